@@ -1,0 +1,1 @@
+"""robocell's reconstruction core: silhouettes to a superquadric, pure functions on arrays."""

@@ -1,0 +1,47 @@
+"""How well a fitted superquadric explains the silhouettes it came from."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+from .superquadric import Superquadric, surface_points
+
+__all__ = ["silhouette_iou"]
+
+_SUBPIXEL_BITS = 4
+
+
+def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.ndarray) -> float:
+    """Intersection over union of the superquadric's projection and a silhouette.
+
+    The superquadric is convex (shape exponents <= 2), so its projection is
+    the convex hull of its projected surface points.
+
+    Parameters
+    ----------
+    superquadric : Superquadric
+    camera : Camera
+        The view's ideal pinhole camera.
+    silhouette : (H, W) ndarray of uint8
+        Nonzero = object.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 if the superquadric is behind the camera.
+    """
+    uv, depth = camera.project(surface_points(superquadric))
+    uv = uv[depth > 0]
+    projected = np.zeros_like(silhouette)
+    if len(uv) >= 3:
+        # Clamp far off-image points: fillConvexPoly takes int32 coordinates.
+        limit = 4.0 * max(silhouette.shape)
+        hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32))
+        fixed_point = np.round(hull * (1 << _SUBPIXEL_BITS)).astype(np.int32)
+        cv2.fillConvexPoly(projected, fixed_point, 255, shift=_SUBPIXEL_BITS)
+    object_pixels = silhouette > 0
+    overlap = np.count_nonzero(object_pixels & (projected > 0))
+    union = np.count_nonzero(object_pixels | (projected > 0))
+    return overlap / union if union else 0.0

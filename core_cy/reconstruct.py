@@ -1,0 +1,209 @@
+"""The whole algorithm: views in, superquadric out (DESIGN.md §1).
+
+decode -> segment -> enclosing sphere -> carve -> support plane -> fit -> quality
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .camera import Camera, undistort_mask
+from .carve import carve, check_support_plane, clip_to_plane, occupancy
+from .errors import FitError, GeometryError, ImageError
+from .quality import silhouette_iou
+from .segment import RED_HSV, Segmentation, segment, silhouette_from_mask
+from .sphere import enclosing_sphere, fibonacci_sphere
+from .superquadric import Superquadric, fit_superquadric
+
+__all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
+
+_JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One photograph of the object.
+
+    ``image`` is a BGR uint8 array or encoded bytes (JPEG, PNG); ``mask`` an
+    8-bit array or encoded bytes, nonzero = object. With a mask the image is
+    not needed (and not decoded).
+    """
+
+    camera: Camera
+    image: np.ndarray | bytes | None = None
+    mask: np.ndarray | bytes | None = None
+
+
+@dataclass(frozen=True)
+class Options:
+    """Tuning of the algorithm; the defaults are what the benchmark measured best.
+
+    Parameters
+    ----------
+    n_points : int
+        Points on the starting sphere (one radius each).
+    inside_weight : float
+        Weight of residuals of points inside the superquadric; 1 is plain
+        Jaklic. Hull points only err outward, so inside ones weigh more.
+    cauchy_scale : float
+        Scale of the robust loss on points outside, in units of the cloud's
+        RMS radius.
+    radius_margin : float
+        Starting sphere radius over the largest silhouette extent.
+    fit_points : int
+        At most this many points go into the fit (evenly strided).
+    """
+
+    n_points: int = 1000
+    inside_weight: float = 10.0
+    cauchy_scale: float = 0.1
+    radius_margin: float = 1.25
+    fit_points: int = 500
+
+    def __post_init__(self) -> None:
+        if self.n_points < 50:
+            raise ValueError(f"n_points must be >= 50, got {self.n_points}")
+        if not self.inside_weight > 0 or not self.cauchy_scale > 0:
+            raise ValueError("inside_weight and cauchy_scale must be positive")
+        if not self.radius_margin >= 1:
+            raise ValueError(f"radius_margin must be >= 1, got {self.radius_margin}")
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """What :func:`reconstruct` found.
+
+    ``points`` (N, 3) is the carved cloud (directions with no edge dropped);
+    ``silhouettes`` the ideal-pinhole silhouettes the hull was carved from;
+    ``silhouette_iou`` how well the superquadric's projection covers each;
+    ``residual`` the fit's RMS radial residual in the bundle's units;
+    ``timings_ms`` the wall time of each stage and the total.
+    """
+
+    superquadric: Superquadric
+    centre: np.ndarray
+    radius: float
+    points: np.ndarray
+    silhouettes: list[np.ndarray]
+    silhouette_iou: list[float]
+    residual: float
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self, *, points: bool = False) -> dict:
+        """The JSON result of DESIGN.md §3 (without the ``scan`` key)."""
+        result = {
+            "superquadric": self.superquadric.to_dict(),
+            "timings_ms": {stage: round(ms, 3) for stage, ms in self.timings_ms.items()},
+            "silhouette_iou": [round(iou, 4) for iou in self.silhouette_iou],
+            "residual": self.residual,
+        }
+        if points:
+            result["points"] = self.points.tolist()
+        return result
+
+
+def decode_image(data: bytes, *, grayscale: bool = False, view: int | None = None) -> np.ndarray:
+    """Decode encoded image bytes (JPEG, PNG, ...) with OpenCV.
+
+    Raises
+    ------
+    ImageError
+        If the bytes are not a decodable image, or a JPEG is truncated
+        (OpenCV would silently return a half-grey image).
+    """
+    if data.startswith(_JPEG_START) and not data.rstrip(b"\x00").endswith(_JPEG_END):
+        raise ImageError("the JPEG is truncated (no end-of-image marker)", view=view)
+    flags = cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_COLOR
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
+    if image is None:
+        raise ImageError(f"the {'mask' if grayscale else 'image'} is not a decodable image "
+                         f"({len(data)} bytes)", view=view)
+    return image
+
+
+def _decoded(index: int, view: View) -> tuple[np.ndarray, bool]:
+    """The view's mask if it has one (True), else its image (False), as an array."""
+    is_mask = view.mask is not None
+    data = view.mask if is_mask else view.image
+    if data is None:
+        raise ImageError("the view has neither an image nor a mask", view=index)
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        data = decode_image(bytes(data), grayscale=is_mask, view=index)
+    return data, is_mask
+
+
+def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=None,
+                options: Options = Options()) -> Reconstruction:
+    """Reconstruct a superquadric from two or more calibrated views.
+
+    Parameters
+    ----------
+    views : sequence of View
+    segmentation : Segmentation
+        How to find the object in views that come without a mask.
+    support_plane : (4,) array_like, optional
+        ``[nx, ny, nz, d]``: the object stands where ``n . x + d >= 0``.
+    options : Options
+
+    Returns
+    -------
+    Reconstruction
+
+    Raises
+    ------
+    CoreError
+        A subclass naming the view and what is wrong with it.
+    """
+    views = list(views)
+    if len(views) < 2:
+        raise GeometryError(f"need at least 2 views, got {len(views)}")
+    clock = time.perf_counter
+    timings: dict[str, float] = {}
+    start = last = clock()
+
+    def lap(stage: str) -> None:
+        nonlocal last
+        now = clock()
+        timings[stage] = timings.get(stage, 0.0) + (now - last) * 1e3
+        last = now
+
+    silhouettes = []
+    for index, view in enumerate(views):
+        data, is_mask = _decoded(index, view)
+        lap("decode")
+        if is_mask:
+            silhouette = silhouette_from_mask(data, view=index)
+        else:
+            silhouette = segment(data, segmentation, view=index)
+        silhouettes.append(undistort_mask(silhouette, view.camera))
+        lap("segment")
+    cameras = [view.camera for view in views]
+    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin)
+    plane = None if support_plane is None else check_support_plane(support_plane, centre)
+    lap("centroid")
+
+    directions = fibonacci_sphere(options.n_points)
+    radii = carve(directions, centre, radius, cameras, [occupancy(s) for s in silhouettes])
+    if plane is not None:
+        radii = clip_to_plane(directions, radii, centre, plane)
+    seen = radii > 0
+    points = centre + radii[seen, None] * directions[seen]
+    lap("carve")
+
+    if len(points) < 11:
+        raise FitError(f"only {len(points)} points survived carving: the silhouettes do not overlap")
+    stride = max(1, len(points) // options.fit_points)
+    fit = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
+                           cauchy_scale=options.cauchy_scale,
+                           support_plane=None if plane is None else plane)
+    lap("fit")
+
+    ious = [silhouette_iou(fit.superquadric, camera, s) for camera, s in zip(cameras, silhouettes)]
+    lap("quality")
+    timings["total"] = (clock() - start) * 1e3
+    return Reconstruction(fit.superquadric, centre, radius, points, silhouettes, ious,
+                          fit.residual, timings)

@@ -1,0 +1,117 @@
+"""The starting sphere: a centre and radius that enclose the object, and its points.
+
+The centre x0 is the point closest (least squares) to the rays through the
+silhouettes' centroids; the radius comes from each silhouette's extent seen
+from x0's projection, at x0's depth, with a margin.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+from .errors import GeometryError
+
+__all__ = ["enclosing_sphere", "fibonacci_sphere"]
+
+# Below this, the rays through the centroids are (nearly) parallel and their
+# closest point runs off along them.
+_MIN_RAY_SPREAD = 1e-6
+
+
+def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25) -> tuple[np.ndarray, float]:
+    """Estimate the object's centre and a radius that surely encloses it.
+
+    Parameters
+    ----------
+    silhouettes : sequence of (H, W) ndarray of uint8
+        One filled silhouette per view, nonzero = object, ideal pinhole images.
+    cameras : sequence of Camera
+        The views' cameras, in the same order.
+    margin : float
+        Factor applied to the largest extent seen in any view.
+
+    Returns
+    -------
+    centre : (3,) ndarray of float64
+    radius : float
+
+    Raises
+    ------
+    GeometryError
+        If the centroid rays do not meet (parallel views), the centre lies
+        behind a camera, or it projects outside a view's image.
+    """
+    if len(silhouettes) != len(cameras) or len(cameras) < 2:
+        raise GeometryError(f"need one silhouette per camera and at least 2 views, got "
+                            f"{len(silhouettes)} silhouettes and {len(cameras)} cameras")
+    normal_matrix = np.zeros((3, 3))
+    normal_rhs = np.zeros(3)
+    boxes = []
+    for silhouette, camera in zip(silhouettes, cameras):
+        moments = cv2.moments(silhouette, binaryImage=True)
+        centroid = np.array([[moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]]])
+        ray = camera.pixel_rays(centroid)[0]
+        projector = np.eye(3) - np.outer(ray, ray)  # removes the component along the ray
+        normal_matrix += projector
+        normal_rhs += projector @ camera.center
+        boxes.append(cv2.boundingRect(silhouette))
+    eigenvalues = np.linalg.eigvalsh(normal_matrix / len(cameras))
+    if eigenvalues[0] < _MIN_RAY_SPREAD:
+        raise GeometryError("the views look along parallel rays: their centroid rays do not meet")
+    centre = np.linalg.solve(normal_matrix, normal_rhs)
+
+    radius = 0.0
+    for view, (camera, (x, y, w, h)) in enumerate(zip(cameras, boxes)):
+        (centre_uv,), (depth,) = camera.project(centre[None])
+        height, width = silhouettes[view].shape
+        if depth <= 0:
+            raise GeometryError("the object's estimated centre lies behind the camera", view=view)
+        if not (0 <= centre_uv[0] <= width - 1 and 0 <= centre_uv[1] <= height - 1):
+            raise GeometryError(
+                "the object's estimated centre projects outside the image: the views disagree "
+                "about where the object is (check the poses' direction and units)",
+                view=view,
+            )
+        corners = np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], dtype=np.float64)
+        extent_px = np.linalg.norm(corners - centre_uv, axis=1).max()
+        radius = max(radius, extent_px * depth / camera.focal_length)
+    return centre, margin * radius
+
+
+@lru_cache(maxsize=8)
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    golden_angle = np.pi * (3.0 - np.sqrt(5.0))
+    k = np.arange(n, dtype=np.float64)
+    z = 1.0 - (2.0 * k + 1.0) / n
+    ring = np.sqrt(1.0 - z * z)
+    directions = np.stack([ring * np.cos(golden_angle * k), ring * np.sin(golden_angle * k), z], axis=1)
+    directions.flags.writeable = False
+    return directions
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """Evenly spread unit directions (a Fibonacci lattice).
+
+    Parameters
+    ----------
+    n : int
+        Number of directions, >= 4.
+
+    Returns
+    -------
+    (n, 3) ndarray of float64
+        Unit vectors, read-only (shared between calls).
+
+    Examples
+    --------
+    >>> d = fibonacci_sphere(100)
+    >>> d.shape, bool(np.allclose(np.linalg.norm(d, axis=1), 1)), bool(abs(d.mean(0)).max() < 0.02)
+    ((100, 3), True, True)
+    """
+    if int(n) != n or n < 4:
+        raise ValueError(f"n must be an integer >= 4, got {n!r}")
+    return _fibonacci_sphere(int(n))

@@ -1,0 +1,19 @@
+"""Cython extensions of core_cy; everything else is declared in pyproject.toml."""
+import numpy as np
+from Cython.Build import cythonize
+from setuptools import Extension, setup
+
+KERNELS = ["_carve_cy", "_superquadric_cy"]
+
+extensions = [
+    Extension(
+        f"core_cy.{name}",
+        [f"core_cy/{name}.pyx"],
+        include_dirs=[np.get_include()],
+        define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+        extra_compile_args=["-O3"],
+    )
+    for name in KERNELS
+]
+
+setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

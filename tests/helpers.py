@@ -1,0 +1,52 @@
+"""Exact scenes for tests: ideal cameras and silhouettes worked out analytically."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core_cy.camera import Camera
+
+WIDTH, HEIGHT, FOCAL = 640, 480, 600.0
+
+
+def intrinsics(focal: float = FOCAL, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
+    return np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world pose of a camera at ``position`` looking at ``target`` (OpenCV axes)."""
+    position = np.asarray(position, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    if np.linalg.norm(right) < 1e-9:  # looking straight along "up"
+        right = np.cross(forward, (0.0, 1.0, 0.0))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([right, down, forward], axis=1)
+    pose[:3, 3] = position
+    return pose
+
+
+def sphere_silhouette(camera: Camera, centre, radius: float, shape=(HEIGHT, WIDTH)) -> np.ndarray:
+    """Exact silhouette of a sphere: pixels whose ray through the pixel centre meets it."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
+    uv = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)
+    rays = camera.pixel_rays(uv)
+    to_centre = np.asarray(centre, dtype=np.float64) - camera.center
+    along = rays @ to_centre
+    miss_squared = to_centre @ to_centre - along**2
+    hit = (miss_squared <= radius**2) & (along > 0)
+    return np.where(hit, np.uint8(255), np.uint8(0)).reshape(shape)
+
+
+def orthogonal_cameras(centre, distance: float, focal: float = FOCAL) -> list[Camera]:
+    """Three cameras on the +x, +y and +z axes through ``centre``, looking at it."""
+    centre = np.asarray(centre, dtype=np.float64)
+    cameras = []
+    for index, axis in enumerate(np.eye(3)):
+        up = (0.0, 0.0, 1.0) if index < 2 else (0.0, 1.0, 0.0)
+        cameras.append(Camera(K=intrinsics(focal), T_world_cam=look_at(centre + distance * axis, centre, up),
+                              view=index))
+    return cameras
