@@ -20,7 +20,7 @@ from core_cy.segment import RED_HSV, Segmentation
 
 from .errors import BundleError
 
-__all__ = ["ScanSpec", "ViewSpec", "Bundle", "load_bundle", "describe_validation_error"]
+__all__ = ["ScanJson", "ViewSpec", "Bundle", "load_bundle", "describe_validation_error"]
 
 Row3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
@@ -58,7 +58,7 @@ class ViewSpec(_Strict):
         return self
 
 
-class ScanSpec(_Strict):
+class ScanJson(_Strict):
     """The content of scan.json."""
 
     views: list[ViewSpec]
@@ -123,7 +123,7 @@ def load_bundle(directory: str | Path) -> Bundle:
     except (OSError, UnicodeDecodeError) as exc:
         raise BundleError(f"cannot read scan.json: {exc}") from exc
     try:
-        spec = ScanSpec.model_validate(json.loads(text))
+        spec = ScanJson.model_validate(json.loads(text))
     except json.JSONDecodeError as exc:
         raise BundleError(f"scan.json is not valid JSON: {exc}") from exc
     except ValidationError as exc:

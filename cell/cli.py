@@ -1,4 +1,4 @@
-"""The ``robocell`` command."""
+"""The ``robocell`` command: one entry point for every part of robocell."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from core_cy.errors import CoreError
 from core_cy.reconstruct import Options, reconstruct
 
 from .bundle import load_bundle
-from .errors import BundleError
+from .config import CellConfig, load_config
+from .errors import BundleError, CellError
 
 log = logging.getLogger("robocell")
 
@@ -38,23 +39,88 @@ def _reconstruct_command(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
+def _config(args: argparse.Namespace) -> CellConfig:
+    return load_config(args.config)
+
+
+def _sim_command(args: argparse.Namespace) -> int:
+    if args.what == "camera":
+        from workers import sim_camera_worker
+
+        return sim_camera_worker.main(_config(args))
+    from .sim import cli as sim_cli
+
+    return sim_cli.run(args)
+
+
+def _worker_command(args: argparse.Namespace) -> int:
+    config = _config(args)
+    if args.kind == "robot":
+        from workers import robot
+
+        return robot.main(config)
+    if args.kind == "camera":
+        from workers import camera
+
+        return camera.main(config)
+    from workers import reconstruct as reconstructor
+
+    return reconstructor.main(config, args.id)
+
+
+def _router_command(args: argparse.Namespace) -> int:
+    from .service import run_router
+
+    return run_router(_config(args), args.listen)
+
+
+def _cell_command(args: argparse.Namespace) -> int:
+    from .service import run_daemon
+
+    return run_daemon(_config(args))
+
+
+def _up_command(args: argparse.Namespace) -> int:
+    from .up import up
+
+    return up(_config(args))
+
+
+def _client_command(args: argparse.Namespace) -> int:
+    from . import client_cli
+
+    return client_cli.run(args, _config(args))
+
+
+def _replay_command(args: argparse.Namespace) -> int:
+    import subprocess
+
+    from .recording import find_recording, replay_command
+
+    path = find_recording(args.job, _config(args).run_dir)
+    argv = replay_command(path, web=args.web, web_port=args.web_port, grpc_port=args.grpc_port)
+    if args.web:
+        print(f"serving {path} at http://127.0.0.1:{args.web_port} (Ctrl-C stops)", flush=True)
+    return subprocess.call(argv)
+
+
+def _config_command(args: argparse.Namespace) -> int:
+    print(_config(args).model_dump_json(indent=2))
+    return 0
+
+
 def _demo_command(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     return run_demo(args)
 
 
-def _sim_command(args: argparse.Namespace) -> int:
-    from .sim import cli as sim_cli
-
-    return sim_cli.run(args)
-
-
 def build_parser() -> argparse.ArgumentParser:
     defaults = Options()
     parser = argparse.ArgumentParser(
-        prog="robocell", description="Graspable superquadric models of unknown objects.")
+        prog="robocell", description="Graspable superquadric models of unknown objects, from a robot cell.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    parser.add_argument("--config", metavar="FILE", help="cell configuration, TOML (default: built-in)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     rec = commands.add_parser(
@@ -66,22 +132,49 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--n-points", type=int, default=defaults.n_points,
                      help="points on the starting sphere (default %(default)s)")
     rec.add_argument("--inside-weight", type=float, default=defaults.inside_weight,
-                     help="weight of points inside the superquadric; 1 = plain Jaklic "
-                          "(default %(default)s)")
+                     help="weight of points inside the superquadric; 1 = plain Jaklic (default %(default)s)")
     rec.add_argument("--cauchy-scale", type=float, default=defaults.cauchy_scale,
-                     help="robust loss scale for points outside, in cloud radii "
-                          "(default %(default)s)")
+                     help="robust loss scale for points outside, in cloud radii (default %(default)s)")
     rec.set_defaults(run=_reconstruct_command)
 
-    sim = commands.add_parser("sim", help="write simulated scan bundles of known objects")
+    sim = commands.add_parser(
+        "sim", help="write simulated scan bundles, or (`sim camera`) serve a simulated Axis camera")
+    sim.add_argument("what", nargs="?", choices=["scans", "camera"], default="scans",
+                     help="scans (default): write bundles; camera: serve the simulated camera of the cell")
     from .sim import cli as sim_cli
 
     sim_cli.add_arguments(sim)
     sim.set_defaults(run=_sim_command)
 
-    demo = commands.add_parser("demo", help="simulate a scan, reconstruct it, compare with the truth")
-    demo.add_argument("--out", default="runs/demo", help="where to write the scan (default %(default)s)")
-    demo.add_argument("--seed", type=int, default=7)
+    router = commands.add_parser("router", help="run the Zenoh router the cell's processes connect to")
+    router.add_argument("--listen", metavar="ENDPOINT", help="endpoint (default: zenoh.router of the config)")
+    router.set_defaults(run=_router_command)
+
+    worker = commands.add_parser("worker", help="run a robot, camera or reconstruction worker")
+    worker.add_argument("kind", choices=["robot", "camera", "reconstruct"])
+    worker.add_argument("--id", help="reconstruction worker id (default: host-pid)")
+    worker.set_defaults(run=_worker_command)
+
+    commands.add_parser("cell", help="run the cell daemon").set_defaults(run=_cell_command)
+    commands.add_parser("up", help="run router, workers, simulated camera and daemon; Ctrl-C stops all") \
+        .set_defaults(run=_up_command)
+
+    from . import client_cli
+
+    client_cli.add_commands(commands, _client_command)
+
+    replay = commands.add_parser("replay", help="open a job's Rerun recording in the viewer")
+    replay.add_argument("job", metavar="JOB_ID_OR_FILE")
+    replay.add_argument("--web", action="store_true", help="serve the web viewer on a local port instead")
+    replay.add_argument("--web-port", type=int, default=9090)
+    replay.add_argument("--grpc-port", type=int, default=9876)
+    replay.set_defaults(run=_replay_command)
+
+    commands.add_parser("config", help="print the configuration in effect (defaults + --config)") \
+        .set_defaults(run=_config_command)
+
+    demo = commands.add_parser("demo", help="run a simulated cell, scan an object, compare with the truth")
+    demo.add_argument("--run-dir", default="runs/demo", help="where the cell keeps its files (default %(default)s)")
     demo.set_defaults(run=_demo_command)
     return parser
 
@@ -92,6 +185,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         return args.run(args)
+    except (CellError, FileNotFoundError) as exc:
+        print(f"robocell {args.command}: {exc}", file=sys.stderr)
+        return 1
     except ValueError as exc:  # option values the parser could not check
         print(f"robocell {args.command}: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,188 @@
+"""Clients of a cell: :class:`AsyncCellClient` for asyncio programs, :class:`CellClient` for scripts.
+
+Both speak only the documented Zenoh keys (``cell/keys.py``); a program in any
+language can do the same. From a script::
+
+    with CellClient("tcp/127.0.0.1:7447", "cell1") as client:
+        result = client.scan(ScanRequest(target=[0.6, 0.0, 0.03]), timeout=60)
+        print(result.superquadric)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+from collections.abc import AsyncIterator, Callable
+
+from . import keys
+from .errors import CellError
+from .messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
+from .transport import Transport
+
+__all__ = ["AsyncCellClient", "CellClient", "JobFailed"]
+
+
+class JobFailed(CellError):
+    """The job ended failed or cancelled; the message says why."""
+
+
+class AsyncCellClient:
+    """Submit, watch, cancel and list the jobs of one cell, over its router."""
+
+    def __init__(self, transport: Transport, cell_id: str, *, timeout: float = 5.0) -> None:
+        self._transport = transport
+        self.cell = cell_id
+        self.timeout = timeout
+
+    @classmethod
+    async def connect(cls, endpoint: str, cell_id: str, *, settings: dict | None = None,
+                      timeout: float = 5.0) -> "AsyncCellClient":
+        return cls(await Transport.open(endpoint, settings=settings), cell_id, timeout=timeout)
+
+    async def close(self) -> None:
+        await self._transport.close()
+
+    async def __aenter__(self) -> "AsyncCellClient":
+        return self
+
+    async def __aexit__(self, *exc_info) -> None:
+        await self.close()
+
+    async def _ask(self, key: str, payload: str | None = None, parameters: str = "") -> bytes:
+        reply = await self._transport.query(key, payload, timeout=self.timeout, parameters=parameters)
+        return reply.payload
+
+    async def submit(self, request: ScanRequest) -> JobStatus:
+        """Queue a scan; with ``request.request_id`` set, submitting again returns the same job."""
+        return parse(JobStatus, await self._ask(keys.submit(self.cell), request.model_dump_json()))
+
+    async def status(self, job_id: str) -> JobStatus:
+        return parse(JobStatus, await self._ask(keys.job(self.cell, job_id)))
+
+    async def result(self, job_id: str) -> ScanResult:
+        return parse(ScanResult, await self._ask(keys.result(self.cell, job_id)))
+
+    async def cancel(self, job_id: str) -> JobStatus:
+        return parse(JobStatus, await self._ask(keys.cancel(self.cell, job_id)))
+
+    async def list(self, states: set[JobState] | None = None, limit: int = 50) -> list[JobStatus]:
+        parameters = f"limit={limit}"
+        if states:
+            parameters += ";state=" + ",".join(sorted(s.value for s in states))
+        payload = await self._ask(keys.jobs(self.cell), parameters=parameters)
+        return [JobStatus.model_validate(item) for item in json.loads(payload)]
+
+    async def events(self, job_id: str = "*") -> AsyncIterator[JobEvent]:
+        """Events of one job (or all jobs), as they happen, until the caller stops iterating."""
+        subscription = self._transport.subscribe(keys.events(self.cell, job_id))
+        try:
+            async for sample in subscription:
+                yield parse(JobEvent, sample.payload)
+        finally:
+            subscription.close()
+
+    async def wait(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None = None,
+                   poll_s: float = 1.0) -> JobStatus:
+        """Wait until the job is finished and return its final status.
+
+        Events go to ``on_event`` as they arrive; the status is polled too, so a
+        missed event cannot make this wait forever.
+
+        Raises
+        ------
+        TimeoutError
+            If the job is not finished within ``timeout`` seconds.
+        """
+        subscription = self._transport.subscribe(keys.events(self.cell, job_id))
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        try:
+            while True:
+                status = await self.status(job_id)
+                if status.state.finished:
+                    return status
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise TimeoutError(f"job {job_id} is still {status.state.value} after {timeout:g} s")
+                try:
+                    sample = await subscription.get(timeout=min(poll_s, remaining))
+                except asyncio.TimeoutError:
+                    continue
+                event = parse(JobEvent, sample.payload)
+                if on_event is not None:
+                    on_event(event)
+        finally:
+            subscription.close()
+
+    async def scan(self, request: ScanRequest, *, timeout: float = 120.0,
+                   on_event: Callable[[JobEvent], None] | None = None) -> ScanResult:
+        """Submit, wait, and return the result.
+
+        Raises
+        ------
+        JobFailed
+            If the job failed or was cancelled.
+        """
+        status = await self.submit(request)
+        final = await self.wait(status.job_id, timeout=timeout, on_event=on_event)
+        if final.state is not JobState.SUCCEEDED:
+            raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}")
+        return await self.result(status.job_id)
+
+
+class CellClient:
+    """The blocking face of :class:`AsyncCellClient`, for scripts: runs its own event loop thread."""
+
+    def __init__(self, endpoint: str, cell_id: str, *, settings: dict | None = None, timeout: float = 5.0) -> None:
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, name="robocell-client", daemon=True)
+        self._thread.start()
+        try:
+            self._client = self._call(AsyncCellClient.connect(endpoint, cell_id, settings=settings,
+                                                               timeout=timeout))
+        except BaseException:
+            self._stop_loop()
+            raise
+
+    def _call(self, coroutine, timeout: float | None = None):
+        return asyncio.run_coroutine_threadsafe(coroutine, self._loop).result(timeout)
+
+    def _stop_loop(self) -> None:
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(timeout=5)
+        self._loop.close()
+
+    def close(self) -> None:
+        try:
+            self._call(self._client.close(), timeout=10)
+        finally:
+            self._stop_loop()
+
+    def __enter__(self) -> "CellClient":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def submit(self, request: ScanRequest) -> JobStatus:
+        return self._call(self._client.submit(request))
+
+    def status(self, job_id: str) -> JobStatus:
+        return self._call(self._client.status(job_id))
+
+    def result(self, job_id: str) -> ScanResult:
+        return self._call(self._client.result(job_id))
+
+    def cancel(self, job_id: str) -> JobStatus:
+        return self._call(self._client.cancel(job_id))
+
+    def list(self, states: set[JobState] | None = None, limit: int = 50) -> list[JobStatus]:
+        return self._call(self._client.list(states, limit))
+
+    def wait(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None = None) -> JobStatus:
+        return self._call(self._client.wait(job_id, timeout=timeout, on_event=on_event))
+
+    def scan(self, request: ScanRequest, *, timeout: float = 120.0,
+             on_event: Callable[[JobEvent], None] | None = None) -> ScanResult:
+        return self._call(self._client.scan(request, timeout=timeout, on_event=on_event))

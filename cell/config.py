@@ -1,0 +1,163 @@
+"""The cell's one configuration file (TOML), validated once into pydantic models.
+
+Every field has a default that works out of the box on one machine in
+simulation; ``robocell config`` prints the defaults as a starting file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, model_validator
+
+from .errors import ConfigError
+from .messages import Point, Pose, ViewPlan, field_errors
+
+__all__ = ["CellConfig", "load_config", "DEFAULT_HAND_EYE"]
+
+# A camera 10 cm out along the flange's z axis, looking along it, rotated so that
+# image "up" is the flange's x axis: a typical wrist mount.
+DEFAULT_HAND_EYE = [[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.1], [0.0, 0.0, 0.0, 1.0]]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ZenohConfig(_Section):
+    #: The router's endpoint: ``robocell router`` listens on it, every other process connects to it.
+    router: str = "tcp/127.0.0.1:7447"
+    #: Extra Zenoh configuration (JSON5 keys to values), e.g. TLS and credentials.
+    settings: dict[str, object] = {}
+
+
+class Workspace(_Section):
+    """The box the flange may move in (robot base frame, metres) and the tilt it may take."""
+
+    min: Point = [0.1, -0.7, 0.05]
+    max: Point = [1.0, 0.7, 1.0]
+    #: Largest angle between the flange's z axis and straight down, degrees.
+    max_tilt_deg: Annotated[float, Field(gt=0, le=180)] = 80.0
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "Workspace":
+        if any(lo >= hi for lo, hi in zip(self.min, self.max)):
+            raise ValueError("workspace min must be below max on every axis")
+        return self
+
+
+class RobotConfig(_Section):
+    backend: Literal["sim"] = "sim"
+    #: Linear speed of the simulated robot, m/s; 0 moves instantly.
+    speed: Annotated[float, Field(ge=0)] = 0.5
+    #: Rotation speed of the simulated robot, degrees/s; 0 rotates instantly.
+    rotation_speed_deg: Annotated[float, Field(ge=0)] = 180.0
+    home: Pose = [[1.0, 0.0, 0.0, 0.4], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.6], [0.0, 0.0, 0.0, 1.0]]
+    workspace: Workspace = Workspace()
+    #: How often the robot worker publishes its pose while moving, Hz.
+    publish_rate_hz: Annotated[float, Field(gt=0, le=200)] = 20.0
+
+
+class CameraConfig(_Section):
+    url: str = "http://127.0.0.1:8080"
+    resolution: tuple[int, int] = (640, 480)
+    username: str | None = None
+    #: Prefer the environment variable ROBOCELL_CAMERA_PASSWORD to writing it here.
+    password: SecretStr | None = None
+    auth: Literal["digest", "basic"] = "digest"
+    K: list[list[float]] = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
+    dist: list[float] | None = None
+    timeout_s: Annotated[float, Field(gt=0)] = 3.0
+    retries: Annotated[int, Field(ge=0, le=10)] = 2
+
+    def resolved_password(self) -> str | None:
+        from_env = os.environ.get("ROBOCELL_CAMERA_PASSWORD")
+        if from_env:
+            return from_env
+        return self.password.get_secret_value() if self.password else None
+
+
+class ScanConfig(_Section):
+    #: The table surface's height in the robot base frame (the support plane z = height).
+    table_height: float = 0.0
+    plan: ViewPlan = ViewPlan()
+
+
+class ReconstructConfig(_Section):
+    processes: Annotated[int, Field(ge=1, le=64)] = 1
+    n_points: Annotated[int, Field(ge=50)] = 1000
+    inside_weight: Annotated[float, Field(gt=0)] | None = None
+    cauchy_scale: Annotated[float, Field(gt=0)] | None = None
+
+
+class SimConfig(_Section):
+    """The simulated scene the simulated camera renders; the camera serves at ``camera.url``."""
+
+    shape: Literal["box", "cylinder", "ellipsoid", "rounded-box", "cup-stack", "lumpy"] = "box"
+    size: Point = [0.04, 0.03, 0.05]
+    position: Annotated[list[float], Field(min_length=2, max_length=2)] = [0.6, 0.0]
+    yaw_deg: float = 20.0
+    seed: int = 0
+
+
+class Timeouts(_Section):
+    move_s: Annotated[float, Field(gt=0)] = 60.0
+    capture_s: Annotated[float, Field(gt=0)] = 15.0
+    reconstruct_s: Annotated[float, Field(gt=0)] = 60.0
+    #: How long a job waits for a missing worker before failing.
+    worker_wait_s: Annotated[float, Field(gt=0)] = 10.0
+
+
+class CellConfig(_Section):
+    cell_id: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")] = "cell1"
+    run_dir: Path = Path("runs")
+    zenoh: ZenohConfig = ZenohConfig()
+    robot: RobotConfig = RobotConfig()
+    camera: CameraConfig = CameraConfig()
+    #: The camera's pose in the flange frame (camera-to-flange), from hand-eye calibration.
+    T_flange_cam: Pose = DEFAULT_HAND_EYE
+    scan: ScanConfig = ScanConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
+    sim: SimConfig = SimConfig()
+    timeouts: Timeouts = Timeouts()
+    #: Jobs that may wait in the queue; a submit beyond this is refused.
+    max_queued: Annotated[int, Field(ge=1)] = 100
+
+    @property
+    def support_plane(self) -> list[float]:
+        return [0.0, 0.0, 1.0, -self.scan.table_height]
+
+    @property
+    def hand_eye(self) -> np.ndarray:
+        return np.asarray(self.T_flange_cam, dtype=np.float64)
+
+
+def load_config(path: str | Path | None) -> CellConfig:
+    """Read a TOML (or, as ``robocell up`` writes for its children, JSON) file; ``None`` gives the defaults.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing, not TOML, or a field is invalid (named in the message).
+    """
+    if path is None:
+        return CellConfig()
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
+    except FileNotFoundError:
+        raise ConfigError(f"configuration file {str(path)!r} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read configuration file {str(path)!r}: {exc}") from exc
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'TOML'}: {exc}") from exc
+    try:
+        return CellConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(f"{path}: {field_errors(exc)}") from exc

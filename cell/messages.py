@@ -1,0 +1,228 @@
+"""Messages on the wire: pydantic models, JSON, each with a ``schema_version``.
+
+Job messages pass between clients and the cell daemon; worker messages
+between the daemon and its robot, camera and reconstruction workers. Images
+never travel inside JSON: they are the raw payload, with the JSON model that
+describes them in the Zenoh attachment (see ``cell/keys.py``).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = [
+    "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
+    "JobStatus", "JobEvent", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
+    "RobotState", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
+    "ReconstructRequest", "ReconstructReply", "parse", "field_errors",
+]
+
+SCHEMA_VERSION = 1
+_RIGID_TOLERANCE = 1e-5
+
+
+def _rigid(matrix: list[list[float]]) -> list[list[float]]:
+    T = np.asarray(matrix, dtype=np.float64)
+    if not np.all(np.isfinite(T)):
+        raise ValueError("pose contains NaN or infinity")
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0, 0, 0, 1]) or np.abs(R.T @ R - np.eye(3)).max() > _RIGID_TOLERANCE \
+            or np.linalg.det(R) < 0:
+        raise ValueError("pose must be a rigid 4x4 transform (orthonormal rotation, last row 0 0 0 1)")
+    return matrix
+
+
+def _finite(values: list[float]) -> list[float]:
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError("must be finite numbers")
+    return values
+
+
+Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+#: A 4x4 rigid transform, metres; which frames it maps between is in the field's name.
+Pose = Annotated[list[Row4], Field(min_length=4, max_length=4), AfterValidator(_rigid)]
+#: A point, metres.
+Point = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_finite)]
+
+
+class Message(BaseModel):
+    """Base of every message: strict fields, and the schema version first."""
+
+    model_config = ConfigDict(extra="forbid")
+    schema_version: Literal[1] = SCHEMA_VERSION
+
+
+def field_errors(exc: ValidationError) -> str:
+    """One line naming each invalid field: ``target: List should have at least 3 items``."""
+    return "; ".join(
+        f"{'.'.join(str(p) for p in error['loc']) or 'message'}: {error['msg']}" for error in exc.errors()
+    )
+
+
+def parse(model: type[BaseModel], payload: bytes | str | None) -> BaseModel:
+    """Validate a JSON payload; raises ``ValueError`` whose text names the wrong fields."""
+    if payload is None or len(payload) == 0:
+        raise ValueError(f"empty payload: expected a JSON {model.__name__}")
+    try:
+        return model.model_validate_json(payload)
+    except ValidationError as exc:
+        raise ValueError(f"invalid {model.__name__}: {field_errors(exc)}") from None
+
+
+# --- jobs --------------------------------------------------------------------------------------
+
+class ViewPlan(BaseModel):
+    """Where to look at a target from: one view per (elevation, azimuth), at ``standoff`` metres."""
+
+    model_config = ConfigDict(extra="forbid")
+    standoff: Annotated[float, Field(gt=0.05, le=3.0)] = 0.5
+    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, le=90)]], Field(min_length=2)] = [55.0, 40.0, 35.0]
+    azimuths_deg: Annotated[list[float], Field(min_length=2)] = [0.0, 120.0, 240.0]
+
+    @model_validator(mode="after")
+    def _same_length(self) -> "ViewPlan":
+        if len(self.elevations_deg) != len(self.azimuths_deg):
+            raise ValueError("elevations_deg and azimuths_deg must have the same length")
+        return self
+
+
+class ScanRequest(Message):
+    """Scan one object: either explicit flange poses, or a target point to plan views around.
+
+    ``flange_poses`` are flange-to-base transforms in the robot base frame. ``request_id``,
+    chosen by the client, makes submitting idempotent.
+    """
+
+    request_id: Annotated[str, Field(min_length=1, max_length=128)] | None = None
+    flange_poses: Annotated[list[Pose], Field(min_length=2, max_length=16)] | None = None
+    target: Point | None = None
+    plan: ViewPlan | None = None
+    label: Annotated[str, Field(max_length=200)] = ""
+
+    @model_validator(mode="after")
+    def _one_kind_of_views(self) -> "ScanRequest":
+        if (self.flange_poses is None) == (self.target is None):
+            raise ValueError("give exactly one of flange_poses and target")
+        if self.plan is not None and self.target is None:
+            raise ValueError("plan goes with target")
+        return self
+
+
+class JobState(str, enum.Enum):
+    QUEUED = "queued"
+    MOVING = "moving"
+    CAPTURING = "capturing"
+    RECONSTRUCTING = "reconstructing"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+    @property
+    def finished(self) -> bool:
+        return self in (JobState.SUCCEEDED, JobState.FAILED, JobState.CANCELLED)
+
+
+class JobStatus(Message):
+    job_id: str
+    state: JobState
+    view: int | None = None          # the view being moved to or captured, from 0
+    n_views: int
+    error: str | None = None         # why it failed: "<step>: <reason>"
+    created: float                   # unix time
+    updated: float
+    recording: str | None = None     # path of the job's Rerun .rrd
+    request: ScanRequest
+
+
+class JobEvent(Message):
+    job_id: str
+    state: JobState
+    view: int | None = None
+    message: str
+    time: float
+
+
+class ScanResult(Message):
+    job_id: str
+    superquadric: dict               # {"size", "shape", "T_world_object"} as in DESIGN.md §3
+    silhouette_iou: list[float]
+    residual: float
+    timings_ms: dict[str, float]
+    T_base_cam: list[Pose]           # where each picture was taken from
+    recording: str | None = None
+
+
+class ErrorReply(Message):
+    error: str
+
+
+# --- workers -----------------------------------------------------------------------------------
+
+class MoveRequest(Message):
+    T_base_flange: Pose
+    job_id: str | None = None
+
+
+class MoveReply(Message):
+    T_base_flange: Pose              # where the robot really is
+    duration_s: float
+
+
+class RobotState(Message):
+    T_base_flange: Pose
+    moving: bool
+    time: float
+
+
+class CaptureRequest(Message):
+    job_id: str | None = None
+    view: int | None = None
+
+
+class CaptureInfo(Message):
+    """Describes the JPEG payload of a capture reply."""
+
+    encoding: Literal["image/jpeg"] = "image/jpeg"
+    width: int
+    height: int
+    source: str                      # the camera's URL, credentials removed
+    time: float
+    duration_s: float
+
+
+class CameraModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    K: Annotated[list[Annotated[list[float], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)]
+    dist: list[float] | None = None
+
+
+class ReconstructView(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    camera: CameraModel
+    T_world_cam: Pose
+    length: Annotated[int, Field(ge=1)]   # bytes of this view's JPEG in the payload
+
+
+class ReconstructRequest(Message):
+    """The attachment of a reconstruction query; the payload is the views' JPEGs, concatenated."""
+
+    job_id: str
+    views: Annotated[list[ReconstructView], Field(min_length=2)]
+    segmentation: dict | None = None        # as in scan.json
+    support_plane: Row4 | None = None
+    options: dict = {}                      # core_cy.reconstruct.Options fields
+
+
+class ReconstructReply(Message):
+    job_id: str
+    result: dict | None = None              # Reconstruction.to_dict(points=True)
+    centre: list[float] | None = None
+    radius: float | None = None
+    silhouettes_png: list[str] = []         # base64 PNG of each view's silhouette, for the recording
+    error: str | None = None
+    worker: str = ""

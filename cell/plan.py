@@ -1,0 +1,89 @@
+"""Planning a scan: where the flange goes for each view, and whether it may go there.
+
+Pure functions: poses in, poses out. Frames: the robot base frame (z up,
+metres) is the world of the reconstruction; ``T_base_flange`` is the flange's
+pose (flange-to-base), ``T_flange_cam`` the camera's pose on the flange
+(camera-to-flange) from hand-eye calibration, so the camera sits at
+``T_base_cam = T_base_flange @ T_flange_cam``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import Workspace
+from .messages import ViewPlan
+
+__all__ = ["look_at", "plan_flange_poses", "workspace_violation", "camera_poses"]
+
+
+def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-base pose of a camera at ``position`` aimed at ``target``, image "up" towards ``up``.
+
+    OpenCV camera axes: z forward, y down, x right.
+
+    Raises
+    ------
+    ValueError
+        If position and target coincide, or the camera would look straight along ``up``.
+    """
+    position = np.asarray(position, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - position
+    if np.linalg.norm(forward) < 1e-9:
+        raise ValueError("the camera position and the target coincide")
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(right) < 1e-9:
+        raise ValueError("the camera would look straight along 'up'")
+    right /= np.linalg.norm(right)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack([right, np.cross(forward, right), forward])
+    pose[:3, 3] = position
+    return pose
+
+
+def plan_flange_poses(target, plan: ViewPlan, T_flange_cam) -> list[np.ndarray]:
+    """Flange poses that put the camera ``plan.standoff`` from ``target``, one per view.
+
+    View k looks at the target from elevation ``plan.elevations_deg[k]`` above
+    the horizontal and azimuth ``plan.azimuths_deg[k]`` about the base z axis.
+    """
+    target = np.asarray(target, dtype=np.float64)
+    flange_from_cam = np.linalg.inv(np.asarray(T_flange_cam, dtype=np.float64))
+    poses = []
+    for elevation, azimuth in zip(plan.elevations_deg, plan.azimuths_deg):
+        el, az = math.radians(elevation), math.radians(azimuth)
+        offset = plan.standoff * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        poses.append(look_at(target + offset, target) @ flange_from_cam)
+    return poses
+
+
+def camera_poses(flange_poses, T_flange_cam) -> list[np.ndarray]:
+    """Camera-to-base poses of the camera for each flange pose."""
+    hand_eye = np.asarray(T_flange_cam, dtype=np.float64)
+    return [np.asarray(pose, dtype=np.float64) @ hand_eye for pose in flange_poses]
+
+
+def workspace_violation(T_base_flange, workspace: Workspace) -> str | None:
+    """Why the pose is outside the workspace, or None if it is inside.
+
+    Examples
+    --------
+    >>> pose = np.eye(4); pose[:3, 3] = [0.5, 0.0, 1.4]; pose[:3, :3] = np.diag([1, -1, -1])
+    >>> workspace_violation(pose, Workspace())
+    'z = 1.4 m is above the workspace maximum 1 m'
+    """
+    pose = np.asarray(T_base_flange, dtype=np.float64)
+    for axis, name in enumerate("xyz"):
+        value = pose[axis, 3]
+        if value < workspace.min[axis]:
+            return f"{name} = {value:.4g} m is below the workspace minimum {workspace.min[axis]:g} m"
+        if value > workspace.max[axis]:
+            return f"{name} = {value:.4g} m is above the workspace maximum {workspace.max[axis]:g} m"
+    # The flange's z axis points out of the tool; straight down is (0, 0, -1).
+    tilt = math.degrees(math.acos(float(np.clip(-pose[2, 2], -1.0, 1.0))))
+    if tilt > workspace.max_tilt_deg:
+        return f"the flange is tilted {tilt:.1f} deg from straight down, more than the limit {workspace.max_tilt_deg:g} deg"
+    return None

@@ -1,0 +1,45 @@
+"""The long-running processes of the shell: the Zenoh router and the cell daemon."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from .config import CellConfig
+from .daemon import CellDaemon
+from .process import open_transport, run_until_stopped
+from .store import JobStore
+from .transport import Transport
+
+__all__ = ["run_router", "run_daemon"]
+
+log = logging.getLogger(__name__)
+
+
+def run_router(config: CellConfig, endpoint: str | None = None) -> int:
+    """A Zenoh router (a session in router mode: Zenoh has no router binary on PyPI)."""
+    endpoint = endpoint or config.zenoh.router
+
+    async def run(stop: asyncio.Event) -> None:
+        router = await Transport.open(endpoint, mode="router", settings=config.zenoh.settings)
+        log.info("Zenoh router listening on %s", endpoint)
+        try:
+            await stop.wait()
+        finally:
+            await router.close()
+
+    return run_until_stopped(run, "router")
+
+
+def run_daemon(config: CellConfig) -> int:
+    """The cell daemon, with its job store in the run directory."""
+    async def run(stop: asyncio.Event) -> None:
+        config.run_dir.mkdir(parents=True, exist_ok=True)
+        with JobStore(config.run_dir / "jobs.sqlite") as store:
+            transport = await open_transport(config)
+            try:
+                await CellDaemon(config, transport, store).run(stop)
+            finally:
+                await transport.close()
+
+    return run_until_stopped(run, "cell daemon")

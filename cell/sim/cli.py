@@ -1,0 +1,112 @@
+"""``robocell sim``: write simulated scan bundles of known objects.
+
+Only options, no positional arguments, so that sub-commands can be added later.
+The main ``robocell`` program builds the parser with :func:`add_arguments` and
+calls :func:`run`.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
+from .scans import make_spec, write_standard_set
+
+__all__ = ["add_arguments", "run"]
+
+SHAPES = [*FAMILIES, "cup-stack", "lumpy"]
+# Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
+# radius, height of one cup; for a lumpy figure: the radii of its ellipsoid.
+DEFAULT_SIZE = {
+    "box": (0.05, 0.03, 0.025),
+    "cylinder": (0.03, 0.03, 0.06),
+    "ellipsoid": (0.045, 0.035, 0.03),
+    "rounded-box": (0.05, 0.035, 0.03),
+    "cup-stack": (0.025, 0.038, 0.06),
+    "lumpy": (0.05, 0.04, 0.045),
+}
+_SHAPE_ONLY = ("size", "yaw", "lying", "position", "count", "views", "distance", "elevation")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``sim`` options to ``parser``."""
+    parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
+                        help="directory to write bundles under (default: sim-scans)")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--set", choices=["standard"], dest="set_name",
+                       help="write a fixed benchmark set (the default when --shape is not given)")
+    which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
+    parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
+                        help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
+                             "lumpy: ellipsoid radii)")
+    parser.add_argument("--yaw", type=float, metavar="DEG", help="turn about the vertical (default 30)")
+    parser.add_argument("--lying", action="store_true", default=None,
+                        help="superquadric lies on its side; cup-stack: upper cup upright, nested")
+    parser.add_argument("--position", type=float, nargs=2, metavar=("X", "Y"),
+                        help="where the object stands on the table (default 0.6 0)")
+    parser.add_argument("--distance", type=float, nargs=2, metavar=("MIN", "MAX"),
+                        help="camera distance range in metres (default 0.4 0.7)")
+    parser.add_argument("--elevation", type=float, nargs=2, metavar=("MIN", "MAX"),
+                        help="camera elevation range in degrees (default 35 55)")
+    parser.add_argument("--views", type=int, metavar="N", help="views per scan (default 3)")
+    parser.add_argument("--seed", type=int, default=0, help="seed for cameras, table and noise (default 0)")
+    parser.add_argument("--masks", action="store_true", help="also write mask{i}.png (not named in scan.json)")
+    parser.add_argument("--count", type=int, metavar="N",
+                        help="scans of the object, seeds SEED..SEED+N-1 (default 1)")
+
+
+def _make_object(args: argparse.Namespace) -> SimObject:
+    size = tuple(args.size) if args.size is not None else DEFAULT_SIZE[args.shape]
+    position = tuple(args.position) if args.position is not None else (0.6, 0.0)
+    if args.shape == "cup-stack":
+        return CupStack(position, *size, top_inverted=not args.lying)
+    if args.shape == "lumpy":
+        return LumpyFigure(position, size, seed=args.seed)
+    yaw = 30.0 if args.yaw is None else args.yaw
+    return SuperquadricObject.on_table(args.shape, size, position, yaw, bool(args.lying))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
+    if args.shape is None:
+        given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
+        if given:
+            print(f"robocell sim: {', '.join(given)} only apply with --shape", file=sys.stderr)
+            return 2
+        for path in write_standard_set(args.out, seed=args.seed, write_masks=args.masks):
+            print(path, flush=True)
+        return 0
+    count = 1 if args.count is None else args.count
+    views = 3 if args.views is None else args.views
+    if count < 1 or views < 1:
+        print("robocell sim: --count and --views must be at least 1", file=sys.stderr)
+        return 2
+    try:
+        obj = _make_object(args)
+    except ValueError as exc:
+        print(f"robocell sim: {exc}", file=sys.stderr)
+        return 2
+    distance = (args.distance[0], args.distance[1]) if args.distance is not None else (0.4, 0.7)
+    elevation = (args.elevation[0], args.elevation[1]) if args.elevation is not None else (35.0, 55.0)
+    if not (0 < distance[0] <= distance[1]) or not (0 < elevation[0] <= elevation[1] < 90):
+        print("robocell sim: need 0 < MIN <= MAX for --distance and 0 < MIN <= MAX < 90 for --elevation",
+              file=sys.stderr)
+        return 2
+    for i in range(count):
+        seed = args.seed + i
+        spec = make_spec(f"{args.shape}-{seed:03d}", obj, seed, views, distance, elevation,
+                         fit_distance=args.distance is None)
+        print(spec.write(args.out, write_masks=args.masks), flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry point, ``python -m cell.sim.cli``."""
+    parser = argparse.ArgumentParser(prog="robocell sim", description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

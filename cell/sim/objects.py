@@ -1,0 +1,410 @@
+"""Known objects for simulated scans: superquadrics, a cup stack, a lumpy figure.
+
+Every object lives in world coordinates (metres, z up, the table is z = 0) and
+offers the same three things (:class:`SimObject`): an inside test for
+volumetric scoring, a closed triangle mesh for rendering, and a JSON-able
+ground truth.
+
+Superquadric and lumpy meshes are built by pushing a grid on the unit cube's
+surface radially onto the object (both are star-shaped about their centre).
+The grid is denser towards the cube's edges, which is where a box-like
+superquadric bends, so the same grid serves boxes and ellipsoids. Objects are
+meant to be immutable: each caches its mesh.
+"""
+from __future__ import annotations
+
+from typing import Any, Protocol, Sequence, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "FAMILIES",
+    "CupStack",
+    "LumpyFigure",
+    "SimObject",
+    "SuperquadricObject",
+    "box",
+    "cylinder",
+    "ellipsoid",
+    "rotation_z",
+    "rounded_box",
+    "vertex_normals",
+]
+
+Mesh = tuple[NDArray[np.float64], NDArray[np.int32]]
+
+#: Shape exponents (e1, e2) of the superquadric families.
+FAMILIES: dict[str, tuple[float, float]] = {
+    "box": (0.1, 0.1),
+    "cylinder": (0.1, 1.0),
+    "ellipsoid": (1.0, 1.0),
+    "rounded-box": (0.4, 0.4),
+}
+
+# A quarter turn about the object's x axis, written out exactly so that a lying
+# object's lowest point lands on z = 0 without a cos(pi/2) = 6e-17 residue.
+_LYING = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+@runtime_checkable
+class SimObject(Protocol):
+    """What the renderer and the scorer need from a known object."""
+
+    def inside(self, points_world: ArrayLike) -> NDArray[np.bool_]:
+        """(N, 3) world points -> (N,) bool, True inside the object."""
+        ...
+
+    def mesh(self) -> Mesh:
+        """Closed, outward-oriented mesh: vertices (V, 3) float64 world, faces (F, 3) int32."""
+        ...
+
+    def truth(self) -> dict[str, Any]:
+        """JSON-able ground truth, with a ``"kind"`` key."""
+        ...
+
+
+def rotation_z(yaw_deg: float) -> NDArray[np.float64]:
+    """(3, 3) rotation about the world z axis by ``yaw_deg`` degrees."""
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def vertex_normals(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> NDArray[np.float64]:
+    """Area-weighted unit vertex normals, (V, 3), of an outward-oriented mesh."""
+    v = vertices[faces]
+    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])  # length = 2 * area
+    vn = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(vn, faces[:, k], fn)
+    norm = np.linalg.norm(vn, axis=1, keepdims=True)
+    return vn / np.where(norm > 0, norm, 1.0)
+
+
+def _cube_grid(n: int = 32) -> Mesh:
+    """Unit-cube surface grid: points (V, 3) on max|c| = 1, faces (F, 3) outward.
+
+    ``n`` cells per face edge (even, so face centres are vertices). Spacing is
+    sin-shaped, denser near the cube's edges; vertices on shared edges are
+    merged, so the mesh is closed.
+    """
+    m = n // 2
+    half = np.sin(0.5 * np.pi * np.arange(m + 1) / m)
+    t = np.concatenate([-half[::-1], half[1:]])  # exactly symmetric, contains 0 and +-1
+    u, v = np.meshgrid(t, t, indexing="ij")
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    tri = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    pts, faces = [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = np.empty(((n + 1) ** 2, 3))
+            p[:, axis] = sign
+            p[:, (axis + 1) % 3] = u.ravel()
+            p[:, (axis + 2) % 3] = v.ravel()
+            faces.append(tri + sum(len(q) for q in pts))
+            pts.append(p)
+    all_pts = np.concatenate(pts)
+    uniq, inverse = np.unique(np.round(all_pts, 12), axis=0, return_inverse=True)
+    f = inverse.reshape(-1)[np.concatenate(faces)]
+    # Orient every triangle away from the origin (the cube is star-shaped about it).
+    tv = uniq[f]
+    normal = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
+    flip = np.einsum("ij,ij->i", normal, tv.sum(axis=1)) < 0
+    f[flip] = f[flip][:, ::-1]
+    return uniq, f.astype(np.int32)
+
+
+class SuperquadricObject:
+    """A superquadric with half-sizes ``size`` (a1, a2, a3), exponents ``shape`` (e1, e2).
+
+    Parameters
+    ----------
+    size : (3,) array_like of float
+        Half-sizes a1, a2, a3 along the object's x, y, z axes (metres).
+    shape : (2,) array_like of float
+        Exponents e1 (z profile), e2 (xy cross-section), each in (0, 2).
+    T_world_object : (4, 4) array_like of float
+        Object-to-world rigid transform.
+
+    Examples
+    --------
+    >>> box = SuperquadricObject.on_table("box", [0.05, 0.03, 0.02], (0.6, 0.0))
+    >>> float(box.mesh()[0][:, 2].min())
+    0.0
+    """
+
+    def __init__(self, size: ArrayLike, shape: ArrayLike, T_world_object: ArrayLike) -> None:
+        self.size = np.asarray(size, dtype=np.float64).reshape(3)
+        self.shape = np.asarray(shape, dtype=np.float64).reshape(2)
+        self.T_world_object = np.asarray(T_world_object, dtype=np.float64).reshape(4, 4)
+        if np.any(self.size <= 0):
+            raise ValueError(f"size must be positive, got {self.size.tolist()}")
+        if np.any(self.shape <= 0) or np.any(self.shape >= 2):
+            raise ValueError(f"shape exponents must lie in (0, 2), got {self.shape.tolist()}")
+        self._mesh: Mesh | None = None
+
+    @classmethod
+    def on_table(
+        cls,
+        family: str | Sequence[float],
+        size: ArrayLike,
+        position_xy: ArrayLike,
+        yaw_deg: float = 0.0,
+        lying: bool = False,
+    ) -> SuperquadricObject:
+        """Stand a superquadric on the table, its lowest point exactly at z = 0.
+
+        ``family`` is a key of :data:`FAMILIES` or an (e1, e2) pair. Upright, the
+        object's z axis points up; ``lying`` first turns it a quarter turn about
+        its own x axis (its z axis then lies horizontal, its y axis points up),
+        then ``yaw_deg`` turns it about the world z axis.
+        """
+        shape = FAMILIES[family] if isinstance(family, str) else family
+        R = rotation_z(yaw_deg) @ (_LYING if lying else np.eye(3))
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:2, 3] = np.asarray(position_xy, dtype=np.float64).reshape(2)
+        # Lowest world z of the body = t_z - h(R^T e_z), h the support function.
+        T[2, 3] = cls(size, shape, np.eye(4)).support(R[2])
+        return cls(size, shape, T)
+
+    def support(self, direction_object: ArrayLike) -> float:
+        """max over the body of ``direction . p``, p in the object frame.
+
+        The gauge of a superquadric is a nested norm,
+        ``||(||(x/a1, y/a2)||_p, |z/a3|)||_q`` with p = 2/e2, q = 2/e1, so its
+        support function is the nested dual norm with exponents p/(p-1), q/(q-1)
+        applied to (a1 n1, a2 n2, a3 n3). Exact, no sampling.
+        """
+        u = np.abs(np.asarray(direction_object, dtype=np.float64) * self.size)
+        e1, e2 = self.shape
+        ps, qs = 2.0 / (2.0 - e2), 2.0 / (2.0 - e1)
+        inner = (u[0] ** ps + u[1] ** ps) ** (1.0 / ps)
+        return float((inner**qs + u[2] ** qs) ** (1.0 / qs))
+
+    def _F(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Inside-outside function of (N, 3) object-frame points."""
+        e1, e2 = self.shape
+        q = np.abs(p) / self.size
+        with np.errstate(over="ignore"):  # far points overflow to inf: still outside
+            xy = q[:, 0] ** (2.0 / e2) + q[:, 1] ** (2.0 / e2)
+            return xy ** (e2 / e1) + q[:, 2] ** (2.0 / e1)
+
+    def inside(self, points_world: ArrayLike) -> NDArray[np.bool_]:
+        """(N, 3) world points -> (N,) bool, F <= 1 in the object frame."""
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        R, t = self.T_world_object[:3, :3], self.T_world_object[:3, 3]
+        return self._F((P - t) @ R) <= 1.0
+
+    def mesh(self) -> Mesh:
+        """Closed mesh with every vertex exactly on the surface, (V, 3) and (F, 3)."""
+        if self._mesh is None:
+            cube, faces = _cube_grid()
+            d = cube * self.size
+            # F is homogeneous of degree 2/e1 under scaling, so F(s d) = 1 at s = F(d)^(-e1/2).
+            s = self._F(d) ** (-self.shape[0] / 2.0)
+            p = d * s[:, None]
+            R, t = self.T_world_object[:3, :3], self.T_world_object[:3, 3]
+            self._mesh = (p @ R.T + t, faces)
+        return self._mesh
+
+    def truth(self) -> dict[str, Any]:
+        return {
+            "kind": "superquadric",
+            "size": self.size.tolist(),
+            "shape": self.shape.tolist(),
+            "T_world_object": self.T_world_object.tolist(),
+        }
+
+
+def box(
+    size: ArrayLike, position_xy: ArrayLike, yaw_deg: float = 0.0, lying: bool = False
+) -> SuperquadricObject:
+    """A box (e1 = e2 = 0.1) on the table, see :meth:`SuperquadricObject.on_table`."""
+    return SuperquadricObject.on_table("box", size, position_xy, yaw_deg, lying)
+
+
+def cylinder(
+    size: ArrayLike, position_xy: ArrayLike, yaw_deg: float = 0.0, lying: bool = False
+) -> SuperquadricObject:
+    """A cylinder along the object's z axis (e1 = 0.1, e2 = 1) on the table."""
+    return SuperquadricObject.on_table("cylinder", size, position_xy, yaw_deg, lying)
+
+
+def ellipsoid(
+    size: ArrayLike, position_xy: ArrayLike, yaw_deg: float = 0.0, lying: bool = False
+) -> SuperquadricObject:
+    """An ellipsoid (e1 = e2 = 1) on the table."""
+    return SuperquadricObject.on_table("ellipsoid", size, position_xy, yaw_deg, lying)
+
+
+def rounded_box(
+    size: ArrayLike, position_xy: ArrayLike, yaw_deg: float = 0.0, lying: bool = False
+) -> SuperquadricObject:
+    """A box with rounded edges (e1 = e2 = 0.4) on the table."""
+    return SuperquadricObject.on_table("rounded-box", size, position_xy, yaw_deg, lying)
+
+
+def _bbox_truth(mesh: Mesh) -> dict[str, list[float]]:
+    v = mesh[0]
+    return {"bbox_min": v.min(axis=0).tolist(), "bbox_max": v.max(axis=0).tolist()}
+
+
+class CupStack:
+    """Two solid truncated-cone cups stacked on the table at ``position_xy``.
+
+    The lower cup stands upright (narrow end down). The upper one is either
+    inverted, rim on rim (``top_inverted=True``), or upright and nested in the
+    lower one, its base ``nest_offset`` above the lower cup's base.
+    """
+
+    def __init__(
+        self,
+        position_xy: ArrayLike,
+        bottom_radius: float = 0.025,
+        top_radius: float = 0.038,
+        height: float = 0.06,
+        top_inverted: bool = True,
+        nest_offset: float = 0.02,
+    ) -> None:
+        if not 0 < bottom_radius <= top_radius or height <= 0:
+            raise ValueError("need 0 < bottom_radius <= top_radius and height > 0")
+        self.position_xy = np.asarray(position_xy, dtype=np.float64).reshape(2)
+        self.rb, self.rt, self.h = float(bottom_radius), float(top_radius), float(height)
+        self.top_inverted = bool(top_inverted)
+        self.nest_offset = float(nest_offset)
+        # Each cup: (z of its base, +1 for opening upwards, -1 for inverted).
+        top = (2 * self.h, -1.0) if self.top_inverted else (self.nest_offset, 1.0)
+        self._cups = [(0.0, 1.0), top]
+        self._mesh: Mesh | None = None
+
+    def _cup_radius(self, z: NDArray[np.float64], base: float, up: float) -> NDArray[np.float64]:
+        """Radius at height z (NaN outside the cup's height range)."""
+        s = (z - base) * up / self.h  # 0 at the narrow end, 1 at the rim
+        return np.where((s >= 0) & (s <= 1), self.rb + (self.rt - self.rb) * s, np.nan)
+
+    def inside(self, points_world: ArrayLike) -> NDArray[np.bool_]:
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        r = np.linalg.norm(P[:, :2] - self.position_xy, axis=1)
+        out = np.zeros(len(P), dtype=bool)
+        for base, up in self._cups:
+            out |= r <= np.nan_to_num(self._cup_radius(P[:, 2], base, up), nan=-1.0)
+        return out
+
+    def _cone(self, base: float, up: float, n_seg: int = 72, n_rings: int = 8) -> Mesh:
+        """One closed cup: a side of ``n_rings`` rings plus two flat caps.
+
+        The caps get their own rim vertices so that smooth vertex normals do not
+        round the cups' sharp rims.
+        """
+        ang = 2 * np.pi * np.arange(n_seg) / n_seg
+        ring = np.stack([np.cos(ang), np.sin(ang)], 1)
+        s = np.linspace(0.0, 1.0, n_rings + 1)
+        z = base + up * self.h * s
+        r = self.rb + (self.rt - self.rb) * s
+        side = np.concatenate([np.column_stack([ring * ri, np.full(n_seg, zi)]) for ri, zi in zip(r, z)])
+        i, j = np.meshgrid(np.arange(n_rings), np.arange(n_seg), indexing="ij")
+        a, b = i * n_seg + j, i * n_seg + (j + 1) % n_seg
+        faces = [np.stack([a, b, b + n_seg], -1).reshape(-1, 3), np.stack([a, b + n_seg, a + n_seg], -1).reshape(-1, 3)]
+        verts = [side]
+        for k in (0, n_rings):  # caps at both ends
+            start = sum(len(v) for v in verts)
+            cap = np.vstack([np.column_stack([ring * r[k], np.full(n_seg, z[k])]), [[0.0, 0.0, z[k]]]])
+            jj = np.arange(n_seg)
+            faces.append(np.stack([jj, (jj + 1) % n_seg, np.full(n_seg, n_seg)], -1) + start)
+            verts.append(cap)
+        v = np.concatenate(verts)
+        f = np.concatenate(faces)
+        # Orient outward: away from the cup's axis point at the face's height.
+        tv = v[f]
+        normal = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
+        centre = np.array([0.0, 0.0, base + up * self.h / 2])
+        flip = np.einsum("ij,ij->i", normal, tv.mean(axis=1) - centre) < 0
+        f[flip] = f[flip][:, ::-1]
+        v[:, :2] += self.position_xy
+        return v, f.astype(np.int32)
+
+    def mesh(self) -> Mesh:
+        """Both cups' closed meshes in one array pair (they overlap where they touch)."""
+        if self._mesh is None:
+            (v0, f0), (v1, f1) = (self._cone(base, up) for base, up in self._cups)
+            self._mesh = (np.vstack([v0, v1]), np.vstack([f0, f1 + len(v0)]).astype(np.int32))
+        return self._mesh
+
+    def truth(self) -> dict[str, Any]:
+        return {
+            "kind": "cup-stack",
+            "position_xy": self.position_xy.tolist(),
+            "bottom_radius": self.rb,
+            "top_radius": self.rt,
+            "height": self.h,
+            "top_inverted": self.top_inverted,
+            "nest_offset": self.nest_offset,
+            **_bbox_truth(self.mesh()),
+        }
+
+
+class LumpyFigure:
+    """An irregular blob on the table: an ellipsoid with a smooth random radius.
+
+    In direction d from its centre the surface lies at
+    ``r(d) = r_ellipsoid(d) * exp(amplitude * f(d))``, f a sum of ``n_waves``
+    random plane waves of low frequency drawn from ``seed``, scaled to unit
+    standard deviation (exp keeps the radius positive, so the blob stays
+    star-shaped). The centre sits at 0.7 of the downward radius above the table
+    and everything below z = 0 is cut off, which leaves a flat base.
+    """
+
+    def __init__(
+        self,
+        position_xy: ArrayLike,
+        radii: ArrayLike = (0.05, 0.04, 0.045),
+        seed: int = 0,
+        amplitude: float = 0.2,
+        n_waves: int = 6,
+    ) -> None:
+        self.radii = np.asarray(radii, dtype=np.float64).reshape(3)
+        self.seed, self.amplitude = int(seed), float(amplitude)
+        rng = np.random.default_rng(self.seed)
+        g = rng.normal(size=(n_waves, 3))
+        self._dirs = g / np.linalg.norm(g, axis=1, keepdims=True)
+        self._freq = rng.uniform(2.5, 5.0, n_waves)
+        self._phase = rng.uniform(0, 2 * np.pi, n_waves)
+        self._weight = rng.uniform(0.5, 1.0, n_waves)
+        down = float(self._radius(np.array([[0.0, 0.0, -1.0]]))[0])
+        self.centre = np.array([*np.asarray(position_xy, dtype=np.float64).reshape(2), 0.7 * down])
+        self._mesh: Mesh | None = None
+
+    def _radius(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Surface distance from the centre along (N, 3) unit directions."""
+        r_ell = 1.0 / np.sqrt(((d / self.radii) ** 2).sum(axis=1))
+        # Each wave has variance w^2 / 2: divide by the sum's standard deviation.
+        f = np.sin(self._freq * (d @ self._dirs.T) + self._phase) @ self._weight
+        return r_ell * np.exp(self.amplitude * f / np.sqrt((self._weight**2).sum() / 2))
+
+    def inside(self, points_world: ArrayLike) -> NDArray[np.bool_]:
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        q = P - self.centre
+        dist = np.linalg.norm(q, axis=1)
+        d = q / np.where(dist > 0, dist, 1.0)[:, None]
+        return (dist <= self._radius(d)) & (P[:, 2] >= 0.0)
+
+    def mesh(self) -> Mesh:
+        if self._mesh is None:
+            cube, faces = _cube_grid()
+            d = cube / np.linalg.norm(cube, axis=1, keepdims=True)
+            v = self.centre + d * self._radius(d)[:, None]
+            v[:, 2] = np.maximum(v[:, 2], 0.0)  # the flat base
+            self._mesh = (v, faces)
+        return self._mesh
+
+    def truth(self) -> dict[str, Any]:
+        return {
+            "kind": "lumpy",
+            "centre": self.centre.tolist(),
+            "radii": self.radii.tolist(),
+            "seed": self.seed,
+            "amplitude": self.amplitude,
+            **_bbox_truth(self.mesh()),
+        }

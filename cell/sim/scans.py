@@ -1,0 +1,270 @@
+"""Simulated scan bundles: camera planning, writing, and the benchmark set.
+
+A bundle is the directory of DESIGN.md §3 (``scan.json`` and ``view{i}.jpg``)
+plus ``truth.json``, the ground truth to score a reconstruction against.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
+from .render import TableScene, render
+
+__all__ = [
+    "HSV_SEGMENTATION",
+    "ScanSpec",
+    "default_K",
+    "fitting_distance",
+    "look_at",
+    "make_spec",
+    "object_target",
+    "plan_views",
+    "standard_set",
+    "write_scan",
+    "write_standard_set",
+]
+
+#: The segmentation written into every simulated scan.json: red, hue wrapping round 0.
+HSV_SEGMENTATION: dict[str, Any] = {"method": "hsv", "lower": [170, 90, 40], "upper": [10, 255, 255]}
+
+
+def default_K(image_size: tuple[int, int] = (640, 480), f: float = 600.0) -> NDArray[np.float64]:
+    """(3, 3) pinhole matrix, focal length ``f`` px, principal point at the image centre."""
+    w, h = image_size
+    return np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def look_at(camera_position: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
+    """Camera-to-world pose (4, 4) of a camera at ``camera_position`` looking at ``target``.
+
+    OpenCV axes: z forward (towards the target), y down (against ``up``),
+    x = y cross z to the right.
+
+    Raises
+    ------
+    ValueError
+        If the camera sits on the target or looks along ``up``.
+
+    Examples
+    --------
+    >>> T = look_at([0.0, 0.0, 1.0], [0.0, 0.5, 0.0])
+    >>> bool(np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)))
+    True
+    """
+    c = np.asarray(camera_position, dtype=np.float64).reshape(3)
+    z = np.asarray(target, dtype=np.float64).reshape(3) - c
+    if np.linalg.norm(z) < 1e-12:
+        raise ValueError("camera_position and target coincide")
+    z /= np.linalg.norm(z)
+    u = np.asarray(up, dtype=np.float64).reshape(3)
+    y = -(u - (u @ z) * z)
+    if np.linalg.norm(y) < 1e-9 * max(np.linalg.norm(u), 1e-300):
+        raise ValueError("the viewing direction is parallel to up")
+    y /= np.linalg.norm(y)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
+    T[:3, 3] = c
+    return T
+
+
+def _rot(axis: int, angle: float) -> NDArray[np.float64]:
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.eye(3)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+def plan_views(
+    target: ArrayLike,
+    n_views: int = 3,
+    distance: tuple[float, float] = (0.4, 0.7),
+    elevation_deg: tuple[float, float] = (35.0, 55.0),
+    azimuth_start_deg: float = 0.0,
+    rng: np.random.Generator | None = None,
+    jitter_deg: float = 2.0,
+) -> list[NDArray[np.float64]]:
+    """Poses (4, 4 each) of ``n_views`` cameras around ``target``, 360/n degrees apart.
+
+    With ``rng`` each view's distance and elevation are drawn uniformly from
+    the ranges, its azimuth is moved by up to ``jitter_deg`` and its optical
+    axis tilted off the target by up to ``jitter_deg`` about the camera's x and
+    y axes (an arm does not point perfectly). Without ``rng`` every view sits
+    at the middle of the ranges and looks exactly at the target.
+    """
+    if n_views < 1:
+        raise ValueError(f"n_views must be >= 1, got {n_views}")
+    target = np.asarray(target, dtype=np.float64).reshape(3)
+    poses = []
+    for i in range(n_views):
+        if rng is None:
+            d, el, jitter = np.mean(distance), np.mean(elevation_deg), np.zeros(3)
+        else:
+            d, el = rng.uniform(*distance), rng.uniform(*elevation_deg)
+            jitter = rng.uniform(-jitter_deg, jitter_deg, 3)
+        az = np.radians(azimuth_start_deg + i * 360.0 / n_views + jitter[0])
+        el = np.radians(el)
+        offset = d * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        T = look_at(target + offset, target)
+        # Turning about the camera's own axes keeps its position (distance, elevation).
+        T[:3, :3] = T[:3, :3] @ _rot(0, np.radians(jitter[1])) @ _rot(1, np.radians(jitter[2]))
+        poses.append(T)
+    return poses
+
+
+def _json_bytes(obj: Any) -> bytes:
+    """Indented JSON with every innermost list of numbers on one line (matrix rows)."""
+    text = json.dumps(obj, indent=2)
+    flat = re.compile(r"\[\s+([-+.\deE,\s]+?)\s+\]")  # a list holding only numbers
+    text = flat.sub(lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text)
+    return (text + "\n").encode()
+
+
+def write_scan(
+    out_dir: str | Path,
+    objects: SimObject | Sequence[SimObject],
+    cameras: Sequence[ArrayLike],
+    K: ArrayLike,
+    dist: ArrayLike | None = None,
+    *,
+    seed: int,
+    image_size: tuple[int, int] = (640, 480),
+    jpeg_quality: int = 90,
+    write_masks: bool = False,
+) -> Path:
+    """Render and write one scan bundle; return its directory.
+
+    Writes ``view{i}.jpg`` per camera, ``scan.json`` (DESIGN.md §3, with
+    :data:`HSV_SEGMENTATION` and the table plane as support plane) and
+    ``truth.json``: the object's ``truth()``, or ``{"kind": "scene",
+    "objects": [...]}`` for several objects. ``write_masks`` adds
+    ``mask{i}.png`` (255 = object) for inspection; scan.json does not name them,
+    so a reconstruction still has to segment the images. The table's look and
+    the sensor noise follow ``seed``: the same arguments give the same bytes.
+    """
+    objs = [objects] if isinstance(objects, SimObject) else list(objects)
+    if not objs:
+        raise ValueError("no objects to scan")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    K = np.asarray(K, dtype=np.float64)
+    table = TableScene.from_seed(seed)
+    views = []
+    for i, T in enumerate(cameras):
+        bgr, mask = render(objs, T, K, dist, image_size, rng=np.random.default_rng([seed, i]), table=table)
+        ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+        if not ok:
+            raise RuntimeError(f"JPEG encoding failed for view {i}")
+        (out / f"view{i}.jpg").write_bytes(jpg.tobytes())
+        if write_masks:
+            cv2.imwrite(str(out / f"mask{i}.png"), mask)
+        view: dict[str, Any] = {"image": f"view{i}.jpg", "K": K.tolist()}
+        if dist is not None:
+            view["dist"] = np.asarray(dist, dtype=np.float64).ravel().tolist()
+        view["T_world_cam"] = np.asarray(T, dtype=np.float64).tolist()
+        views.append(view)
+    scan = {"views": views, "segmentation": HSV_SEGMENTATION, "support_plane": [0, 0, 1, 0]}
+    (out / "scan.json").write_bytes(_json_bytes(scan))
+    truth = objs[0].truth() if len(objs) == 1 else {"kind": "scene", "objects": [o.truth() for o in objs]}
+    (out / "truth.json").write_bytes(_json_bytes(truth))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ScanSpec:
+    """Everything needed to write one simulated scan bundle."""
+
+    name: str
+    objects: tuple[SimObject, ...]
+    cameras: tuple[NDArray[np.float64], ...]
+    K: NDArray[np.float64]
+    target: NDArray[np.float64]  # the point the cameras aim at (the object's centre)
+    seed: int
+    dist: NDArray[np.float64] | None = None
+    image_size: tuple[int, int] = field(default=(640, 480))
+
+    def write(self, out_dir: str | Path, write_masks: bool = False) -> Path:
+        """Write the bundle to ``out_dir / name``."""
+        return write_scan(
+            Path(out_dir) / self.name, self.objects, self.cameras, self.K, self.dist,
+            seed=self.seed, image_size=self.image_size, write_masks=write_masks,
+        )
+
+
+def object_target(obj: SimObject) -> NDArray[np.float64]:
+    """Where to aim the cameras: the centre of the mesh's bounding box."""
+    v = obj.mesh()[0]
+    return (v.min(axis=0) + v.max(axis=0)) / 2
+
+
+def fitting_distance(obj: SimObject, K: ArrayLike, image_size: tuple[int, int], fill: float = 0.8) -> float:
+    """Smallest camera distance at which the object's bounding sphere spans at most
+    ``fill`` of the image's half-height (from the aimed-at centre, 2 degrees of
+    pointing jitter allowed for)."""
+    v = obj.mesh()[0]
+    r = float(np.linalg.norm(v - object_target(obj), axis=1).max())
+    half_angle = np.arctan(fill * min(image_size) / 2 / float(np.asarray(K)[1, 1])) - np.radians(2.0)
+    return r / np.sin(half_angle)
+
+
+def make_spec(
+    name: str, obj: SimObject, seed: int, n_views: int = 3,
+    distance: tuple[float, float] = (0.4, 0.7), elevation_deg: tuple[float, float] = (35.0, 55.0),
+    image_size: tuple[int, int] = (640, 480), fit_distance: bool = True,
+) -> ScanSpec:
+    """A spec with cameras planned around ``obj``, seeded by ``seed``.
+
+    With ``fit_distance`` the near end of ``distance`` moves out (at most to the
+    far end) until the whole object fits in the image.
+    """
+    K = default_K(image_size)
+    near = distance[0]
+    if fit_distance:
+        near = min(max(near, fitting_distance(obj, K, image_size)), distance[1])
+    rng = np.random.default_rng([seed, 1])
+    target = object_target(obj)
+    cams = plan_views(target, n_views, (near, distance[1]), elevation_deg, rng.uniform(0, 360), rng)
+    return ScanSpec(name, (obj,), tuple(cams), K, target, seed, image_size=image_size)
+
+
+def standard_set(seed: int = 0) -> list[ScanSpec]:
+    """The fixed benchmark: 6 scans per superquadric family, 2 cup stacks, 2 lumpy figures.
+
+    Half-sizes are drawn from 1.5-7.5 cm (full dimensions 3-15 cm), at least
+    one of them 3 cm or more so that no object is a speck at 0.7 m; cylinders
+    are round (a1 = a2); scans 4 and 5 of each family lie on their side. Yaws
+    are uniform, positions within 8 cm of (0.6, 0).
+    """
+    specs = []
+    for fam_index, family in enumerate(["box", "cylinder", "ellipsoid", "rounded-box"]):
+        for i in range(6):
+            rng = np.random.default_rng([seed, fam_index, i])
+            a = rng.uniform(0.015, 0.075, 3)
+            a[rng.integers(3)] = rng.uniform(0.03, 0.075)
+            if family == "cylinder":
+                a[1] = a[0]
+            rho, phi = 0.08 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            xy = (0.6 + rho * np.cos(phi), rho * np.sin(phi))
+            obj = SuperquadricObject.on_table(family, a, xy, rng.uniform(0, 180), lying=i >= 4)
+            specs.append(make_spec(f"{family}-{i:02d}", obj, seed=1000 * seed + 10 * fam_index + i))
+    for i in range(2):
+        rng = np.random.default_rng([seed, 10, i])
+        xy = (0.6 + rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05))
+        cups = CupStack(xy, rng.uniform(0.022, 0.03), rng.uniform(0.035, 0.045), rng.uniform(0.05, 0.07), i == 0)
+        specs.append(make_spec(f"cup-stack-{i:02d}", cups, seed=1000 * seed + 100 + i))
+        lumpy = LumpyFigure(xy, rng.uniform(0.03, 0.06, 3), seed=1000 * seed + i)
+        specs.append(make_spec(f"lumpy-{i:02d}", lumpy, seed=1000 * seed + 200 + i))
+    return specs
+
+
+def write_standard_set(out_dir: str | Path, seed: int = 0, write_masks: bool = False) -> list[Path]:
+    """Write every bundle of :func:`standard_set` under ``out_dir``; return their directories."""
+    return [spec.write(out_dir, write_masks) for spec in standard_set(seed)]

@@ -1,0 +1,303 @@
+"""The cell daemon's job store: every scan job, its events and its result in one SQLite file.
+
+Each method is one short transaction, called straight from the daemon's event
+loop. Every commit is synced to disk (WAL journal, ``synchronous=FULL``), so a
+job is durable once :meth:`JobStore.add` returns, even if the daemon is killed
+with ``kill -9`` right after.
+
+Job ids look like ``20261122-000042``: the UTC day the job was submitted, then
+the store's job counter (the row number; jobs are never deleted). They are
+unique within a store because the counter is, and sort in submission order as
+long as the clock does not step back over midnight.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TypeVar
+
+from pydantic import ValidationError
+
+from .errors import StoreError
+from .messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
+
+__all__ = ["JobStore", "SCHEMA_VERSION", "INTERRUPTED"]
+
+#: Kept in ``PRAGMA user_version``; a file with another version is refused, not guessed at.
+SCHEMA_VERSION = 1
+INTERRUPTED = "interrupted: the daemon stopped during this job"
+_T = TypeVar("_T")
+_RUNNING = (JobState.MOVING, JobState.CAPTURING, JobState.RECONSTRUCTING)
+
+# One statement each: sqlite3 runs one at a time inside our transaction (executescript would commit).
+_SCHEMA = (
+    """CREATE TABLE jobs (
+        seq INTEGER PRIMARY KEY,                    -- submission order, the counter in job_id
+        job_id TEXT NOT NULL UNIQUE,
+        request_id TEXT UNIQUE,                     -- NULLs are distinct: only client ids collide
+        state TEXT NOT NULL, view INTEGER, n_views INTEGER NOT NULL, error TEXT,
+        created REAL NOT NULL, updated REAL NOT NULL, recording TEXT,
+        request TEXT NOT NULL)                      -- ScanRequest JSON""",
+    "CREATE INDEX jobs_state ON jobs (state)",
+    """CREATE TABLE events (seq INTEGER PRIMARY KEY, job_id TEXT NOT NULL REFERENCES jobs (job_id),
+        event TEXT NOT NULL)                        -- JobEvent JSON""",
+    "CREATE INDEX events_job ON events (job_id)",
+    """CREATE TABLE results (job_id TEXT PRIMARY KEY REFERENCES jobs (job_id),
+        result TEXT NOT NULL)                       -- ScanResult JSON""",
+)
+_COLUMNS = "job_id, state, view, n_views, error, created, updated, recording, request"
+
+
+class JobStore:
+    """Scan jobs kept in the SQLite file ``path``, created with its schema if missing.
+
+    Use as a context manager, or call :meth:`close`. Not thread-safe: one
+    store per thread (other processes may open the same file).
+
+    Raises
+    ------
+    StoreError
+        The file cannot be opened or created, is not a database, or has another
+        schema version. Every method raises it when SQLite fails or a stored
+        row no longer validates.
+    """
+
+    def __init__(self, path: Path, *, timeout: float = 5.0):
+        self.path = Path(path)
+        with self._errors():
+            # isolation_level=None: we issue BEGIN/COMMIT ourselves, so each
+            # method is exactly one transaction and nothing is left open.
+            self._db = sqlite3.connect(self.path, timeout=timeout, isolation_level=None)
+            try:
+                self._db.execute("PRAGMA journal_mode = WAL")      # readers don't block the writer
+                self._db.execute("PRAGMA synchronous = FULL")      # fsync every commit
+                self._db.execute("PRAGMA foreign_keys = ON")
+                with self._write() as db:
+                    version = db.execute("PRAGMA user_version").fetchone()[0]
+                    if version == 0:
+                        for statement in _SCHEMA:
+                            db.execute(statement)
+                        db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                    elif version != SCHEMA_VERSION:
+                        raise StoreError(f"job store {self.path} has schema version {version}; "
+                                         f"this robocell reads version {SCHEMA_VERSION}")
+            except BaseException:
+                self._db.close()
+                raise
+
+    def close(self) -> None:
+        """Close the database; later calls raise :class:`StoreError`. Closing twice is fine."""
+        self._db.close()
+
+    def __enter__(self) -> JobStore:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # --- writing ----------------------------------------------------------------------------
+
+    def add(self, request: ScanRequest, *, n_views: int, now: float) -> tuple[JobStatus, bool]:
+        """Queue a new job; returns ``(status, True)``.
+
+        If a job was already submitted with ``request.request_id``, nothing is
+        added and that job comes back as ``(status, False)``, whatever its state.
+
+        Raises
+        ------
+        ValueError
+            ``n_views`` is below 1.
+        """
+        if n_views < 1:
+            raise ValueError(f"n_views must be at least 1, got {n_views}")
+        with self._write() as db:
+            # BEGIN IMMEDIATE holds the write lock, so look-up and insert cannot
+            # interleave with another writer; the UNIQUE index is the backstop.
+            if request.request_id is not None:
+                row = db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE request_id = ?",
+                                 (request.request_id,)).fetchone()
+                if row is not None:
+                    return _status(row), False
+            seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
+            job_id = f"{time.strftime('%Y%m%d', time.gmtime(now))}-{seq:06d}"
+            db.execute(
+                "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (seq, job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
+                 request.model_dump_json()),
+            )
+            return self._get(db, job_id), True
+
+    def update(self, job_id: str, state: JobState, *, view: int | None = None, error: str | None = None,
+               recording: str | None = None, now: float) -> JobStatus:
+        """Move a job to ``state``; ``view`` and ``error`` are replaced, ``recording`` kept unless given.
+
+        Raises
+        ------
+        KeyError
+            There is no job ``job_id``.
+        ValueError
+            The job is finished (succeeded, failed or cancelled): that is final.
+        """
+        state = JobState(state)
+        with self._write() as db:
+            self._check_open(db, job_id, state)
+            db.execute(
+                "UPDATE jobs SET state = ?, view = ?, error = ?, recording = COALESCE(?, recording),"
+                " updated = ? WHERE job_id = ?",
+                (state.value, view, error, recording, now, job_id),
+            )
+            return self._get(db, job_id)
+
+    def add_event(self, event: JobEvent) -> None:
+        """Append a progress event to its job's history.
+
+        Raises
+        ------
+        KeyError
+            There is no job ``event.job_id``.
+        """
+        with self._write() as db:
+            inserted = db.execute(
+                "INSERT INTO events (job_id, event) SELECT job_id, ? FROM jobs WHERE job_id = ?",
+                (event.model_dump_json(), event.job_id),
+            ).rowcount
+            if inserted == 0:
+                raise KeyError(f"no job {event.job_id!r}")
+
+    def save_result(self, result: ScanResult, *, now: float) -> JobStatus:
+        """Store the result of job ``result.job_id`` and mark it succeeded, both or neither.
+
+        Raises
+        ------
+        KeyError
+            There is no such job.
+        ValueError
+            The job is already finished.
+        """
+        with self._write() as db:
+            self._check_open(db, result.job_id, JobState.SUCCEEDED)
+            db.execute("INSERT INTO results (job_id, result) VALUES (?, ?)",
+                       (result.job_id, result.model_dump_json()))
+            db.execute(
+                "UPDATE jobs SET state = ?, view = NULL, error = NULL, recording = COALESCE(?, recording),"
+                " updated = ? WHERE job_id = ?",
+                (JobState.SUCCEEDED.value, result.recording, now, result.job_id),
+            )
+            return self._get(db, result.job_id)
+
+    def interrupt_unfinished(self, *, now: float, reason: str = INTERRUPTED) -> list[JobStatus]:
+        """Fail every moving, capturing or reconstructing job with ``reason``; returns them, oldest first.
+
+        Queued jobs stay queued: the daemon resumes them.
+        """
+        where, params = _in_states(set(_RUNNING))
+        with self._write() as db:
+            ids = [row[0] for row in db.execute(f"SELECT job_id FROM jobs {where} ORDER BY seq", params)]
+            db.executemany("UPDATE jobs SET state = ?, error = ?, updated = ? WHERE job_id = ?",
+                           [(JobState.FAILED.value, reason, now, job_id) for job_id in ids])
+            return [self._get(db, job_id) for job_id in ids]
+
+    # --- reading ----------------------------------------------------------------------------
+
+    def get(self, job_id: str) -> JobStatus | None:
+        """The job's status, or None if there is no such job."""
+        rows = self._read(f"SELECT {_COLUMNS} FROM jobs WHERE job_id = ?", [job_id], _status)
+        return rows[0] if rows else None
+
+    def result(self, job_id: str) -> ScanResult | None:
+        """The job's result, or None if it has none (yet)."""
+        rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id],
+                          lambda row: ScanResult.model_validate_json(row[0]))
+        return rows[0] if rows else None
+
+    def events(self, job_id: str) -> list[JobEvent]:
+        """The job's events in the order they were added (none for an unknown job)."""
+        return self._read("SELECT event FROM events WHERE job_id = ? ORDER BY seq", [job_id],
+                          lambda row: JobEvent.model_validate_json(row[0]))
+
+    def list(self, *, states: set[JobState] | None = None, limit: int = 100) -> list[JobStatus]:
+        """Up to ``limit`` jobs, newest first, only those in ``states`` if given.
+
+        Raises
+        ------
+        ValueError
+            ``limit`` is below 1.
+        """
+        if limit < 1:
+            raise ValueError(f"limit must be at least 1, got {limit}")
+        where, params = _in_states(states)
+        return self._read(f"SELECT {_COLUMNS} FROM jobs {where} ORDER BY seq DESC LIMIT ?",
+                          [*params, limit], _status)
+
+    def unfinished(self) -> list[JobStatus]:
+        """Every job not yet succeeded, failed or cancelled, oldest first: a restarted daemon's to-do."""
+        where, params = _in_states({s for s in JobState if not s.finished})
+        return self._read(f"SELECT {_COLUMNS} FROM jobs {where} ORDER BY seq", params, _status)
+
+    def count(self, states: set[JobState]) -> int:
+        """How many jobs are in one of ``states``."""
+        where, params = _in_states(states)
+        return self._read(f"SELECT COUNT(*) FROM jobs {where}", params, lambda row: row[0])[0]
+
+    # --- plumbing ---------------------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def _errors(self) -> Iterator[None]:
+        """The one place where SQLite's and pydantic's errors become :class:`StoreError`."""
+        try:
+            yield
+        except sqlite3.Error as exc:
+            raise StoreError(f"job store {self.path}: {exc}") from exc
+        except ValidationError as exc:
+            raise StoreError(f"job store {self.path} holds an invalid row: {exc}") from exc
+
+    def _read(self, sql: str, params: list, convert: Callable[[tuple], _T]) -> list[_T]:
+        """One query, every row converted; a single statement needs no explicit transaction."""
+        with self._errors():
+            return [convert(row) for row in self._db.execute(sql, params)]
+
+    @contextlib.contextmanager
+    def _write(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction: committed if the block returns, rolled back if it raises."""
+        with self._errors():
+            db = self._db
+            db.execute("BEGIN IMMEDIATE")  # take the write lock now, not half-way through
+            try:
+                yield db
+                db.execute("COMMIT")
+            except BaseException:
+                if db.in_transaction:  # SQLite may already have rolled back; a failed COMMIT has not
+                    db.execute("ROLLBACK")
+                raise
+
+    def _get(self, db: sqlite3.Connection, job_id: str) -> JobStatus:
+        return _status(db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE job_id = ?", (job_id,)).fetchone())
+
+    def _check_open(self, db: sqlite3.Connection, job_id: str, new: JobState) -> None:
+        row = db.execute("SELECT state FROM jobs WHERE job_id = ?", (job_id,)).fetchone()
+        if row is None:
+            raise KeyError(f"no job {job_id!r}")
+        if JobState(row[0]).finished:
+            raise ValueError(f"job {job_id} is {row[0]}, which is final: it cannot become {new.value}")
+
+
+def _status(row: tuple) -> JobStatus:
+    job_id, state, view, n_views, error, created, updated, recording, request = row
+    return JobStatus(job_id=job_id, state=JobState(state), view=view, n_views=n_views, error=error,
+                     created=created, updated=updated, recording=recording,
+                     request=ScanRequest.model_validate_json(request))
+
+
+def _in_states(states: set[JobState] | None) -> tuple[str, list[str]]:
+    """A WHERE clause for ``states`` (None: every job; empty: none) and its parameters."""
+    if states is None:
+        return "", []
+    values = sorted(JobState(s).value for s in states)
+    if not values:
+        return "WHERE 0", []
+    return f"WHERE state IN ({', '.join('?' * len(values))})", values

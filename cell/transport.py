@@ -1,0 +1,320 @@
+"""An asyncio face for one Zenoh session: queries, queryables, publications, liveliness.
+
+Zenoh calls back on its own threads; everything here hands those calls over
+to the event loop (``call_soon_threadsafe``), so the rest of robocell is plain
+asyncio. Zenoh errors are translated into ``cell.errors.TransportError`` here
+and nowhere else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+
+import zenoh
+
+from .errors import NoResponder, RemoteError, TransportError, TransportTimeout
+from .messages import ErrorReply
+
+__all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session_config"]
+
+log = logging.getLogger(__name__)
+JSON = "application/json"
+# Zenoh answers a query that ran out of time with one error reply carrying this payload.
+_ZENOH_TIMEOUT = b"Timeout"
+
+
+def session_config(endpoint: str, *, mode: str = "client", settings: dict | None = None,
+                   lease_ms: int | None = None, connect_timeout_ms: int = 0) -> zenoh.Config:
+    """A Zenoh configuration: a router listening on ``endpoint``, or a client connecting to it.
+
+    Scouting is off: robocell's processes find each other through the router only.
+    ``lease_ms`` shortens how long a frozen process keeps its liveliness tokens.
+    ``settings`` adds any Zenoh JSON5 key (TLS, credentials, ...).
+    """
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("listen/endpoints" if mode == "router" else "connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("scouting/gossip/enabled", "false")
+    if mode != "router" and connect_timeout_ms:
+        config.insert_json5("connect/timeout_ms", str(connect_timeout_ms))
+    if lease_ms:
+        config.insert_json5("transport/link/tx/lease", str(lease_ms))
+    for key, value in (settings or {}).items():
+        config.insert_json5(key, json.dumps(value))
+    return config
+
+
+@dataclass
+class Request:
+    """A query as a handler sees it."""
+
+    key: str
+    parameters: dict[str, str]
+    payload: bytes | None
+    attachment: bytes | None
+
+
+@dataclass
+class Response:
+    payload: bytes | str
+    encoding: str = JSON
+    attachment: bytes | str | None = None
+
+
+@dataclass
+class Reply:
+    key: str
+    payload: bytes
+    encoding: str
+    attachment: bytes | None = field(default=None, repr=False)
+
+
+class RequestError(Exception):
+    """Raised by a handler: the request is wrong; the message goes back to the caller."""
+
+
+Handler = Callable[[Request], Awaitable[Response]]
+
+
+def _bytes(value) -> bytes | None:
+    return None if value is None else value.to_bytes()
+
+
+class Subscription:
+    """Samples (or liveliness changes) of a key expression, as an async iterator."""
+
+    def __init__(self) -> None:
+        self._queue: asyncio.Queue = asyncio.Queue()
+        self._undeclare: Callable[[], None] = lambda: None
+
+    def __aiter__(self):
+        return self
+
+    async def __anext__(self):
+        return await self._queue.get()
+
+    async def get(self, timeout: float | None = None):
+        return await asyncio.wait_for(self._queue.get(), timeout)
+
+    def close(self) -> None:
+        self._undeclare()
+        self._undeclare = lambda: None
+
+
+class Transport:
+    """One Zenoh session, used from one asyncio event loop."""
+
+    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop, endpoint: str) -> None:
+        self._session = session
+        self._loop = loop
+        self.endpoint = endpoint
+        self._declared: list = []
+        self._closed = False
+
+    @classmethod
+    async def open(cls, endpoint: str, *, mode: str = "client", settings: dict | None = None,
+                   lease_ms: int | None = None, connect_timeout_s: float = 0.0) -> "Transport":
+        """Open a session; a client waits up to ``connect_timeout_s`` for the router.
+
+        Raises
+        ------
+        TransportError
+            If the router cannot be reached (or, for a router, the endpoint cannot be bound).
+        """
+        config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms,
+                                connect_timeout_ms=int(connect_timeout_s * 1000))
+        try:
+            session = await asyncio.to_thread(zenoh.open, config)
+        except zenoh.ZError as exc:
+            what = "listen on" if mode == "router" else "reach the Zenoh router at"
+            raise TransportError(f"cannot {what} {endpoint}: {exc}") from exc
+        return cls(session, asyncio.get_running_loop(), endpoint)
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for declared in reversed(self._declared):
+            try:
+                declared.undeclare()
+            except zenoh.ZError:  # already gone with the session
+                pass
+        await asyncio.to_thread(self._session.close)
+
+    async def __aenter__(self) -> "Transport":
+        return self
+
+    async def __aexit__(self, *exc_info) -> None:
+        await self.close()
+
+    # --- queries ---------------------------------------------------------------------------
+
+    async def query(self, key: str, payload: bytes | str | None = None, *, timeout: float,
+                    attachment: bytes | str | None = None, encoding: str = JSON,
+                    parameters: str = "") -> Reply:
+        """Send a query and return the first successful reply.
+
+        Raises
+        ------
+        NoResponder
+            If nobody serves ``key``.
+        TransportTimeout
+            If no reply came within ``timeout`` seconds.
+        RemoteError
+            If the responder answered with an error (its message is the error's text).
+        """
+        loop = self._loop
+        done = loop.create_future()
+        replies: list[tuple[bool, Reply]] = []
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                sample = reply.ok
+                replies.append((True, Reply(str(sample.key_expr), sample.payload.to_bytes(),
+                                            str(sample.encoding), _bytes(sample.attachment))))
+            else:
+                replies.append((False, Reply(key, reply.err.payload.to_bytes(), str(reply.err.encoding))))
+
+        def on_finished() -> None:
+            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
+
+        selector = f"{key}?{parameters}" if parameters else key
+        kwargs = {"timeout": timeout, "encoding": zenoh.Encoding(encoding)}
+        if payload is not None:
+            kwargs["payload"] = payload
+        if attachment is not None:
+            kwargs["attachment"] = attachment
+        try:
+            self._session.get(selector, zenoh.handlers.Callback(on_reply, on_finished), **kwargs)
+            # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
+            await asyncio.wait_for(done, timeout + 5.0)
+        except zenoh.ZError as exc:
+            raise TransportError(f"query on {key} failed: {exc}") from exc
+        except asyncio.TimeoutError:
+            raise TransportTimeout(f"no answer on {key} within {timeout:g} s") from None
+        for ok, reply in replies:
+            if ok:
+                return reply
+        if not replies:
+            raise NoResponder(f"nobody answers on {key}")
+        error = replies[0][1]
+        if error.payload == _ZENOH_TIMEOUT:
+            raise TransportTimeout(f"no answer on {key} within {timeout:g} s")
+        raise RemoteError(_error_text(error.payload))
+
+    def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
+        """Answer queries on ``key`` with ``handler``, on the event loop, concurrently.
+
+        A ``RequestError`` from the handler goes back as an error reply with its
+        message; any other exception as "internal error", and is logged.
+        """
+        loop = self._loop
+
+        def on_query(query: zenoh.Query) -> None:
+            request = Request(str(query.key_expr), dict(query.parameters), _bytes(query.payload),
+                              _bytes(query.attachment))
+            try:
+                asyncio.run_coroutine_threadsafe(self._answer(query, request, handler), loop)
+            except RuntimeError:  # the loop is gone: we are shutting down
+                query.drop()
+
+        self._declared.append(self._session.declare_queryable(key, on_query, complete=complete))
+
+    @staticmethod
+    async def _answer(query: zenoh.Query, request: Request, handler: Handler) -> None:
+        try:
+            try:
+                response = await handler(request)
+            except RequestError as exc:
+                query.reply_err(ErrorReply(error=str(exc)).model_dump_json(), encoding=zenoh.Encoding(JSON))
+                return
+            except Exception as exc:
+                log.exception("handler for %s failed", request.key)
+                query.reply_err(ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}")
+                                .model_dump_json(), encoding=zenoh.Encoding(JSON))
+                return
+            kwargs = {"encoding": zenoh.Encoding(response.encoding)}
+            if response.attachment is not None:
+                kwargs["attachment"] = response.attachment
+            query.reply(query.key_expr, response.payload, **kwargs)
+        except zenoh.ZError as exc:  # the querier went away
+            log.warning("could not answer on %s: %s", request.key, exc)
+        finally:
+            # Until it is dropped, the querier keeps waiting for more replies.
+            query.drop()
+
+    # --- publications ----------------------------------------------------------------------
+
+    def put(self, key: str, payload: bytes | str, *, encoding: str = JSON,
+            attachment: bytes | str | None = None) -> None:
+        kwargs = {"encoding": zenoh.Encoding(encoding)}
+        if attachment is not None:
+            kwargs["attachment"] = attachment
+        try:
+            self._session.put(key, payload, **kwargs)
+        except zenoh.ZError as exc:
+            raise TransportError(f"publishing on {key} failed: {exc}") from exc
+
+    def subscribe(self, key: str) -> Subscription:
+        """Publications on ``key`` as :class:`Reply` objects (key, payload, encoding, attachment)."""
+        subscription = Subscription()
+        queue, loop = subscription._queue, self._loop
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            item = Reply(str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding),
+                         _bytes(sample.attachment))
+            loop.call_soon_threadsafe(queue.put_nowait, item)
+
+        subscriber = self._session.declare_subscriber(key, on_sample)
+        subscription._undeclare = subscriber.undeclare
+        return subscription
+
+    # --- liveliness ------------------------------------------------------------------------
+
+    def declare_token(self, key: str):
+        """Announce this process under ``key`` for as long as the session lives."""
+        token = self._session.liveliness().declare_token(key)
+        self._declared.append(token)
+        return token
+
+    def watch_liveliness(self, key_expr: str) -> Subscription:
+        """``(key, alive)`` for every token matching ``key_expr``: those that exist now, then changes."""
+        subscription = Subscription()
+        queue, loop = subscription._queue, self._loop
+
+        def on_change(sample: zenoh.Sample) -> None:
+            alive = sample.kind == zenoh.SampleKind.PUT
+            loop.call_soon_threadsafe(queue.put_nowait, (str(sample.key_expr), alive))
+
+        subscriber = self._session.liveliness().declare_subscriber(key_expr, on_change, history=True)
+        subscription._undeclare = subscriber.undeclare
+        return subscription
+
+    async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
+        """Keys of the liveliness tokens matching ``key_expr`` now."""
+        loop = self._loop
+        done = loop.create_future()
+        keys: list[str] = []
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                keys.append(str(reply.ok.key_expr))
+
+        def on_finished() -> None:
+            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
+
+        self._session.liveliness().get(key_expr, zenoh.handlers.Callback(on_reply, on_finished), timeout=timeout)
+        await asyncio.wait_for(done, timeout + 5.0)
+        return sorted(keys)
+
+
+def _error_text(payload: bytes) -> str:
+    try:
+        return ErrorReply.model_validate_json(payload).error
+    except ValueError:
+        return payload.decode("utf-8", errors="replace") or "error without a message"

@@ -1,0 +1,277 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Compiled kernels of the superquadrics: inside-outside values, the support
+function, and the fit's objective with its analytic gradient.
+
+Object frame: ``X = R^T (p - t)``. Inside-outside function::
+
+    F = ((|x|/a1)^(2/e2) + (|y|/a2)^(2/e2))^(e2/e1) + (|z|/a3)^(2/e1)
+
+evaluated in log space (``u^p = exp(p log u)``) so that the steep powers of a
+box-like shape (2/e = 20) neither overflow nor lose the small terms.
+"""
+
+from libc.math cimport exp, log, log1p, fabs, sqrt, sin, cos
+
+# |x| below this is treated as this: keeps log() finite at the axes' planes.
+cdef double _TINY = 1e-300
+
+
+cdef inline void _rotation(const double[:, ::1] R0, double alpha, double beta,
+                           double gamma, double R[3][3], double dR[3][3][3]) noexcept nogil:
+    """R = R0 @ Rz(gamma) @ Ry(beta) @ Rx(alpha) and dR/d(alpha, beta, gamma)."""
+    cdef double ca = cos(alpha), sa = sin(alpha)
+    cdef double cb = cos(beta), sb = sin(beta)
+    cdef double cg = cos(gamma), sg = sin(gamma)
+    cdef double Rx[3][3]
+    cdef double Ry[3][3]
+    cdef double Rz[3][3]
+    cdef double dRx[3][3]
+    cdef double dRy[3][3]
+    cdef double dRz[3][3]
+    cdef double A[3][3]
+    cdef double B[3][3]
+    cdef int i, j, k, m
+    for i in range(3):
+        for j in range(3):
+            Rx[i][j] = 0.0; Ry[i][j] = 0.0; Rz[i][j] = 0.0
+            dRx[i][j] = 0.0; dRy[i][j] = 0.0; dRz[i][j] = 0.0
+    Rx[0][0] = 1.0; Rx[1][1] = ca; Rx[1][2] = -sa; Rx[2][1] = sa; Rx[2][2] = ca
+    dRx[1][1] = -sa; dRx[1][2] = -ca; dRx[2][1] = ca; dRx[2][2] = -sa
+    Ry[1][1] = 1.0; Ry[0][0] = cb; Ry[0][2] = sb; Ry[2][0] = -sb; Ry[2][2] = cb
+    dRy[0][0] = -sb; dRy[0][2] = cb; dRy[2][0] = -cb; dRy[2][2] = -sb
+    Rz[2][2] = 1.0; Rz[0][0] = cg; Rz[0][1] = -sg; Rz[1][0] = sg; Rz[1][1] = cg
+    dRz[0][0] = -sg; dRz[0][1] = -cg; dRz[1][0] = cg; dRz[1][1] = -sg
+    # m = 0: d/dalpha, 1: d/dbeta, 2: d/dgamma, 3: R itself
+    for m in range(4):
+        for i in range(3):
+            for j in range(3):
+                A[i][j] = 0.0
+                for k in range(3):
+                    A[i][j] += R0[i, k] * (dRz[k][j] if m == 2 else Rz[k][j])
+        for i in range(3):
+            for j in range(3):
+                B[i][j] = 0.0
+                for k in range(3):
+                    B[i][j] += A[i][k] * (dRy[k][j] if m == 1 else Ry[k][j])
+        for i in range(3):
+            for j in range(3):
+                A[i][j] = 0.0
+                for k in range(3):
+                    A[i][j] += B[i][k] * (dRx[k][j] if m == 0 else Rx[k][j])
+                if m == 3:
+                    R[i][j] = A[i][j]
+                else:
+                    dR[m][i][j] = A[i][j]
+
+
+cdef inline double _log_sum(double la, double lb, double* wa, double* wb) noexcept nogil:
+    """log(e^la + e^lb), and the shares e^la / (e^la + e^lb), e^lb / (...) in wa, wb."""
+    cdef double r
+    if la >= lb:
+        r = exp(lb - la)
+        wa[0] = 1.0 / (1.0 + r)
+        wb[0] = r * wa[0]
+        return la + log(1.0 + r)
+    r = exp(la - lb)
+    wb[0] = 1.0 / (1.0 + r)
+    wa[0] = r * wb[0]
+    return lb + log(1.0 + r)
+
+
+cdef double _support(const double* a, const double* e, const double* v, double* dh_da,
+                     double* dh_de, double* dh_dv) noexcept nogil:
+    """Support along object-frame v of the superquadric (a, e) centred at the origin.
+
+    ``h = ((|a1 v1|^q2 + |a2 v2|^q2)^(q1/q2) + |a3 v3|^q1)^(1/q1)``, ``q = 2 / (2 - e)``
+    (the nested dual norm; e < 2), in log space. Writes dh/da, dh/de, dh/dv.
+    """
+    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1])
+    cdef double lT[3]
+    cdef double dT[3]
+    cdef double T, lS, lG, h, g1, g3, w1, w2, dq1, dq2
+    cdef int k
+    for k in range(3):
+        T = fabs(a[k] * v[k])
+        lT[k] = log(T if T > _TINY else _TINY)
+    lS = _log_sum(q2 * lT[0], q2 * lT[1], &w1, &w2)  # S = T1^q2 + T2^q2
+    lG = _log_sum(q1 / q2 * lS, q1 * lT[2], &g1, &g3)  # G = S^(q1/q2) + T3^q1 = h^q1
+    h = exp(lG / q1)
+    dT[0] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * lT[0] - lS)
+    dT[1] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * lT[1] - lS)
+    dT[2] = h * exp((q1 - 1.0) * lT[2] - lG)
+    dq1 = h * (-lG / (q1 * q1) + (g1 * lS / q2 + g3 * lT[2]) / q1)
+    dq2 = h * g1 / q2 * (w1 * lT[0] + w2 * lT[1] - lS / q2)
+    dh_de[0] = dq1 * 2.0 / ((2.0 - e[0]) * (2.0 - e[0]))
+    dh_de[1] = dq2 * 2.0 / ((2.0 - e[1]) * (2.0 - e[1]))
+    for k in range(3):
+        dh_da[k] = dT[k] * fabs(v[k])
+        dh_dv[k] = dT[k] * a[k] * (1.0 if v[k] > 0 else (-1.0 if v[k] < 0 else 0.0))
+    return h
+
+
+def support(const double[::1] size not None, const double[::1] shape not None,
+            const double[::1] v not None):
+    """Support (max of v . x) of the superquadric at the origin along object-frame v."""
+    cdef double dh_da[3]
+    cdef double dh_de[2]
+    cdef double dh_dv[3]
+    return _support(&size[0], &shape[0], &v[0], dh_da, dh_de, dh_dv)
+
+
+def inside_outside(const double[:, ::1] points not None, const double[:, ::1] R not None,
+                   const double[::1] t not None, const double[::1] size not None,
+                   const double[::1] shape not None, double[::1] out not None):
+    """Fill ``out[i]`` with F of ``points[i]`` (world) for the pose (R, t)."""
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double la1 = log(size[0]), la2 = log(size[1]), la3 = log(size[2])
+    cdef double e1 = shape[0], e2 = shape[1]
+    cdef double qx, qy, qz, x, y, z, logA, w1, w2
+    with nogil:
+        for i in range(n):
+            qx = points[i, 0] - t[0]
+            qy = points[i, 1] - t[1]
+            qz = points[i, 2] - t[2]
+            x = fabs(R[0, 0] * qx + R[1, 0] * qy + R[2, 0] * qz)
+            y = fabs(R[0, 1] * qx + R[1, 1] * qy + R[2, 1] * qz)
+            z = fabs(R[0, 2] * qx + R[1, 2] * qy + R[2, 2] * qz)
+            logA = _log_sum(2.0 / e2 * (log(x if x > _TINY else _TINY) - la1),
+                            2.0 / e2 * (log(y if y > _TINY else _TINY) - la2), &w1, &w2)
+            out[i] = exp(_log_sum(e2 / e1 * logA,
+                                  2.0 / e1 * (log(z if z > _TINY else _TINY) - la3), &w1, &w2))
+
+
+def objective(const double[::1] params not None, const double[:, ::1] R0 not None,
+              const double[:, ::1] points not None, double inside_weight,
+              bint cauchy, double cauchy_scale, const double[::1] plane not None,
+              double plane_weight, double[::1] grad not None):
+    """Mean loss over the points, plus the plane penalty, and its gradient by ``params``.
+
+    ``params`` = (a1, a2, a3, e1, e2, tx, ty, tz, alpha, beta, gamma) with
+    R = R0 Rz(gamma) Ry(beta) Rx(alpha). Residual ``r = sqrt(a1 a2 a3) (F^e1 - 1)``;
+    loss ``inside_weight r^2`` inside (F < 1), outside ``r^2`` or the Cauchy
+    loss ``c^2 log(1 + r^2 / c^2)``. If ``plane_weight > 0``, ``plane`` = (n, d)
+    with unit n, and ``plane_weight * depth^2`` is added, depth being how far
+    the superquadric reaches below n.x + d = 0 (its support along -n minus
+    n.t + d), when positive. The gradient (11,) is written to ``grad``.
+    """
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double a1 = params[0], a2 = params[1], a3 = params[2]
+    cdef double e1 = params[3], e2 = params[4]
+    cdef double t0 = params[5], t1 = params[6], t2 = params[7]
+    cdef double la1 = log(a1), la2 = log(a2), la3 = log(a3)
+    cdef double s = sqrt(a1 * a2 * a3)
+    cdef double c2 = cauchy_scale * cauchy_scale
+    cdef double p2e1 = 2.0 / e1, p2e2 = 2.0 / e2, e2e1 = e2 / e1
+    cdef double qx, qy, qz, x, y, z, ax, ay, az, lu, lv, lw
+    cdef double wU, wV, wP, wQ, logA, logF, Fe, r, dl, D, PU, PV, gx, gy, gz
+    cdef double loss = 0.0
+    # accumulators: dL/da (3), dL/de (2), g = sum dL/dX (3), M = sum q g^T (9)
+    cdef double da1 = 0.0, da2 = 0.0, da3 = 0.0, de1 = 0.0, de2 = 0.0
+    cdef double g0 = 0.0, g1 = 0.0, g2 = 0.0
+    cdef double M[3][3]
+    cdef double down[3]
+    cdef double v[3]
+    cdef double dh_da[3]
+    cdef double dh_de[2]
+    cdef double dh_dv[3]
+    cdef double depth, dcost
+    cdef int j, k, m
+    with nogil:
+        _rotation(R0, params[8], params[9], params[10], R, dR)
+        for j in range(3):
+            for k in range(3):
+                M[j][k] = 0.0
+        for i in range(n):
+            qx = points[i, 0] - t0
+            qy = points[i, 1] - t1
+            qz = points[i, 2] - t2
+            x = R[0][0] * qx + R[1][0] * qy + R[2][0] * qz
+            y = R[0][1] * qx + R[1][1] * qy + R[2][1] * qz
+            z = R[0][2] * qx + R[1][2] * qy + R[2][2] * qz
+            ax = fabs(x)
+            ay = fabs(y)
+            az = fabs(z)
+            if ax < _TINY:
+                ax = _TINY
+            if ay < _TINY:
+                ay = _TINY
+            if az < _TINY:
+                az = _TINY
+            lu = log(ax) - la1
+            lv = log(ay) - la2
+            lw = log(az) - la3
+            # F = A^(e2/e1) + Q with A = U + V; w* are the shares U/A, V/A, P/F, Q/F
+            logA = _log_sum(p2e2 * lu, p2e2 * lv, &wU, &wV)
+            logF = _log_sum(e2e1 * logA, p2e1 * lw, &wP, &wQ)
+            Fe = exp(e1 * logF)
+            r = s * (Fe - 1.0)
+            if Fe < 1.0:
+                loss += inside_weight * r * r
+                dl = 2.0 * inside_weight * r
+            elif cauchy:
+                loss += c2 * log1p(r * r / c2)
+                dl = 2.0 * r / (1.0 + r * r / c2)
+            else:
+                loss += r * r
+                dl = 2.0 * r
+            # D = F dl/dF; dF/dx = (2/e1) P/A U/x = (2/e1) F wP wU / x, dF/dz = (2/e1) F wQ / z
+            D = dl * s * e1 * Fe
+            PU = p2e1 * D * wP * wU
+            PV = p2e1 * D * wP * wV
+            da1 += dl * 0.5 * r / a1 - PU / a1
+            da2 += dl * 0.5 * r / a2 - PV / a2
+            da3 += dl * 0.5 * r / a3 - p2e1 * D * wQ / a3
+            de1 += dl * s * Fe * logF - D * (e2e1 / e1 * logA * wP + p2e1 / e1 * lw * wQ)
+            de2 += D * wP / e1 * (logA - p2e2 * (wU * lu + wV * lv))
+            gx = PU / ax
+            gy = PV / ay
+            gz = p2e1 * D * wQ / az
+            if x < 0.0:
+                gx = -gx
+            if y < 0.0:
+                gy = -gy
+            if z < 0.0:
+                gz = -gz
+            g0 += gx
+            g1 += gy
+            g2 += gz
+            M[0][0] += qx * gx; M[0][1] += qx * gy; M[0][2] += qx * gz
+            M[1][0] += qy * gx; M[1][1] += qy * gy; M[1][2] += qy * gz
+            M[2][0] += qz * gx; M[2][1] += qz * gy; M[2][2] += qz * gz
+        grad[0] = da1 / n
+        grad[1] = da2 / n
+        grad[2] = da3 / n
+        grad[3] = de1 / n
+        grad[4] = de2 / n
+        # X = R^T (p - t): dL/dt = -R g, dL/dR = M
+        for j in range(3):
+            grad[5 + j] = -(R[j][0] * g0 + R[j][1] * g1 + R[j][2] * g2) / n
+        for m in range(3):
+            grad[8 + m] = 0.0
+            for j in range(3):
+                for k in range(3):
+                    grad[8 + m] += dR[m][j][k] * M[j][k]
+            grad[8 + m] /= n
+        loss /= n
+        if plane_weight > 0.0:
+            for j in range(3):
+                down[j] = -plane[j]
+            for k in range(3):  # the direction in the object frame, R^T down
+                v[k] = R[0][k] * down[0] + R[1][k] * down[1] + R[2][k] * down[2]
+            depth = (_support(&params[0], &params[3], v, dh_da, dh_de, dh_dv)
+                     - (plane[0] * t0 + plane[1] * t1 + plane[2] * t2) - plane[3])
+            if depth > 0.0:
+                loss += plane_weight * depth * depth
+                dcost = 2.0 * plane_weight * depth
+                for k in range(3):
+                    grad[k] += dcost * dh_da[k]
+                    grad[5 + k] -= dcost * plane[k]
+                grad[3] += dcost * dh_de[0]
+                grad[4] += dcost * dh_de[1]
+                for m in range(3):  # d(R^T down)/d angle = dR^T down
+                    for k in range(3):
+                        grad[8 + m] += dcost * dh_dv[k] * (
+                            dR[m][0][k] * down[0] + dR[m][1][k] * down[1] + dR[m][2][k] * down[2])
+    return loss
