@@ -20,8 +20,9 @@ cdef inline double _bilinear(const float[:, ::1] image, double u, double v) noex
 
 
 def carve_view(const double[:, ::1] directions not None, double[::1] radii not None,
-               const double[::1] centre not None, const double[:, ::1] projection not None,
-               const float[:, ::1] occupancy not None, double level=0.5, double step=1.0):
+               unsigned char[::1] observed not None, const double[::1] centre not None,
+               const double[:, ::1] projection not None, const float[:, ::1] occupancy not None,
+               double level=0.5, double step=1.0):
     """Shrink the points ``centre + radii[i] * directions[i]`` onto one view's silhouette.
 
     ``occupancy`` is the silhouette as floats in [0, 1], smooth enough that
@@ -30,7 +31,8 @@ def carve_view(const double[:, ::1] directions not None, double[::1] radii not N
     unknown for this view and stays. A point outside the silhouette moves to
     where the ray through the first edge pixel on the image segment towards the
     centre's projection meets its direction line; with no edge on that segment,
-    to the centre. ``radii`` is updated in place; returns how many moved.
+    to the centre. ``radii`` is updated in place, and ``observed[i]`` set to 1
+    for every point this view sees; returns how many moved.
     """
     cdef Py_ssize_t n = directions.shape[0], i
     cdef Py_ssize_t height = occupancy.shape[0], width = occupancy.shape[1]
@@ -38,8 +40,8 @@ def carve_view(const double[:, ::1] directions not None, double[::1] radii not N
     cdef double t, t_prev, s, s_prev, edge_t, eu, ev, ax, ay, bx, by, denominator, radius
     cdef Py_ssize_t carved = 0
     cdef bint found
-    if directions.shape[1] != 3 or radii.shape[0] != n or centre.shape[0] != 3:
-        raise ValueError("directions must be (N, 3), radii (N,) and centre (3,)")
+    if directions.shape[1] != 3 or radii.shape[0] != n or observed.shape[0] != n or centre.shape[0] != 3:
+        raise ValueError("directions must be (N, 3), radii and observed (N,), centre (3,)")
     if projection.shape[0] != 3 or projection.shape[1] != 4:
         raise ValueError("projection must be (3, 4)")
     if height < 2 or width < 2:
@@ -66,6 +68,7 @@ def carve_view(const double[:, ::1] directions not None, double[::1] radii not N
                 v = (h0y + radius * huy) / pz
                 if u < 0 or v < 0 or u > width - 1 or v > height - 1:
                     continue
+                observed[i] = 1
                 s_prev = _bilinear(occupancy, u, v)
                 if s_prev >= level:
                     continue

@@ -10,7 +10,7 @@ evaluated in log space (``u^p = exp(p log u)``) so that the steep powers of a
 box-like shape (2/e = 20) neither overflow nor lose the small terms.
 """
 
-from libc.math cimport exp, log, log1p, fabs, sqrt, sin, cos
+from libc.math cimport exp, log, log1p, fabs, copysign, sqrt, sin, cos
 
 # |x| below this is treated as this: keeps log() finite at the axes' planes.
 cdef double _TINY = 1e-300
@@ -162,10 +162,10 @@ def objective(const double[::1] params not None, const double[:, ::1] R0 not Non
     cdef double t0 = params[5], t1 = params[6], t2 = params[7]
     cdef double la1 = log(a1), la2 = log(a2), la3 = log(a3)
     cdef double s = sqrt(a1 * a2 * a3)
-    cdef double c2 = cauchy_scale * cauchy_scale
+    cdef double c2 = cauchy_scale * cauchy_scale, inv_c2 = 1.0 / c2, u
     cdef double p2e1 = 2.0 / e1, p2e2 = 2.0 / e2, e2e1 = e2 / e1
     cdef double qx, qy, qz, x, y, z, ax, ay, az, lu, lv, lw
-    cdef double wU, wV, wP, wQ, logA, logF, Fe, r, dl, D, PU, PV, gx, gy, gz
+    cdef double wU, wV, wP, wQ, logA, logF, Fe, r, dl, D, PU, PV, QW, gx, gy, gz
     cdef double loss = 0.0
     # accumulators: dL/da (3), dL/de (2), g = sum dL/dX (3), M = sum q g^T (9)
     cdef double da1 = 0.0, da2 = 0.0, da3 = 0.0, de1 = 0.0, de2 = 0.0
@@ -211,8 +211,9 @@ def objective(const double[::1] params not None, const double[:, ::1] R0 not Non
                 loss += inside_weight * r * r
                 dl = 2.0 * inside_weight * r
             elif cauchy:
-                loss += c2 * log1p(r * r / c2)
-                dl = 2.0 * r / (1.0 + r * r / c2)
+                u = r * r * inv_c2
+                loss += c2 * log1p(u)
+                dl = 2.0 * r / (1.0 + u)
             else:
                 loss += r * r
                 dl = 2.0 * r
@@ -220,31 +221,27 @@ def objective(const double[::1] params not None, const double[:, ::1] R0 not Non
             D = dl * s * e1 * Fe
             PU = p2e1 * D * wP * wU
             PV = p2e1 * D * wP * wV
-            da1 += dl * 0.5 * r / a1 - PU / a1
-            da2 += dl * 0.5 * r / a2 - PV / a2
-            da3 += dl * 0.5 * r / a3 - p2e1 * D * wQ / a3
-            de1 += dl * s * Fe * logF - D * (e2e1 / e1 * logA * wP + p2e1 / e1 * lw * wQ)
-            de2 += D * wP / e1 * (logA - p2e2 * (wU * lu + wV * lv))
-            gx = PU / ax
-            gy = PV / ay
-            gz = p2e1 * D * wQ / az
-            if x < 0.0:
-                gx = -gx
-            if y < 0.0:
-                gy = -gy
-            if z < 0.0:
-                gz = -gz
+            QW = p2e1 * D * wQ
+            # sums of a_k dL/da_k and e1 dL/de: divided once after the loop
+            da1 += dl * 0.5 * r - PU
+            da2 += dl * 0.5 * r - PV
+            da3 += dl * 0.5 * r - QW
+            de1 += e1 * dl * s * Fe * logF - D * (e2e1 * logA * wP + p2e1 * lw * wQ)
+            de2 += D * wP * (logA - p2e2 * (wU * lu + wV * lv))
+            gx = PU / copysign(ax, x)  # dF/dx has the sign of x
+            gy = PV / copysign(ay, y)
+            gz = QW / copysign(az, z)
             g0 += gx
             g1 += gy
             g2 += gz
             M[0][0] += qx * gx; M[0][1] += qx * gy; M[0][2] += qx * gz
             M[1][0] += qy * gx; M[1][1] += qy * gy; M[1][2] += qy * gz
             M[2][0] += qz * gx; M[2][1] += qz * gy; M[2][2] += qz * gz
-        grad[0] = da1 / n
-        grad[1] = da2 / n
-        grad[2] = da3 / n
-        grad[3] = de1 / n
-        grad[4] = de2 / n
+        grad[0] = da1 / (a1 * n)
+        grad[1] = da2 / (a2 * n)
+        grad[2] = da3 / (a3 * n)
+        grad[3] = de1 / (e1 * n)
+        grad[4] = de2 / (e1 * n)
         # X = R^T (p - t): dL/dt = -R g, dL/dR = M
         for j in range(3):
             grad[5 + j] = -(R[j][0] * g0 + R[j][1] * g1 + R[j][2] * g2) / n

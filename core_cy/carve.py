@@ -39,8 +39,8 @@ def occupancy(silhouette: np.ndarray) -> np.ndarray:
     return smooth.astype(np.float32) * np.float32(1.0 / 255.0)
 
 
-def carve(directions, centre, radius: float, cameras, occupancies) -> np.ndarray:
-    """Radii of the points after shrinking the sphere onto every view.
+def carve(directions, centre, radius: float, cameras, occupancies) -> tuple[np.ndarray, np.ndarray]:
+    """Radii of the points after shrinking the sphere onto every view, and which points were seen.
 
     Parameters
     ----------
@@ -55,9 +55,12 @@ def carve(directions, centre, radius: float, cameras, occupancies) -> np.ndarray
 
     Returns
     -------
-    (N,) ndarray of float64
+    radii : (N,) ndarray of float64
         Radius of each point after carving; 0 where no view saw an edge
         between the point and the centre.
+    observed : (N,) ndarray of bool
+        Whether any view saw the point inside its image; a point no view saw
+        keeps the starting radius, which says nothing about the object.
 
     Examples
     --------
@@ -68,9 +71,9 @@ def carve(directions, centre, radius: float, cameras, occupancies) -> np.ndarray
     >>> camera = Camera(K=[[500, 0, 99.5], [0, 500, 99.5], [0, 0, 1]], T_world_cam=np.eye(4))
     >>> disc = np.zeros((200, 200), np.uint8)
     >>> _ = cv2.circle(disc, (100, 100), 50, 255, -1)
-    >>> radii = carve([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 1.0], 0.15, [camera], [occupancy(disc)])
-    >>> bool(np.allclose(radii, 0.1, atol=0.003))
-    True
+    >>> radii, observed = carve([[1.0, 0, 0], [0, 1.0, 0]], [0, 0, 1.0], 0.15, [camera], [occupancy(disc)])
+    >>> bool(np.allclose(radii, 0.1, atol=0.003)), observed.tolist()
+    (True, [True, True])
     """
     directions = np.ascontiguousarray(directions, dtype=np.float64)
     if directions.ndim != 2 or directions.shape[1] != 3:
@@ -81,9 +84,10 @@ def carve(directions, centre, radius: float, cameras, occupancies) -> np.ndarray
     if len(cameras) != len(occupancies):
         raise ValueError(f"got {len(cameras)} cameras but {len(occupancies)} occupancy images")
     radii = np.full(len(directions), float(radius))
+    observed = np.zeros(len(directions), np.uint8)
     for camera, occupied in zip(cameras, occupancies):
-        carve_view(directions, radii, centre, camera.projection, occupied, _EDGE_LEVEL)
-    return radii
+        carve_view(directions, radii, observed, centre, camera.projection, occupied, _EDGE_LEVEL)
+    return radii, observed.view(bool)
 
 
 def check_support_plane(plane, centre) -> np.ndarray:

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 
 from .camera import Camera
-from .superquadric import Superquadric, surface_points
+from .superquadric import Superquadric, inside_outside, surface_points
 
-__all__ = ["silhouette_iou"]
+__all__ = ["silhouette_iou", "radial_residual"]
 
 _SUBPIXEL_BITS = 4
 
@@ -45,3 +45,28 @@ def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.nd
     overlap = np.count_nonzero(object_pixels & (projected > 0))
     union = np.count_nonzero(object_pixels | (projected > 0))
     return overlap / union if union else 0.0
+
+
+def radial_residual(superquadric: Superquadric, points) -> float:
+    """RMS distance of the points from the surface, along the rays from its centre.
+
+    A point at ``x`` (object frame) meets the surface at ``x F^(-e1/2)``, so its
+    radial distance is ``|x| |1 - F^(-e1/2)|``: in the points' own units.
+
+    Parameters
+    ----------
+    superquadric : Superquadric
+    points : (N, 3) array_like
+        World points.
+
+    Examples
+    --------
+    >>> sphere = Superquadric([1.0, 1.0, 1.0], [1.0, 1.0], np.eye(4))
+    >>> round(radial_residual(sphere, [[2.0, 0, 0], [0, 0.5, 0]]), 6)
+    0.790569
+    """
+    points = np.asarray(points, dtype=np.float64)
+    F = np.maximum(inside_outside(points, superquadric), 1e-300)
+    distance = np.linalg.norm(points - superquadric.T_world_object[:3, 3], axis=1)
+    radial = distance * np.abs(1.0 - F ** (-superquadric.shape[0] / 2.0))
+    return float(np.sqrt(np.mean(radial**2)))

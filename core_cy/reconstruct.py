@@ -14,7 +14,8 @@ import numpy as np
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, occupancy
 from .errors import FitError, GeometryError, ImageError
-from .quality import silhouette_iou
+from .quality import radial_residual, silhouette_iou
+from .refine import refine_to_silhouettes
 from .segment import RED_HSV, Segmentation, segment, silhouette_from_mask
 from .sphere import enclosing_sphere, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric
@@ -49,6 +50,9 @@ class Options:
     inside_weight : float
         Weight of residuals of points inside the superquadric; 1 is plain
         Jaklic. Hull points only err outward, so inside ones weigh more.
+    outside_loss : {"cauchy", "squared"}
+        Loss on the residuals of points outside; "squared" with
+        ``inside_weight=1`` is plain Jaklic.
     cauchy_scale : float
         Scale of the robust loss on points outside, in units of the cloud's
         RMS radius.
@@ -56,17 +60,26 @@ class Options:
         Starting sphere radius over the largest silhouette extent.
     fit_points : int
         At most this many points go into the fit (evenly strided).
+    refine_below : float
+        When the fit's projections cover the silhouettes worse than this (mean
+        IoU), the object is not a superquadric: fit again without trusting the
+        hull's inner envelope, refine against the silhouettes themselves, and
+        keep what covers them best. 0 turns this off.
     """
 
     n_points: int = 1000
     inside_weight: float = 10.0
+    outside_loss: str = "cauchy"
     cauchy_scale: float = 0.1
     radius_margin: float = 1.25
-    fit_points: int = 500
+    fit_points: int = 250
+    refine_below: float = 0.8
 
     def __post_init__(self) -> None:
         if self.n_points < 50:
             raise ValueError(f"n_points must be >= 50, got {self.n_points}")
+        if self.outside_loss not in ("cauchy", "squared"):
+            raise ValueError(f"outside_loss must be 'cauchy' or 'squared', got {self.outside_loss!r}")
         if not self.inside_weight > 0 or not self.cauchy_scale > 0:
             raise ValueError("inside_weight and cauchy_scale must be positive")
         if not self.radius_margin >= 1:
@@ -77,10 +90,10 @@ class Options:
 class Reconstruction:
     """What :func:`reconstruct` found.
 
-    ``points`` (N, 3) is the carved cloud (directions with no edge dropped);
+    ``points`` (N, 3) is the carved cloud (unseen directions, and those with no edge, dropped);
     ``silhouettes`` the ideal-pinhole silhouettes the hull was carved from;
     ``silhouette_iou`` how well the superquadric's projection covers each;
-    ``residual`` the fit's RMS radial residual in the bundle's units;
+    ``residual`` the points' RMS radial distance from its surface, in the bundle's units;
     ``timings_ms`` the wall time of each stage and the total.
     """
 
@@ -187,10 +200,11 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     lap("centroid")
 
     directions = fibonacci_sphere(options.n_points)
-    radii = carve(directions, centre, radius, cameras, [occupancy(s) for s in silhouettes])
+    radii, observed = carve(directions, centre, radius, cameras, [occupancy(s) for s in silhouettes])
     if plane is not None:
         radii = clip_to_plane(directions, radii, centre, plane)
-    seen = radii > 0
+    # Points that no view saw, and directions in which no view saw the object, carry no evidence.
+    seen = observed & (radii > 0)
     points = centre + radii[seen, None] * directions[seen]
     lap("carve")
 
@@ -198,12 +212,21 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         raise FitError(f"only {len(points)} points survived carving: the silhouettes do not overlap")
     stride = max(1, len(points) // options.fit_points)
     fit = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
-                           cauchy_scale=options.cauchy_scale,
+                           outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
                            support_plane=None if plane is None else plane)
     lap("fit")
 
-    ious = [silhouette_iou(fit.superquadric, camera, s) for camera, s in zip(cameras, silhouettes)]
+    superquadric = fit.superquadric
+    ious = [silhouette_iou(superquadric, camera, s) for camera, s in zip(cameras, silhouettes)]
     lap("quality")
+    if np.mean(ious) < options.refine_below:
+        plain = fit_superquadric(points[::stride], inside_weight=1.0, outside_loss="squared",
+                                 support_plane=plane)
+        refined = refine_to_silhouettes(plain.superquadric, cameras, silhouettes)
+        refined_ious = [silhouette_iou(refined, camera, s) for camera, s in zip(cameras, silhouettes)]
+        if np.mean(refined_ious) > np.mean(ious):
+            superquadric, ious = refined, refined_ious
+        lap("refine")
     timings["total"] = (clock() - start) * 1e3
-    return Reconstruction(fit.superquadric, centre, radius, points, silhouettes, ious,
-                          fit.residual, timings)
+    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious,
+                          radial_residual(superquadric, points), timings)

@@ -50,6 +50,7 @@ _ROUND_RATIO = 1.3
 _STEP_SCALE = 0.1
 # Stop when an iteration lowers the mean cost (about 1e-4 at a good fit) by less.
 _FTOL = 1e-7
+_MAXCOR = 20  # L-BFGS memory: 20 pairs took ~10 % fewer iterations than the default 10
 # Weight of the squared depth below the support plane (normalised units). The
 # data term's slope is small at a fit, so this already keeps the depth near
 # 1e-3; a stiffer penalty (1e3) tripled the iterations on simulated hulls.
@@ -472,7 +473,7 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
         objective = _Objective(cloud, R0, *weights, plane, _STEP_SCALE)
         y0 = np.clip(y0, bounds.lb, bounds.ub)  # L-BFGS-B would clip silently
         return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=bounds,
-                        options={"maxiter": iterations, "ftol": _FTOL})
+                        options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
 
     plain_jaklic = (1.0, False, 1.0)
     tried = [(run(search, R0, x0 / _STEP_SCALE, plain_jaklic, _SEARCH_ITERATIONS), k, R0)

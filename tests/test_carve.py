@@ -36,7 +36,8 @@ def test_carving_along_the_axes_meets_the_tangent_cones(scene):
     # tangent cone, which crosses the x direction at D r / sqrt(D^2 - r^2) from the centre.
     cameras, silhouettes = scene
     axes = np.vstack([np.eye(3), -np.eye(3)])
-    radii = carve(axes, CENTRE, 2 * RADIUS, cameras, [occupancy(s) for s in silhouettes])
+    radii, observed = carve(axes, CENTRE, 2 * RADIUS, cameras, [occupancy(s) for s in silhouettes])
+    assert observed.all()
     expected = DISTANCE * RADIUS / np.sqrt(DISTANCE**2 - RADIUS**2)
     # Half a pixel at this depth is 0.5 * 0.5 / 600 = 0.0004.
     np.testing.assert_allclose(radii, expected, atol=4e-4)
@@ -45,7 +46,7 @@ def test_carving_along_the_axes_meets_the_tangent_cones(scene):
 def test_carved_points_lie_on_the_visual_hull(scene):
     cameras, silhouettes = scene
     directions = fibonacci_sphere(500)
-    radii = carve(directions, CENTRE, 2 * RADIUS, cameras, [occupancy(s) for s in silhouettes])
+    radii, _ = carve(directions, CENTRE, 2 * RADIUS, cameras, [occupancy(s) for s in silhouettes])
     points = CENTRE + radii[:, None] * directions
     # Outside the sphere (the hull contains the object) ...
     assert np.all(np.linalg.norm(points - CENTRE, axis=1) >= RADIUS - 4e-4)
@@ -65,8 +66,8 @@ def test_points_out_of_the_image_are_not_carved_by_that_view(scene):
     cameras, silhouettes = scene
     # Straight up from the centre is on camera 2's optical axis; a huge start radius takes it
     # behind that camera and far outside the others' images: nobody may carve it.
-    radii = carve([[0.0, 0.0, 1.0]], CENTRE, 10.0, cameras, [occupancy(s) for s in silhouettes])
-    assert radii[0] == 10.0
+    radii, observed = carve([[0.0, 0.0, 1.0]], CENTRE, 10.0, cameras, [occupancy(s) for s in silhouettes])
+    assert radii[0] == 10.0 and not observed[0]
 
 
 def test_support_plane_pulls_points_back_onto_the_table():

@@ -1,0 +1,150 @@
+"""The whole algorithm on exact scenes and on simulated scans, scored against the truth."""
+
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from cell.bundle import load_bundle
+from cell.sim.objects import box, cylinder, ellipsoid, rounded_box
+from cell.sim.scans import default_K, plan_views, write_scan
+from core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
+from core_cy.reconstruct import Options, View, reconstruct
+from core_cy.scoring import volumetric_iou
+from core_cy.superquadric import Superquadric
+
+from .bundles import SPHERE_CENTRE, SPHERE_RADIUS, write_sphere_bundle
+
+
+def _run(bundle_dir, **kwargs):
+    bundle = load_bundle(bundle_dir)
+    return reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane,
+                       **kwargs)
+
+
+def _truth(bundle_dir):
+    return Superquadric.from_dict(__import__("json").loads((bundle_dir / "truth.json").read_text()))
+
+
+def test_sphere_on_the_table(sphere_bundle):
+    result = _run(sphere_bundle)
+    fit = result.superquadric
+    assert volumetric_iou(fit, _truth(sphere_bundle)) > 0.85
+    np.testing.assert_allclose(fit.T_world_object[:3, 3], SPHERE_CENTRE, atol=0.1 * SPHERE_RADIUS)
+    assert min(result.silhouette_iou) > 0.9
+    # Every carved point is on or outside the sphere: the hull contains the object.
+    distances = np.linalg.norm(result.points - SPHERE_CENTRE, axis=1)
+    assert distances.min() > SPHERE_RADIUS * 0.97
+    assert set(result.timings_ms) == {"decode", "segment", "centroid", "carve", "fit", "quality", "total"}
+
+
+def test_units_do_not_matter(tmp_path, sphere_bundle):
+    metres = _run(sphere_bundle).superquadric
+    millimetres = _run(write_sphere_bundle(tmp_path / "mm", scale=1000.0)).superquadric
+    np.testing.assert_allclose(np.sort(millimetres.size), np.sort(metres.size) * 1000, rtol=0.02)
+    np.testing.assert_allclose(millimetres.T_world_object[:3, 3], metres.T_world_object[:3, 3] * 1000,
+                               atol=0.5)
+
+
+def test_supplied_masks_give_the_same_answer(tmp_path, sphere_bundle):
+    from_images = _run(sphere_bundle).superquadric
+    from_masks = _run(write_sphere_bundle(tmp_path / "masks", masks=True)).superquadric
+    assert volumetric_iou(from_images, from_masks) > 0.95
+
+
+def test_two_views_are_enough(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    result = reconstruct(bundle.views[:2], support_plane=bundle.support_plane)
+    assert volumetric_iou(result.superquadric, _truth(sphere_bundle)) > 0.7
+
+
+FAMILIES = {
+    "box": lambda: box([0.05, 0.03, 0.025], [0.6, 0.02], yaw_deg=25),
+    "cylinder": lambda: cylinder([0.03, 0.03, 0.06], [0.58, -0.03], yaw_deg=0),
+    "ellipsoid": lambda: ellipsoid([0.045, 0.035, 0.03], [0.62, 0.0], yaw_deg=60),
+    "rounded-box": lambda: rounded_box([0.04, 0.04, 0.03], [0.6, 0.05], yaw_deg=-30),
+    "lying-cylinder": lambda: cylinder([0.025, 0.025, 0.07], [0.6, 0.0], yaw_deg=-40, lying=True),
+}
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_simulated_objects_against_the_truth(tmp_path, family):
+    obj = FAMILIES[family]()
+    target = obj.T_world_object[:3, 3]
+    cameras = plan_views(target, rng=np.random.default_rng(3))
+    bundle = write_scan(tmp_path / family, [obj], cameras, default_K(), seed=3)
+    result = _run(bundle)
+    assert volumetric_iou(result.superquadric, Superquadric.from_dict(obj.truth())) > 0.8
+    assert min(result.silhouette_iou) > 0.85
+
+
+def test_distorted_lens(tmp_path):
+    obj = FAMILIES["box"]()
+    truth = Superquadric.from_dict(obj.truth())
+    # Aimed beside the object, so that it sits where the lens bends most.
+    cameras = plan_views(obj.T_world_object[:3, 3] + [0.08, 0.0, 0.06], distance=(0.4, 0.45),
+                         rng=np.random.default_rng(5))
+    dist = [-0.3, 0.1, 0.0, 0.0, 0.0]
+    bundle = write_scan(tmp_path / "distorted", [obj], cameras, default_K(), dist=dist, seed=5)
+    handled = volumetric_iou(_run(bundle).superquadric, truth)
+    assert handled > 0.78
+    assert volumetric_iou(_run_without_distortion(bundle), truth) < handled - 0.02
+
+
+def _run_without_distortion(bundle_dir):
+    bundle = load_bundle(bundle_dir)
+    views = [View(type(v.camera)(K=v.camera.K, T_world_cam=v.camera.T_world_cam), image=v.image)
+             for v in bundle.views]
+    return reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane).superquadric
+
+
+# --- bad input ---------------------------------------------------------------------------------
+
+
+def test_fewer_than_two_views(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    with pytest.raises(GeometryError, match="need at least 2 views, got 1"):
+        reconstruct(bundle.views[:1])
+
+
+def test_corrupt_and_truncated_jpeg(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    views = list(bundle.views)
+    views[1] = View(views[1].camera, image=views[1].image[: len(views[1].image) // 2])
+    with pytest.raises(ImageError, match="^view 1: the JPEG is truncated"):
+        reconstruct(views)
+    views[1] = View(views[1].camera, image=b"definitely not an image")
+    with pytest.raises(ImageError, match="^view 1: the image is not a decodable image"):
+        reconstruct(views)
+
+
+def test_empty_silhouette_names_the_view(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    views = list(bundle.views)
+    grey = cv2.imencode(".jpg", np.full((480, 640, 3), 128, np.uint8))[1].tobytes()
+    views[2] = View(views[2].camera, image=grey)
+    with pytest.raises(SilhouetteError, match="^view 2: the silhouette is empty"):
+        reconstruct(views)
+
+
+def test_support_plane_above_the_object(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    with pytest.raises(GeometryError, match="under the table"):
+        reconstruct(bundle.views, support_plane=[0, 0, 1, -0.5])
+
+
+def test_poses_that_disagree_about_the_object(sphere_bundle):
+    bundle = load_bundle(sphere_bundle)
+    views = list(bundle.views)
+    flipped = views[0].camera.T_world_cam.copy()
+    flipped[:3, :3] = flipped[:3, :3] @ np.diag([-1.0, -1.0, 1.0])  # rolled half a turn: still rigid
+    flipped[:3, 3] += [0.3, -0.3, 0.0]
+    views[0] = View(type(views[0].camera)(K=views[0].camera.K, T_world_cam=flipped, view=0), image=views[0].image)
+    with pytest.raises(CoreError, match="view"):
+        reconstruct(views)
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="n_points"):
+        Options(n_points=3)
