@@ -55,6 +55,10 @@ def _sim_command(args: argparse.Namespace) -> int:
         from workers import sim_camera_worker
 
         return sim_camera_worker.main(_config(args))
+    if args.what == "kuka":
+        from .sim import kuka
+
+        return kuka.run(args)
     from .sim import cli as sim_cli
 
     return sim_cli.run(args)
@@ -145,12 +149,16 @@ def build_parser() -> argparse.ArgumentParser:
     rec.set_defaults(run=_reconstruct_command)
 
     sim = commands.add_parser(
-        "sim", help="write simulated scan bundles, or (`sim camera`) serve a simulated Axis camera")
-    sim.add_argument("what", nargs="?", choices=["scans", "camera"], default="scans",
-                     help="scans (default): write bundles; camera: serve the simulated camera of the cell")
+        "sim", help="write simulated scan bundles; `sim camera`: a simulated Axis camera; "
+                    "`sim kuka`: a simulated KUKA controller")
+    sim.add_argument("what", nargs="?", choices=["scans", "camera", "kuka"], default="scans",
+                     help="scans (default): write bundles; camera: serve the cell's simulated camera; "
+                          "kuka: a KUKA controller speaking KukaVarProxy (kvp) or the OpenOPC gateway (opc)")
     from .sim import cli as sim_cli
+    from .sim import kuka as sim_kuka
 
     sim_cli.add_arguments(sim)
+    sim_kuka.add_arguments(sim)
     sim.set_defaults(run=_sim_command)
 
     router = commands.add_parser("router", help="run the Zenoh router the cell's processes connect to")
@@ -169,6 +177,10 @@ def build_parser() -> argparse.ArgumentParser:
     from . import client_cli
 
     client_cli.add_commands(commands, _client_command)
+
+    from . import calibrate_cli
+
+    calibrate_cli.add_commands(commands)
 
     replay = commands.add_parser("replay", help="open a job's Rerun recording in the viewer")
     replay.add_argument("job", metavar="JOB_ID_OR_FILE")

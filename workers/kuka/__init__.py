@@ -1,0 +1,8 @@
+"""The KUKA bridges: KukaVarProxy and OpenOPC-gateway clients, E6POS conversion, and the robot backend.
+
+``backend.KukaBackend`` implements the robot worker's ``RobotBackend`` over
+either client (``kvp.KvpClient``, ``opc.OpcClient``); ``backend.make_client``
+and ``KukaBackend.from_config`` build them from ``config.KukaConfig``;
+``variables`` names every KRL variable they use; ``errors`` is their exception tree.
+Nothing is imported here, so that using KukaVarProxy never imports openopc2.
+"""
