@@ -94,41 +94,51 @@ class AsyncCellClient:
         TimeoutError
             If the job is not finished within ``timeout`` seconds.
         """
+        await self._wait_finished(job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
+        return await self.status(job_id)
+
+    async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
+                             poll_s: float) -> JobState:
+        """The job's final state, from its events (or, should one be lost, from polling its status)."""
         subscription = self._transport.subscribe(keys.events(self.cell, job_id))
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         try:
-            while True:
-                status = await self.status(job_id)
-                if status.state.finished:
-                    return status
+            state = (await self.status(job_id)).state  # after subscribing: an end in between is not missed
+            while not state.finished:
                 remaining = deadline - loop.time()
                 if remaining <= 0:
-                    raise TimeoutError(f"job {job_id} is still {status.state.value} after {timeout:g} s")
+                    raise TimeoutError(f"job {job_id} is still {state.value} after {timeout:g} s")
                 try:
                     sample = await subscription.get(timeout=min(poll_s, remaining))
-                except asyncio.TimeoutError:
+                except TimeoutError:
+                    state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
                     continue
                 event = parse(JobEvent, sample.payload)
                 if on_event is not None:
                     on_event(event)
+                state = event.state
+            return state
         finally:
             subscription.close()
 
     async def scan(self, request: ScanRequest, *, timeout: float = 120.0,
-                   on_event: Callable[[JobEvent], None] | None = None) -> ScanResult:
+                   on_event: Callable[[JobEvent], None] | None = None, poll_s: float = 1.0) -> ScanResult:
         """Submit, wait, and return the result.
 
         Raises
         ------
         JobFailed
             If the job failed or was cancelled.
+        TimeoutError
+            If the job is not finished within ``timeout`` seconds.
         """
         status = await self.submit(request)
-        final = await self.wait(status.job_id, timeout=timeout, on_event=on_event)
-        if final.state is not JobState.SUCCEEDED:
-            raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}")
-        return await self.result(status.job_id)
+        state = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
+        if state is JobState.SUCCEEDED:
+            return await self.result(status.job_id)
+        final = await self.status(status.job_id)
+        raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}")
 
 
 class CellClient:

@@ -57,6 +57,9 @@ class RobotConfig(_Section):
     speed: Annotated[float, Field(ge=0)] = 0.5
     #: Rotation speed of the simulated robot, degrees/s; 0 rotates instantly.
     rotation_speed_deg: Annotated[float, Field(ge=0)] = 180.0
+    #: If set, every move of the simulated robot takes exactly this long, seconds, whatever its
+    #: length (speeds are then ignored): for benchmarks and tests of the cell's timing.
+    move_time_s: Annotated[float, Field(ge=0)] | None = None
     home: Pose = [[1.0, 0.0, 0.0, 0.4], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.6], [0.0, 0.0, 0.0, 1.0]]
     workspace: Workspace = Workspace()
     #: How often the robot worker publishes its pose while moving, Hz.

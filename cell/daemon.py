@@ -8,38 +8,101 @@ moves and captures for one job at a time. When a job's pictures are taken,
 its reconstruction runs as a task of its own, so it overlaps the next job's
 motion. Every state change is stored (SQLite), published as a JobEvent and
 written to the job's Rerun recording.
+
+The event loop only decides, asks and publishes. The job store runs in a
+thread of its own, in order (an SQLite connection belongs to one thread); the
+recordings are written by a process of their own (``cell.recorder``: their
+milliseconds of logging would otherwise delay every job), and are complete a
+moment after the job ends. A step's bookkeeping (store, event, recording) is
+done once its query to the worker is on its way. What the loop remembers of
+the jobs (the queue, the jobs in flight) is what its decisions need, so no
+decision waits for the store. What must outlive a crash is awaited before
+anyone hears of it: a job is stored before its submit is answered, a result
+before the job is announced succeeded.
+
+Cancelling cancels the job's task and sets a flag every step checks: on
+Python 3.11 a cancel that arrives as an awaited answer does can be lost.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
+import functools
 import logging
 import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from . import keys
 from .config import CellConfig
-from .errors import CellError, NoResponder, TransportError
+from .errors import CellError, NoResponder, RemoteError, TransportError
 from .messages import (CameraModel, CaptureInfo, CaptureRequest, JobEvent, JobState, JobStatus, MoveReply,
                        MoveRequest, ReconstructReply, ReconstructRequest, ReconstructView, ScanRequest,
                        ScanResult, parse)
 from .plan import camera_poses, plan_flange_poses, workspace_violation
-from .recording import JobRecording
+from .recorder import Recorder
 from .store import JobStore
 from .transport import Request, RequestError, Response, Transport
 
 __all__ = ["CellDaemon", "StepFailed"]
 
 log = logging.getLogger(__name__)
+_CANCEL_WAIT_S = 2.0
 
 
 class StepFailed(CellError):
     """A step of a job failed; the message says which step and why."""
+
+
+def _later(function: Callable, *args, **kwargs) -> None:
+    """Call ``function`` when the event loop next looks round, in the order of these calls.
+
+    What a step records (store, event, recording) is done after the step's query is on its way:
+    the worker starts at once, and the bookkeeping overlaps its work.
+    """
+    asyncio.get_running_loop().call_soon(functools.partial(function, *args, **kwargs))
+
+
+class _Serial:
+    """One thread that runs the calls given to it, in order.
+
+    A call is handed to the thread when the event loop next looks round (see
+    :func:`_later`), so calls and posts keep the order they were made in.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix=name)
+
+    async def call(self, function: Callable, *args, **kwargs):
+        """Run ``function`` in the thread after everything posted before; its result."""
+        handed: asyncio.Future[Future] = asyncio.get_running_loop().create_future()
+        _later(self._hand, functools.partial(function, *args, **kwargs), handed)
+        return await asyncio.wrap_future(await handed)
+
+    def _hand(self, call: Callable, handed: asyncio.Future) -> None:
+        if not handed.cancelled():  # the caller gave up before the call was handed over: skip it
+            handed.set_result(self._executor.submit(call))
+
+    def post(self, function: Callable, *args, **kwargs) -> None:
+        """Run ``function`` in the thread after everything posted before; a failure is logged."""
+        _later(self._post, functools.partial(function, *args, **kwargs))
+
+    def _post(self, call: Callable) -> None:
+        self._executor.submit(call).add_done_callback(self._log_failure)
+
+    def _log_failure(self, future: Future) -> None:
+        exc = future.exception()
+        if exc is not None:
+            log.error("%s: %s: %s", self.name, type(exc).__name__, exc, exc_info=exc)
+
+    def close(self) -> None:
+        """Run what is posted, then end the thread."""
+        self._executor.shutdown(wait=True)
 
 
 @dataclass
@@ -52,41 +115,72 @@ class _Capture:
 @dataclass
 class _ActiveJob:
     job_id: str
+    request: ScanRequest
     started: float
-    recording: JobRecording
     task: asyncio.Task | None = None
     cancel_requested: bool = False
+    finishing: bool = False                 # the result is being stored: too late to cancel
     captures: list[_Capture] = field(default_factory=list)
+    durations_s: dict[str, float] = field(default_factory=dict)   # what the job waited for, see ScanResult
+
+    def check_cancel(self) -> None:
+        """Raise CancelledError if a cancel was asked for: a task's cancel can get lost in an await
+        that completes at the same moment, so every step checks the flag too."""
+        if self.cancel_requested:
+            raise asyncio.CancelledError
 
 
 class CellDaemon:
-    """Runs scan jobs for one cell. Create, then ``await run(stop)``."""
+    """Runs scan jobs for one cell. Create, then ``await run(stop)``.
 
-    def __init__(self, config: CellConfig, transport: Transport, store: JobStore, *, clock=time.time) -> None:
+    The job store is ``store_path`` (default ``<run dir>/jobs.sqlite``), opened
+    by ``run`` in the store's own thread.
+    """
+
+    def __init__(self, config: CellConfig, transport: Transport, *, store_path: Path | None = None,
+                 clock=time.time) -> None:
         self.config = config
         self.cell = config.cell_id
+        self.run_dir = Path(config.run_dir)
+        self._store_path = store_path or self.run_dir / "jobs.sqlite"
         self._transport = transport
-        self._store = store
         self._clock = clock
+        self._store: JobStore | None = None     # used in the store thread only
+        self._db = _Serial("job-store")
+        self._recorder = Recorder(n_points=config.reconstruct.n_points,
+                                  sim=config.sim.model_dump() if config.robot.backend == "sim" else None)
         self._queue: asyncio.Queue[str] = asyncio.Queue()
-        self._active: dict[str, _ActiveJob] = {}
+        self._queued: dict[str, ScanRequest] = {}   # waiting jobs, in order
+        self._active: dict[str, _ActiveJob] = {}    # jobs being moved for, captured or reconstructed
         self._alive: set[str] = set()                   # this cell's workers with a liveliness token
         self._reconstructors: dict[str, int] = {}       # live reconstructor -> jobs in flight
         self._presence = asyncio.Condition()
         self._background: set[asyncio.Task] = set()
-        self.run_dir = Path(config.run_dir)
 
     # --- lifecycle -----------------------------------------------------------------------------
 
     async def run(self, stop: asyncio.Event) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        self._recover()
+        self._store = await self._db.call(JobStore, self._store_path)
+        self._recorder.start()
+        try:
+            await self._recover()
+            await self._serve(stop)
+        finally:
+            await asyncio.sleep(0)  # what is handed over later goes out first
+            await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
+            await self._db.call(self._store.close)
+            await asyncio.to_thread(self._db.close)
+
+    async def _serve(self, stop: asyncio.Event) -> None:
         transport, cell = self._transport, self.cell
         self._spawn(self._watch(transport.watch_liveliness(keys.alive(cell)), self._on_cell_worker))
         self._spawn(self._watch(transport.watch_liveliness(keys.RECONSTRUCTORS_ALIVE), self._on_reconstructor))
         transport.serve(keys.submit(cell), self._on_submit)
         transport.serve(keys.jobs(cell), self._on_list)
-        transport.serve(f"{keys.jobs(cell)}/**", self._on_job_query)
+        # Not "jobs/**": that matches "jobs" too, and a list query would get a second, wrong answer.
+        transport.serve(keys.job(cell, "*"), self._on_job_query)
+        transport.serve(f"{keys.job(cell, '*')}/*", self._on_job_query)
         lane = self._spawn(self._motion_lane())
         transport.declare_token(keys.alive(cell, "daemon"))
         log.info("cell %s ready: run directory %s", cell, self.run_dir.resolve())
@@ -97,8 +191,6 @@ class CellDaemon:
             for task in list(self._background):
                 task.cancel()
             await asyncio.gather(*self._background, return_exceptions=True)
-            for active in self._active.values():
-                active.recording.close()
 
     def _spawn(self, coroutine) -> asyncio.Task:
         task = asyncio.create_task(coroutine)
@@ -106,14 +198,21 @@ class CellDaemon:
         task.add_done_callback(self._background.discard)
         return task
 
-    def _recover(self) -> None:
+    async def _recover(self) -> None:
         """After a restart: jobs caught mid-step failed; queued jobs run again, in order."""
-        now = self._clock()
-        for status in self._store.interrupt_unfinished(now=now):
-            self._event(status, status.error or "interrupted")
+        def recover(store: JobStore, now: float) -> tuple[list[JobStatus], list[JobStatus]]:
+            return store.interrupt_unfinished(now=now), store.unfinished()
+
+        interrupted, waiting = await self._db.call(recover, self._store, self._clock())
+        for status in interrupted:
+            self._event(status.job_id, status.state, status.error or "interrupted", now=status.updated)
             log.warning("job %s was interrupted by a restart", status.job_id)
-        for status in self._store.unfinished():
-            self._queue.put_nowait(status.job_id)
+        for status in waiting:
+            self._enqueue(status.job_id, status.request)
+
+    def _enqueue(self, job_id: str, request: ScanRequest) -> None:
+        self._queued[job_id] = request
+        self._queue.put_nowait(job_id)
 
     # --- worker presence -----------------------------------------------------------------------
 
@@ -128,6 +227,8 @@ class CellDaemon:
 
     def _on_cell_worker(self, key: str, alive: bool) -> None:
         part = key.rsplit("/", 1)[-1]
+        if part == "daemon":
+            return  # the daemon's own token, not a worker
         (self._alive.add if alive else self._alive.discard)(part)
         log.info("%s worker %s", part, "is up" if alive else "is gone")
 
@@ -140,12 +241,14 @@ class CellDaemon:
         log.info("reconstructor %s %s", worker, "joined" if alive else "left")
 
     async def _wait_for(self, ready, what: str) -> None:
+        if ready():
+            return
         wait = self.config.timeouts.worker_wait_s
-        async with self._presence:
-            try:
-                await asyncio.wait_for(self._presence.wait_for(ready), wait)
-            except asyncio.TimeoutError:
-                raise StepFailed(f"no {what} is running (waited {wait:g} s)") from None
+        try:
+            async with asyncio.timeout(wait), self._presence:
+                await self._presence.wait_for(ready)
+        except TimeoutError:
+            raise StepFailed(f"no {what} is running (waited {wait:g} s)") from None
 
     async def _ask(self, part: str, key: str, message, timeout: float, **kwargs):
         await self._wait_for(lambda: part in self._alive, f"{part} worker")
@@ -153,33 +256,40 @@ class CellDaemon:
             return await self._transport.query(key, message.model_dump_json(), timeout=timeout, **kwargs)
         except NoResponder:
             raise StepFailed(f"no {part} worker is running") from None
+        except RemoteError as exc:  # the worker's own message names the part and the reason
+            raise StepFailed(str(exc)) from None
         except TransportError as exc:
             raise StepFailed(f"{part}: {exc}") from None
 
     # --- job state -----------------------------------------------------------------------------
 
-    def _event(self, status: JobStatus, message: str) -> None:
-        event = JobEvent(job_id=status.job_id, state=status.state, view=status.view, message=message,
-                         time=status.updated)
-        self._store.add_event(event)
-        self._transport.put(keys.events(self.cell, status.job_id), event.model_dump_json())
-        active = self._active.get(status.job_id)
+    def _event(self, job_id: str, state: JobState, message: str, *, view: int | None = None,
+               now: float) -> None:
+        """Record a state change: in the job's recording, in the store, and as a publication.
+
+        A finished job's recording is closed: the recorder writes its footer a moment later.
+        """
+        event = JobEvent(job_id=job_id, state=state, view=view, message=message, time=now)
+        active = self._active.get(job_id)
         if active is not None:
-            active.recording.set_time(self._clock() - active.started)
-            level = "ERROR" if status.state is JobState.FAILED else "INFO"
-            active.recording.log_text(f"{status.state.value}: {message}", level)
+            level = "ERROR" if state is JobState.FAILED else "INFO"
+            self._record(active, "log_text", f"{state.value}: {message}", level)
+            if state.finished:
+                del self._active[job_id]
+                _later(self._recorder.close, job_id)
+        self._db.post(self._store.add_event, event)
+        _later(self._publish, event)
+
+    def _publish(self, event: JobEvent) -> None:
+        self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
 
     def _set(self, job_id: str, state: JobState, message: str, *, view: int | None = None,
-             error: str | None = None, recording: Path | None = None) -> JobStatus:
-        status = self._store.update(job_id, state, view=view, error=error, now=self._clock(),
-                                    recording=None if recording is None else str(recording))
-        self._event(status, message)
-        return status
-
-    def _finish(self, job_id: str) -> None:
-        active = self._active.pop(job_id, None)
-        if active is not None:
-            active.recording.close()
+             error: str | None = None, recording: Path | None = None) -> None:
+        """Move the job to ``state``: the store is written in its thread, in order, without waiting."""
+        now = self._clock()
+        self._db.post(self._store.update, job_id, state, view=view, error=error, now=now,
+                      recording=None if recording is None else str(recording))
+        self._event(job_id, state, message, view=view, now=now)
 
     def _recording_path(self, job_id: str) -> Path:
         return self.run_dir / f"{job_id}.rrd"
@@ -190,43 +300,51 @@ class CellDaemon:
         plan = request.plan or self.config.scan.plan
         return plan_flange_poses(request.target, plan, self.config.T_flange_cam)
 
+    def _record(self, active: _ActiveJob, method: str, *args, **kwargs) -> None:
+        """``JobRecording.<method>(*args, **kwargs)`` on the job's recording, at the job time of now."""
+        _later(self._recorder.call, active.job_id, self._clock() - active.started, method, *args, **kwargs)
+
     # --- the motion lane -----------------------------------------------------------------------
 
     async def _motion_lane(self) -> None:
         while True:
             job_id = await self._queue.get()
-            status = self._store.get(job_id)
-            if status is None or status.state is not JobState.QUEUED:
+            request = self._queued.pop(job_id, None)
+            if request is None:
                 continue  # cancelled while it waited
-            active = _ActiveJob(job_id, self._clock(), JobRecording(self._recording_path(job_id), job_id))
+            active = _ActiveJob(job_id, request, self._clock())
             self._active[job_id] = active
-            active.task = asyncio.create_task(self._acquire(active, status.request))
+            _later(self._recorder.open, job_id, self._recording_path(job_id))
+            active.task = asyncio.create_task(self._acquire(active))
             # asyncio.wait, unlike await, does not raise when the job (not the lane) is cancelled.
             await asyncio.wait({active.task})
 
-    async def _acquire(self, active: _ActiveJob, request: ScanRequest) -> None:
+    async def _acquire(self, active: _ActiveJob) -> None:
         job_id, timeouts = active.job_id, self.config.timeouts
         step = "planning"
         try:
-            poses = self._flange_poses(request)
+            poses = self._flange_poses(active.request)
             for view, pose in enumerate(poses):
                 step = f"moving to view {view}"
                 self._set(job_id, JobState.MOVING, step, view=view, recording=self._recording_path(job_id))
                 reply = await self._ask("robot", keys.robot_move(self.cell),
                                         MoveRequest(T_base_flange=pose.tolist(), job_id=job_id), timeouts.move_s)
-                reached = np.asarray(parse(MoveReply, reply.payload).T_base_flange)
-                active.recording.set_time(self._clock() - active.started)
-                active.recording.log_robot_pose(reached)
+                active.check_cancel()
+                moved = parse(MoveReply, reply.payload)
+                reached = np.asarray(moved.T_base_flange)
+                active.durations_s[f"move{view}"] = moved.duration_s
+                self._record(active, "log_robot_pose", reached)
                 step = f"capturing view {view}"
                 self._set(job_id, JobState.CAPTURING, step, view=view)
                 reply = await self._ask("camera", keys.camera_capture(self.cell),
                                         CaptureRequest(job_id=job_id, view=view), timeouts.capture_s)
+                active.check_cancel()
                 info = parse(CaptureInfo, reply.attachment)
+                active.durations_s[f"capture{view}"] = info.duration_s
                 T_base_cam = camera_poses([reached], self.config.T_flange_cam)[0]
                 active.captures.append(_Capture(reply.payload, reached, T_base_cam))
-                active.recording.set_time(self._clock() - active.started)
-                active.recording.log_view(view, reply.payload, self.config.camera.K, T_base_cam,
-                                          (info.width, info.height))
+                self._record(active, "log_view", view, reply.payload, self.config.camera.K, T_base_cam,
+                             (info.width, info.height))
             step = "reconstructing"
             self._set(job_id, JobState.RECONSTRUCTING, f"{len(poses)} views taken")
         except asyncio.CancelledError:
@@ -235,19 +353,21 @@ class CellDaemon:
         except (StepFailed, ValueError) as exc:
             self._fail(job_id, f"{step}: {exc}")
             return
+        except Exception as exc:  # a bug must not leave the job hanging, nor stop the lane
+            log.exception("job %s: %s failed", job_id, step)
+            self._fail(job_id, f"{step}: internal error: {type(exc).__name__}: {exc}")
+            return
         active.task = self._spawn(self._reconstruct(active))
 
     def _cancelled(self, active: _ActiveJob) -> None:
         if active.cancel_requested:
             self._set(active.job_id, JobState.CANCELLED, "cancelled by request")
-            self._finish(active.job_id)
         else:
             raise asyncio.CancelledError  # the daemon is stopping: the restart will deal with the job
 
     def _fail(self, job_id: str, error: str) -> None:
         log.warning("job %s failed: %s", job_id, error)
         self._set(job_id, JobState.FAILED, error, error=error)
-        self._finish(job_id)
 
     # --- reconstruction ------------------------------------------------------------------------
 
@@ -257,6 +377,7 @@ class CellDaemon:
             await self._wait_for(lambda: bool(self._reconstructors), "reconstruction worker")
             worker = min(self._reconstructors, key=self._reconstructors.get)
             self._reconstructors[worker] += 1
+            began = time.perf_counter()
             try:
                 reply = await self._transport.query(
                     keys.reconstructor(worker), b"".join(c.jpeg for c in active.captures),
@@ -265,14 +386,21 @@ class CellDaemon:
             finally:
                 if worker in self._reconstructors:
                     self._reconstructors[worker] -= 1
+            active.check_cancel()
+            active.durations_s["reconstruct"] = time.perf_counter() - began
             answer = parse(ReconstructReply, reply.payload)
             if answer.error:
                 raise StepFailed(answer.error)
-            self._succeed(active, answer)
+            active.finishing = True
+            _later(self._recorder.reconstruction, job_id, self._clock() - active.started, reply.payload)
+            await self._succeed(active, answer)
         except asyncio.CancelledError:
             self._cancelled(active)
         except (StepFailed, TransportError, ValueError) as exc:
             self._fail(job_id, f"reconstructing: {exc}")
+        except Exception as exc:  # a bug must not leave the job hanging
+            log.exception("job %s: reconstruction failed", job_id)
+            self._fail(job_id, f"reconstructing: internal error: {type(exc).__name__}: {exc}")
 
     def _reconstruct_request(self, active: _ActiveJob) -> ReconstructRequest:
         camera = CameraModel(K=self.config.camera.K, dist=self.config.camera.dist)
@@ -284,40 +412,20 @@ class CellDaemon:
         return ReconstructRequest(job_id=active.job_id, views=views, support_plane=self.config.support_plane,
                                   options=options)
 
-    def _succeed(self, active: _ActiveJob, answer: ReconstructReply) -> None:
+    async def _succeed(self, active: _ActiveJob, answer: ReconstructReply) -> None:
         result = answer.result
         scan_result = ScanResult(job_id=active.job_id, superquadric=result["superquadric"],
                                  silhouette_iou=result["silhouette_iou"], residual=result["residual"],
                                  timings_ms=result["timings_ms"],
                                  T_base_cam=[c.T_base_cam.tolist() for c in active.captures],
+                                 durations_s=active.durations_s,
                                  recording=str(self._recording_path(active.job_id)))
-        self._log_reconstruction(active, answer)
-        status = self._store.save_result(scan_result, now=self._clock())
+        # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
+        now = self._clock()
+        await asyncio.shield(self._db.call(self._store.save_result, scan_result, now=now))
         total = result["timings_ms"].get("total", float("nan"))
-        self._event(status, f"reconstructed by {answer.worker} in {total:.1f} ms")
-        self._finish(active.job_id)
-
-    def _log_reconstruction(self, active: _ActiveJob, answer: ReconstructReply) -> None:
-        from core_cy.sphere import fibonacci_sphere
-        from core_cy.superquadric import Superquadric
-
-        recording, result = active.recording, answer.result
-        recording.set_time(self._clock() - active.started)
-        for view, encoded in enumerate(answer.silhouettes_png):
-            mask = cv2.imdecode(np.frombuffer(base64.b64decode(encoded), np.uint8), cv2.IMREAD_GRAYSCALE)
-            recording.log_silhouette(view, mask)
-        n_points = self.config.reconstruct.n_points
-        sphere = np.asarray(answer.centre) + answer.radius * fibonacci_sphere(n_points)
-        recording.log_points("sphere", sphere, colour=(150, 150, 150))
-        recording.log_points("carved", np.asarray(result["points"]))
-        recording.log_superquadric("fit", Superquadric.from_dict(result["superquadric"]))
-        timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result["timings_ms"].items())
-        recording.log_text(f"reconstruction on {answer.worker}: {timings}")
-        if self.config.robot.backend == "sim":
-            from .sim.scene import scene_from_config
-
-            for obj in scene_from_config(self.config.sim):
-                recording.log_mesh("truth", *obj.mesh())
+        self._event(active.job_id, JobState.SUCCEEDED, f"reconstructed by {answer.worker} in {total:.1f} ms",
+                    now=now)
 
     # --- requests ------------------------------------------------------------------------------
 
@@ -331,12 +439,13 @@ class CellDaemon:
             violation = workspace_violation(pose, self.config.robot.workspace)
             if violation:
                 raise RequestError(f"view {view} is outside the workspace: {violation}")
-        if self._store.count({JobState.QUEUED}) >= self.config.max_queued:
+        if len(self._queued) >= self.config.max_queued:
             raise RequestError(f"the queue is full ({self.config.max_queued} jobs waiting): try again later")
-        status, created = self._store.add(scan, n_views=len(poses), now=self._clock())
+        # Stored for good before the answer: a submitted job survives a crash.
+        status, created = await self._db.call(self._store.add, scan, n_views=len(poses), now=self._clock())
         if created:
-            self._event(status, "queued")
-            self._queue.put_nowait(status.job_id)
+            self._event(status.job_id, status.state, "queued", now=status.created)
+            self._enqueue(status.job_id, scan)
         return Response(status.model_dump_json())
 
     async def _on_list(self, request: Request) -> Response:
@@ -346,36 +455,49 @@ class CellDaemon:
             limit = int(request.parameters.get("limit", 50))
         except ValueError as exc:
             raise RequestError(f"bad parameters: {exc}") from None
-        statuses = self._store.list(states=states, limit=max(1, min(limit, 1000)))
+        statuses = await self._db.call(self._store.list, states=states, limit=max(1, min(limit, 1000)))
         return Response("[" + ",".join(s.model_dump_json() for s in statuses) + "]")
 
     async def _on_job_query(self, request: Request) -> Response:
         parts = request.key.split("/")[3:]  # robocell/<cell>/jobs/<id>[/<what>]
         job_id, what = parts[0], (parts[1] if len(parts) > 1 else "status")
-        status = self._store.get(job_id)
-        if status is None:
-            raise RequestError(f"no job {job_id!r} in cell {self.cell}")
+        if what == "cancel":
+            return Response((await self._cancel(job_id)).model_dump_json())
+        if what not in ("status", "result"):
+            raise RequestError(f"unknown job query {what!r}: expected status, result or cancel")
+        status = await self._status(job_id)
         if what == "status":
             return Response(status.model_dump_json())
-        if what == "result":
-            result = self._store.result(job_id)
-            if result is None:
-                raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
-                                   + (f" ({status.error})" if status.error else ""))
-            return Response(result.model_dump_json())
-        if what == "cancel":
-            return Response(self._cancel(status).model_dump_json())
-        raise RequestError(f"unknown job query {what!r}: expected status, result or cancel")
+        result = await self._db.call(self._store.result, job_id)
+        if result is None:
+            raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
+                               + (f" ({status.error})" if status.error else ""))
+        return Response(result.model_dump_json())
 
-    def _cancel(self, status: JobStatus) -> JobStatus:
-        if status.state is JobState.CANCELLED:
-            return status
-        if status.state.finished:
-            raise RequestError(f"job {status.job_id} already {status.state.value}: nothing to cancel")
-        active = self._active.get(status.job_id)
-        if active is None:  # still queued: the lane will skip it
-            return self._set(status.job_id, JobState.CANCELLED, "cancelled by request")
-        active.cancel_requested = True
-        if active.task is not None:
-            active.task.cancel()
+    async def _status(self, job_id: str) -> JobStatus:
+        status = await self._db.call(self._store.get, job_id)
+        if status is None:
+            raise RequestError(f"no job {job_id!r} in cell {self.cell}")
         return status
+
+    async def _cancel(self, job_id: str) -> JobStatus:
+        """Cancel the job; the status returned is "cancelled" unless the job ended first."""
+        if job_id in self._queued:  # the lane will skip it
+            del self._queued[job_id]
+            self._set(job_id, JobState.CANCELLED, "cancelled by request")
+            return await self._status(job_id)
+        active = self._active.get(job_id)
+        if active is None:
+            status = await self._status(job_id)
+            if status.state is JobState.CANCELLED:
+                return status
+            raise RequestError(f"job {job_id} already {status.state.value}: nothing to cancel")
+        task = active.task
+        if not active.finishing:
+            active.cancel_requested = True
+            if task is not None:
+                task.cancel()
+        if task is not None:
+            # A step may be ending right now: let it notice the flag (bounded: the caller waits).
+            await asyncio.wait({task}, timeout=_CANCEL_WAIT_S)
+        return await self._status(job_id)

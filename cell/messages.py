@@ -154,6 +154,9 @@ class ScanResult(Message):
     residual: float
     timings_ms: dict[str, float]
     T_base_cam: list[Pose]           # where each picture was taken from
+    #: What the job waited for, seconds: ``move<i>`` and ``capture<i>`` as the robot and camera
+    #: workers reported them, ``reconstruct`` the round trip to the reconstruction worker.
+    durations_s: dict[str, float] = {}
     recording: str | None = None
 
 

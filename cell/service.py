@@ -8,7 +8,6 @@ import logging
 from .config import CellConfig
 from .daemon import CellDaemon
 from .process import open_transport, run_until_stopped
-from .store import JobStore
 from .transport import Transport
 
 __all__ = ["run_router", "run_daemon"]
@@ -35,11 +34,10 @@ def run_daemon(config: CellConfig) -> int:
     """The cell daemon, with its job store in the run directory."""
     async def run(stop: asyncio.Event) -> None:
         config.run_dir.mkdir(parents=True, exist_ok=True)
-        with JobStore(config.run_dir / "jobs.sqlite") as store:
-            transport = await open_transport(config)
-            try:
-                await CellDaemon(config, transport, store).run(stop)
-            finally:
-                await transport.close()
+        transport = await open_transport(config)
+        try:
+            await CellDaemon(config, transport).run(stop)
+        finally:
+            await transport.close()
 
     return run_until_stopped(run, "cell daemon")

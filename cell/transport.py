@@ -99,7 +99,8 @@ class Subscription:
         return await self._queue.get()
 
     async def get(self, timeout: float | None = None):
-        return await asyncio.wait_for(self._queue.get(), timeout)
+        async with asyncio.timeout(timeout):
+            return await self._queue.get()
 
     def close(self) -> None:
         self._undeclare()
@@ -192,7 +193,9 @@ class Transport:
         try:
             self._session.get(selector, zenoh.handlers.Callback(on_reply, on_finished), **kwargs)
             # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
-            await asyncio.wait_for(done, timeout + 5.0)
+            # Not asyncio.wait_for: on Python 3.11 it swallows a cancel that comes with the answer.
+            async with asyncio.timeout(timeout + 5.0):
+                await done
         except zenoh.ZError as exc:
             raise TransportError(f"query on {key} failed: {exc}") from exc
         except asyncio.TimeoutError:
@@ -309,7 +312,8 @@ class Transport:
             loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
 
         self._session.liveliness().get(key_expr, zenoh.handlers.Callback(on_reply, on_finished), timeout=timeout)
-        await asyncio.wait_for(done, timeout + 5.0)
+        async with asyncio.timeout(timeout + 5.0):
+            await done
         return sorted(keys)
 
 

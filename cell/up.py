@@ -15,6 +15,7 @@ import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from . import keys
 from .config import CellConfig
@@ -32,27 +33,40 @@ class _Child:
     name: str
     argv: list[str]
     process: asyncio.subprocess.Process | None = None
+    stopped: bool = False   # on purpose, by stop_child: not a failure
 
 
 class CellProcesses:
     """Start and stop a whole cell on this machine."""
 
-    def __init__(self, config: CellConfig, *, with_router: bool = True, reconstructors: int = 1) -> None:
+    def __init__(self, config: CellConfig, *, with_router: bool = True, reconstructors: int = 1,
+                 robot: bool = True, camera: bool = True, sim_camera: bool | None = None,
+                 daemon: bool = True) -> None:
+        """Which parts run as children; ``sim_camera`` defaults to "if the robot is simulated".
+
+        Leaving parts out lets a caller (a test, say) run them itself, in-process.
+        """
         self.config = config
         self.run_dir = Path(config.run_dir)
         self.config_path = self.run_dir / "cell-config.json"
         self.log_dir = self.run_dir / "logs"
         command = [sys.executable, "-m", "cell.cli", "--config", str(self.config_path)]
+        if sim_camera is None:
+            sim_camera = config.robot.backend == "sim"
         children = [_Child("router", [*command, "router"])] if with_router else []
-        children.append(_Child("robot", [*command, "worker", "robot"]))
-        if config.robot.backend == "sim":
+        if robot:
+            children.append(_Child("robot", [*command, "worker", "robot"]))
+        if sim_camera:
             children.append(_Child("sim-camera", [*command, "sim", "camera"]))
-        children.append(_Child("camera", [*command, "worker", "camera"]))
+        if camera:
+            children.append(_Child("camera", [*command, "worker", "camera"]))
         for index in range(reconstructors):
             children.append(_Child(f"reconstruct-{index}", [*command, "worker", "reconstruct",
                                                             "--id", f"{config.cell_id}-r{index}-{os.getpid()}"]))
-        children.append(_Child("daemon", [*command, "cell"]))
+        if daemon:
+            children.append(_Child("daemon", [*command, "cell"]))
         self.children = children
+        self._environment: dict[str, str] = {}
 
     async def start(self, *, ready_timeout: float = 60.0) -> None:
         """Start every child and wait until the daemon and all workers announce themselves.
@@ -66,42 +80,116 @@ class CellProcesses:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         # The JSON masks the camera password; the children get it from the environment instead.
         self.config_path.write_text(self.config.model_dump_json(indent=1))
-        environment = dict(os.environ)
+        self._environment = dict(os.environ)
         password = self.config.camera.resolved_password()
         if password:
-            environment["ROBOCELL_CAMERA_PASSWORD"] = password
+            self._environment["ROBOCELL_CAMERA_PASSWORD"] = password
         for child in self.children:
-            with open(self.log_dir / f"{child.name}.log", "ab") as log_file:
-                child.process = await asyncio.create_subprocess_exec(
-                    *child.argv, stdin=asyncio.subprocess.DEVNULL, stdout=log_file, stderr=log_file,
-                    env=environment, start_new_session=True)  # Ctrl-C goes to `up`, which stops the children in order
-        await self._wait_ready(ready_timeout)
+            await self._spawn(child)
+        await self.wait_ready(ready_timeout)
 
-    async def _wait_ready(self, timeout: float) -> None:
-        expected = {keys.alive(self.config.cell_id, part) for part in ("daemon", "robot", "camera")}
-        n_reconstructors = sum(1 for c in self.children if c.name.startswith("reconstruct"))
+    async def _spawn(self, child: _Child) -> None:
+        child.stopped = False
+        with open(self.log_dir / f"{child.name}.log", "ab") as log_file:
+            child.process = await asyncio.create_subprocess_exec(
+                *child.argv, stdin=asyncio.subprocess.DEVNULL, stdout=log_file, stderr=log_file,
+                env=self._environment, start_new_session=True)  # Ctrl-C goes to `up`, which stops the children in order
+
+    async def start_child(self, name: str, *, ready_timeout: float = 30.0) -> None:
+        """(Re)start one child that is not running, and wait until the cell is ready again.
+
+        Raises
+        ------
+        CellError
+            As :meth:`start`; also if the child is still running.
+        """
+        child = self.child(name)
+        if child.process is not None and child.process.returncode is None:
+            raise CellError(f"{name} is already running")
+        await self._spawn(child)
+        await self.wait_ready(ready_timeout)
+
+    async def stop_child(self, name: str, *, kill: bool = False, gone_timeout: float = 10.0) -> int:
+        """Stop one child (SIGTERM, or SIGKILL with ``kill``) and wait until the router has
+        forgotten its liveliness token; returns its exit status."""
+        child = self.child(name)
+        child.stopped = True
+        await self._stop(child, signal.SIGKILL if kill else signal.SIGTERM)
+        assert child.process is not None
+        if name in ("daemon", "robot", "camera"):
+            token = keys.alive(self.config.cell_id, name)
+            async with await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.settings,
+                                            connect_timeout_s=gone_timeout) as transport:
+                deadline = asyncio.get_running_loop().time() + gone_timeout
+                while token in await transport.alive(token, timeout=1.0):
+                    if asyncio.get_running_loop().time() > deadline:
+                        raise CellError(f"{name} stopped, but its liveliness token is still there")
+                    await asyncio.sleep(0.05)
+        return child.process.returncode
+
+    def _expected(self) -> tuple[set[str], int, bool]:
+        """Liveliness keys, how many reconstructors, and whether the simulated camera, of running children."""
+        tokens, n_reconstructors, sim_camera = set(), 0, False
+        for child in self.children:
+            if child.process is None or child.process.returncode is not None:
+                continue
+            if child.name in ("daemon", "robot", "camera"):
+                tokens.add(keys.alive(self.config.cell_id, child.name))
+            elif child.name.startswith("reconstruct"):
+                n_reconstructors += 1
+            elif child.name == "sim-camera":
+                sim_camera = True
+        return tokens, n_reconstructors, sim_camera
+
+    async def wait_ready(self, timeout: float) -> None:
+        """Wait until every running child that announces itself has done so.
+
+        Raises
+        ------
+        CellError
+            If a child exits meanwhile, or something is still missing after ``timeout`` seconds.
+        """
+        expected, n_reconstructors, sim_camera = self._expected()
         transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.settings,
                                          connect_timeout_s=min(timeout, 20.0))
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
-        missing: set[str] = set()
+        missing: list[str] = []
         try:
             while loop.time() < deadline:
                 self._check_running()
                 alive = set(await transport.alive(f"{keys.ROOT}/**", timeout=1.0))
-                missing = expected - alive
+                missing = sorted(expected - alive)
                 pool = [key for key in alive if key.startswith(keys.RECONSTRUCTORS_ALIVE[:-1])]
-                if not missing and len(pool) >= n_reconstructors:
+                if len(pool) < n_reconstructors:
+                    missing.append("reconstruction workers")
+                if sim_camera and not await self._sim_camera_listening():
+                    missing.append(f"the simulated camera at {self.config.camera.url}")
+                if not missing:
                     return
                 await asyncio.sleep(0.1)
         finally:
             await transport.close()
         raise CellError(f"the cell was not ready after {timeout:g} s: waiting for "
-                        f"{', '.join(sorted(missing)) or 'reconstruction workers'}; logs in {self.log_dir}")
+                        f"{', '.join(missing)}; logs in {self.log_dir}")
+
+    async def _sim_camera_listening(self) -> bool:
+        address = urlsplit(self.config.camera.url)
+        try:
+            _, writer = await asyncio.wait_for(
+                asyncio.open_connection(address.hostname or "127.0.0.1", address.port or 80), 1.0)
+        except (OSError, asyncio.TimeoutError):
+            return False
+        writer.close()
+        try:
+            await writer.wait_closed()
+        except OSError:
+            pass
+        return True
 
     def _check_running(self) -> None:
         for child in self.children:
-            if child.process is not None and child.process.returncode is not None:
+            if child.process is not None and child.process.returncode is not None and not child.stopped:
                 raise CellError(f"{child.name} exited with status {child.process.returncode}; "
                                 f"see {self.log_dir / (child.name + '.log')}")
 
@@ -117,17 +205,21 @@ class CellProcesses:
         return next(c for c in self.children if c.name == name)
 
     async def stop(self) -> None:
+        """Stop every child, in reverse start order."""
         for child in reversed(self.children):
-            process = child.process
-            if process is None or process.returncode is not None:
-                continue
-            process.send_signal(signal.SIGTERM)
-            try:
-                await asyncio.wait_for(process.wait(), _STOP_WAIT_S)
-            except asyncio.TimeoutError:
-                log.warning("%s did not stop in %g s: killing it", child.name, _STOP_WAIT_S)
-                process.kill()
-                await process.wait()
+            await self._stop(child, signal.SIGTERM)
+
+    async def _stop(self, child: _Child, signum: int) -> None:
+        process = child.process
+        if process is None or process.returncode is not None:
+            return
+        process.send_signal(signum)
+        try:
+            await asyncio.wait_for(process.wait(), _STOP_WAIT_S)
+        except asyncio.TimeoutError:
+            log.warning("%s did not stop in %g s: killing it", child.name, _STOP_WAIT_S)
+            process.kill()
+            await process.wait()
 
 
 def up(config: CellConfig) -> int:

@@ -42,7 +42,8 @@ def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 class SimRobot:
-    """A robot whose moves take distance / speed (or angle / rotation speed, if longer)."""
+    """A robot whose moves take distance / speed (or angle / rotation speed, if longer),
+    or ``move_time_s`` each if that is configured."""
 
     def __init__(self, config: RobotConfig) -> None:
         self._config = config
@@ -52,6 +53,8 @@ class SimRobot:
         return self._pose.copy()
 
     def duration(self, target: np.ndarray) -> float:
+        if self._config.move_time_s is not None:
+            return self._config.move_time_s
         distance = float(np.linalg.norm(target[:3, 3] - self._pose[:3, 3]))
         angle = math.degrees(_rotation_angle(self._pose, target))
         linear = distance / self._config.speed if self._config.speed else 0.0

@@ -1,0 +1,197 @@
+"""Benchmark of the cell: orchestration overhead per job, and pipelining across jobs.
+
+Runs whole simulated cells on this machine (router, workers, simulated
+camera, daemon: every part its own process, talking Zenoh on loopback) and
+prints tables; asserts nothing.
+
+(a) Orchestration overhead: jobs one at a time, the simulated robot moving
+    instantly. Overhead = time from submit to result in the client's hands,
+    minus what the job really waited for, as the workers reported it: robot
+    moves (MoveReply.duration_s), snapshots (CaptureInfo.duration_s) and the
+    reconstruction round trip (ScanResult.durations_s). Target: median <= 5 ms.
+(b) Pipelining: every move takes 1 s; N jobs submitted together. Bound:
+    N x (3 moves + 3 captures) + one reconstruction, the captures and the
+    reconstruction at their measured median durations.
+
+    .venv/bin/python bench/bench_cell.py [--jobs 20] [--pipeline-jobs 10] [--move-time 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from cell import keys  # noqa: E402
+from cell.client import AsyncCellClient  # noqa: E402
+from cell.config import CellConfig  # noqa: E402
+from cell.demo import free_port  # noqa: E402
+from cell.messages import JobState, ScanRequest, ScanResult  # noqa: E402
+from cell.sim.scene import truth_from_config  # noqa: E402
+from cell.store import JobStore  # noqa: E402
+from cell.transport import Transport  # noqa: E402
+from cell.up import CellProcesses  # noqa: E402
+from core_cy.superquadric import Superquadric  # noqa: E402
+
+
+def _config(run_dir: Path, **robot) -> CellConfig:
+    return CellConfig.model_validate({
+        "cell_id": "bench", "run_dir": str(run_dir),
+        "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
+        "camera": {"url": f"http://127.0.0.1:{free_port()}"},
+        "robot": {"speed": 0.0, "rotation_speed_deg": 0.0, **robot},
+    })
+
+
+def _target(config: CellConfig) -> list[float]:
+    return Superquadric.from_dict(truth_from_config(config.sim)).T_world_object[:3, 3].tolist()
+
+
+def _pct(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
+
+
+async def _one_job(client: AsyncCellClient, request: ScanRequest) -> tuple[float, ScanResult]:
+    """Submit, wait for the end, fetch the result, as any client does; seconds from submit to result."""
+    began = time.perf_counter()
+    result = await client.scan(request, timeout=60.0)
+    return time.perf_counter() - began, result
+
+
+# Query round trips per job whose transit is not part of a worker's reported duration: submit,
+# 3 moves, 3 captures, the result; the end event travels one way. (The reconstruction's whole round
+# trip counts as waited for.)
+_ROUND_TRIPS_PER_JOB = 8.5
+
+
+async def _round_trip(config: CellConfig, n: int = 50) -> float:
+    """Median seconds of a query the robot worker answers at once, in the running cell."""
+    async with await Transport.open(config.zenoh.router) as transport:
+        times = []
+        for _ in range(n):
+            began = time.perf_counter()
+            await transport.query(keys.robot_state(config.cell_id), timeout=5.0)
+            times.append(time.perf_counter() - began)
+    return statistics.median(times)
+
+
+async def overhead(n_jobs: int, run_dir: Path) -> None:
+    config = _config(run_dir)
+    cell = CellProcesses(config)
+    try:
+        await cell.start()
+        async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
+            request = ScanRequest(target=_target(config))
+            await _one_job(client, request)  # warm-up: imports, first connections
+            rows = []
+            for _ in range(n_jobs):
+                total, result = await _one_job(client, request)
+                d = result.durations_s
+                moves = sum(v for k, v in d.items() if k.startswith("move"))
+                captures = sum(v for k, v in d.items() if k.startswith("capture"))
+                rows.append({"total": total, "moves": moves, "captures": captures,
+                             "reconstruct": d["reconstruct"], "core": result.timings_ms["total"] / 1000,
+                             "overhead": total - moves - captures - d["reconstruct"]})
+            round_trip = await _round_trip(config)
+    finally:
+        await cell.stop()
+    ms = lambda key, f: 1000 * f([r[key] for r in rows])  # noqa: E731
+    print(f"\n(a) orchestration overhead, {n_jobs} jobs one at a time, robot moving instantly (ms)")
+    print(f"{'':<34}{'median':>9}{'p90':>9}{'min':>9}{'max':>9}")
+    for key, label in [("total", "submit -> result"), ("moves", "robot moves (reported)"),
+                       ("captures", "camera snapshots (reported)"), ("reconstruct", "reconstruction round trip"),
+                       ("core", "  of which the core (reported)"), ("overhead", "orchestration overhead")]:
+        print(f"{label:<34}{ms(key, statistics.median):9.2f}{ms(key, lambda v: _pct(v, 0.9)):9.2f}"
+              f"{ms(key, min):9.2f}{ms(key, max):9.2f}")
+    print(f"target: median overhead <= 5 ms -> {'met' if ms('overhead', statistics.median) <= 5 else 'NOT met'}")
+    floor = _ROUND_TRIPS_PER_JOB * round_trip
+    print(f"Zenoh round trip in this cell (a query the robot answers at once): median {1000 * round_trip:.2f} ms;"
+          f"\na job makes {_ROUND_TRIPS_PER_JOB:g} whose transit counts as overhead (submit, 3 moves, 3 captures, "
+          f"result, and the end event's half), about {1000 * floor:.1f} ms;\nthe rest, "
+          f"{ms('overhead', statistics.median) - 1000 * floor:.1f} ms median, is the daemon's and the client's own work "
+          f"and the wait for a processor\n(the cell's {len(cell.children)} processes, the recorder and this client "
+          f"share {os.cpu_count()} here).")
+
+
+async def pipelining(n_jobs: int, move_time: float, run_dir: Path) -> None:
+    config = _config(run_dir, move_time_s=move_time)
+    cell = CellProcesses(config)
+    try:
+        await cell.start()
+        async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
+            request = ScanRequest(target=_target(config))
+            began = time.perf_counter()
+            ids = [(await client.submit(request)).job_id for _ in range(n_jobs)]
+            for job_id in ids:
+                final = await client.wait(job_id, timeout=60 + 10 * n_jobs * move_time)
+                if final.state is not JobState.SUCCEEDED:
+                    raise RuntimeError(f"job {job_id} {final.state.value}: {final.error}")
+            total = time.perf_counter() - began
+            results = [await client.result(job_id) for job_id in ids]
+    finally:
+        await cell.stop()
+    with JobStore(Path(config.run_dir) / "jobs.sqlite") as store:
+        events = [store.events(job_id) for job_id in ids]
+    captures = [v for r in results for k, v in r.durations_s.items() if k.startswith("capture")]
+    moves = [v for r in results for k, v in r.durations_s.items() if k.startswith("move")]
+    reconstructions = [r.durations_s["reconstruct"] for r in results]
+    capture, reconstruct = statistics.median(captures), statistics.median(reconstructions)
+    nominal = n_jobs * 3 * (move_time + capture) + reconstruct
+    actual = sum(moves) + sum(captures) + reconstructions[-1]
+    serial = sum(moves) + sum(captures) + sum(reconstructions)
+    print(f"\n(b) pipelining: {n_jobs} jobs submitted together, every move {move_time:g} s")
+    print(f"  median move {statistics.median(moves):.3f} s, capture {capture:.3f} s (mean "
+          f"{statistics.mean(captures):.3f}), reconstruction round trip {reconstruct:.3f} s")
+    rows = [("total time, first submit to the last job's end", total),
+            ("bound: N x (3 moves + 3 captures) + 1 reconstruction", nominal),
+            ("  the same with the durations the workers reported", actual),
+            ("without pipelining (every reconstruction waited for)", serial)]
+    for label, seconds in rows:
+        print(f"  {label:<56}{seconds:8.2f} s")
+    overlapped = sum(_overlap(this, following) for this, following in zip(events, events[1:]))
+    waited = sum(_span(e, JobState.RECONSTRUCTING, JobState.SUCCEEDED) for e in events[:-1])
+    print(f"  reconstruction (reconstructing -> succeeded) overlapping the next job's motion: "
+          f"{overlapped:.3f} s of {waited:.3f} s")
+    print(f"  -> total is {'within' if total <= nominal else 'OVER'} the bound by {abs(nominal - total):.2f} s "
+          f"({100 * (total - nominal) / nominal:+.1f} %); orchestration per job "
+          f"{1000 * (total - actual) / n_jobs:.0f} ms")
+
+
+def _first(events, state: JobState) -> float:
+    return next(e.time for e in events if e.state is state)
+
+
+def _span(events, start: JobState, end: JobState) -> float:
+    return _first(events, end) - _first(events, start)
+
+
+def _overlap(this, following) -> float:
+    """Seconds of this job's reconstruction during which the next job moved or captured."""
+    begin = max(_first(this, JobState.RECONSTRUCTING), _first(following, JobState.MOVING))
+    end = min(_first(this, JobState.SUCCEEDED), _first(following, JobState.RECONSTRUCTING))
+    return max(0.0, end - begin)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--jobs", type=int, default=20)
+    parser.add_argument("--pipeline-jobs", type=int, default=10)
+    parser.add_argument("--move-time", type=float, default=1.0)
+    parser.add_argument("--run-dir", help="where the cells keep their files (default: a temporary directory)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench-cell-") as tmp:
+        root = Path(args.run_dir) if args.run_dir else Path(tmp)
+        asyncio.run(overhead(args.jobs, root / "overhead"))
+        asyncio.run(pipelining(args.pipeline_jobs, args.move_time, root / "pipelining"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,327 @@
+"""Shared parts of the cell's end-to-end tests: real processes, real Zenoh on loopback.
+
+A test module starts one cell (router, workers, daemon as child processes,
+through ``cell.up.CellProcesses``) and reuses it. Parts a test must steer
+run in the test process instead: the simulated camera (for fault injection)
+and a reconstruction worker that can be held at a gate. Every wait here is
+bounded in time, and everything started is stopped in a ``finally``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import threading
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import zenoh
+from rerun.chunk import RrdReader
+
+from cell import keys
+from cell.client import CellClient
+from cell.config import CellConfig
+from cell.messages import JobEvent, JobState, JobStatus, ReconstructReply, RobotState, ScanRequest
+from cell.sim.scene import scene_from_config, truth_from_config
+from cell.store import JobStore
+from cell.transport import Request, RequestError, Response, Transport, session_config
+from cell.up import CellProcesses
+from core_cy.superquadric import Superquadric
+from workers.reconstruct import reconstruct_request
+from workers.sim_camera import SimCameraServer
+from workers.sim_camera_worker import robot_camera_pose
+
+__all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
+           "GatedReconstructor", "wait_until", "wait_for_footer", "truth_target", "look_away_poses"]
+
+# Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
+START_TIMEOUT_S = 60.0
+JOB_TIMEOUT_S = 60.0
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on now (bound to port 0 on loopback, then released)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None = None,
+                timeouts: dict | None = None, **fields) -> CellConfig:
+    """A test cell on free local ports: an instant robot, short time-outs and few retries.
+
+    ``robot``, ``camera`` and ``timeouts`` update those sections; other keyword
+    arguments are top-level fields (``cell_id``, ``sim``, ``reconstruct``...).
+    """
+    data = {
+        "cell_id": "test",
+        "run_dir": str(run_dir),
+        "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
+        "robot": {"speed": 0.0, "rotation_speed_deg": 0.0, **(robot or {})},
+        "camera": {"url": f"http://127.0.0.1:{free_port()}", "timeout_s": 1.0, "retries": 1, **(camera or {})},
+        "timeouts": {"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0,
+                     **(timeouts or {})},
+        **fields,
+    }
+    return CellConfig.model_validate(data)
+
+
+def truth_target(config: CellConfig) -> list[float]:
+    """The centre of the simulated object: a good scan target."""
+    return Superquadric.from_dict(truth_from_config(config.sim)).T_world_object[:3, 3].tolist()
+
+
+def look_away_poses(config: CellConfig) -> list[list[list[float]]]:
+    """Flange poses inside the workspace whose camera sees only table: the object is out of view."""
+    from cell.messages import ViewPlan
+    from cell.plan import plan_flange_poses, workspace_violation
+
+    empty_spot = [config.sim.position[0], config.sim.position[1] + 0.4, 0.0]
+    poses = plan_flange_poses(empty_spot, ViewPlan(standoff=0.3), config.T_flange_cam)
+    assert not any(workspace_violation(pose, config.robot.workspace) for pose in poses)
+    return [pose.tolist() for pose in poses]
+
+
+def wait_for_footer(path: str | Path, *, timeout: float = 30.0) -> None:
+    """Wait until the recording at ``path`` is complete: the daemon's recorder writes it a moment
+    after the job ends, and closes it with a footer."""
+    def complete() -> bool:
+        if not Path(path).exists():
+            return False
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "no footer" is what we are waiting out
+            try:
+                RrdReader(str(path)).store()
+            except (RuntimeError, OSError, ValueError):
+                return False
+        return True
+
+    wait_until(complete, timeout=timeout, interval=0.05, what=f"the footer of {path}")
+
+
+def wait_until(predicate: Callable[[], object], *, timeout: float, interval: float = 0.01, what: str = "") -> object:
+    """Poll ``predicate`` until it returns something true; fail the test after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what or predicate}")
+        time.sleep(interval)
+
+
+class LoopThread:
+    """An asyncio event loop in a thread of its own, for the async parts of a sync test."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self.loop.run_forever, name="test-loop", daemon=True)
+        self._thread.start()
+
+    def run(self, coroutine, timeout: float = 60.0):
+        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(timeout)
+
+    def close(self) -> None:
+        async def drain() -> None:
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            await self.loop.shutdown_asyncgens()
+            await self.loop.shutdown_default_executor()
+
+        try:
+            self.run(drain(), timeout=30.0)
+        finally:
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self._thread.join(10.0)
+            self.loop.close()
+
+
+class RunningCell:
+    """A started cell: its processes, a blocking client, and a reader of its job store."""
+
+    def __init__(self, config: CellConfig, processes: CellProcesses, loop: LoopThread, client: CellClient) -> None:
+        self.config = config
+        self.processes = processes
+        self.loop = loop
+        self.client = client
+
+    @property
+    def router(self) -> str:
+        return self.config.zenoh.router
+
+    def scan_request(self, **fields) -> ScanRequest:
+        if "flange_poses" not in fields and "target" not in fields:
+            fields["target"] = truth_target(self.config)
+        return ScanRequest(**fields)
+
+    def submit(self, **fields) -> JobStatus:
+        return self.client.submit(self.scan_request(**fields))
+
+    def wait(self, job_id: str, timeout: float = JOB_TIMEOUT_S) -> JobStatus:
+        return self.client.wait(job_id, timeout=timeout)
+
+    def wait_state(self, job_id: str, states: set[JobState], timeout: float = JOB_TIMEOUT_S) -> JobStatus:
+        """Poll until the job is in one of ``states``; fail if it finishes in another state first."""
+        def check() -> JobStatus | None:
+            status = self.client.status(job_id)
+            if status.state in states:
+                return status
+            assert not status.state.finished, f"job {job_id} ended {status.state.value} ({status.error}) " \
+                                              f"before reaching {sorted(s.value for s in states)}"
+            return None
+
+        return wait_until(check, timeout=timeout, interval=0.005, what=f"job {job_id} in {states}")
+
+    def events(self, job_id: str) -> list[JobEvent]:
+        """The job's events as the daemon stored them."""
+        with JobStore(self.config.run_dir / "jobs.sqlite") as store:
+            return store.events(job_id)
+
+    def robot_state(self) -> RobotState:
+        return self.loop.run(self._robot_state())
+
+    async def _robot_state(self) -> RobotState:
+        async with await Transport.open(self.router) as transport:
+            reply = await transport.query(keys.robot_state(self.config.cell_id), timeout=5.0)
+        return RobotState.model_validate_json(reply.payload)
+
+    def log(self, name: str) -> str:
+        return (self.processes.log_dir / f"{name}.log").read_text(errors="replace")
+
+    def tracebacks(self) -> dict[str, str]:
+        """The log of every child that logged a traceback, by name."""
+        logs = {child.name: self.log(child.name) for child in self.processes.children
+                if (self.processes.log_dir / f"{child.name}.log").exists()}
+        return {name: text for name, text in logs.items() if "Traceback" in text}
+
+    def daemon_running(self) -> bool:
+        process = self.processes.child("daemon").process
+        return process is not None and process.returncode is None
+
+
+@contextlib.contextmanager
+def running_cell(config: CellConfig, **parts) -> Iterator[RunningCell]:
+    """Start a cell as child processes (``parts`` as for CellProcesses); stop it all afterwards."""
+    loop = LoopThread()
+    processes = CellProcesses(config, **parts)
+    client = None
+    try:
+        loop.run(processes.start(ready_timeout=START_TIMEOUT_S), timeout=START_TIMEOUT_S + 10)
+        client = CellClient(config.zenoh.router, config.cell_id, timeout=10.0)
+        yield RunningCell(config, processes, loop, client)
+    finally:
+        try:
+            if client is not None:
+                client.close()
+        finally:
+            try:
+                loop.run(processes.stop(), timeout=60.0)
+            finally:
+                loop.close()
+
+
+class InProcessSimCamera:
+    """The simulated Axis camera, served by the test itself so that it can inject faults.
+
+    As ``robocell sim camera`` does, it renders from the robot worker's pose,
+    asked over Zenoh. :meth:`restart` serves again on the same port, e.g. with
+    other credentials.
+    """
+
+    def __init__(self, config: CellConfig) -> None:
+        self.config = config
+        self._session = zenoh.open(session_config(config.zenoh.router, connect_timeout_ms=10_000))
+        self.server: SimCameraServer | None = None
+
+    def start(self, password: str | None = None) -> SimCameraServer:
+        camera = self.config.camera
+        password = password if password is not None else camera.resolved_password()
+        host, port = camera.url.rsplit(":", 1)
+        server = SimCameraServer(
+            scene_from_config(self.config.sim), K=np.asarray(camera.K), image_size=tuple(camera.resolution),
+            dist=camera.dist, pose_provider=lambda: robot_camera_pose(self._session, self.config),
+            host=host.removeprefix("http://"), port=int(port), username=camera.username, password=password,
+            auth=camera.auth if camera.username else None, seed=self.config.sim.seed)
+        server.start()
+        self.server = server
+        return server
+
+    def restart(self, password: str | None = None) -> SimCameraServer:
+        self.stop_server()
+        return self.start(password)
+
+    def stop_server(self) -> None:
+        server, self.server = self.server, None
+        if server is not None:
+            server.stop()
+
+    def close(self) -> None:
+        try:
+            self.stop_server()
+        finally:
+            self._session.close()
+
+
+class GatedReconstructor:
+    """A reconstruction worker served in the test process: the real core, behind a gate.
+
+    It serves ``keys.reconstructor(worker_id)`` with ``Transport.serve`` and
+    announces itself with ``keys.reconstructor_alive(worker_id)``, as
+    ``robocell worker reconstruct`` does. While :meth:`hold` is in force a
+    request waits (at most ``max_hold_s``) until :meth:`release`.
+    """
+
+    def __init__(self, loop: LoopThread, router: str, worker_id: str = "gated", *, max_hold_s: float = 30.0) -> None:
+        self.loop = loop
+        self.worker_id = worker_id
+        self.max_hold_s = max_hold_s
+        self.received: list[str] = []       # ReconstructRequest JSON of each request
+        self.answered = 0
+        self.waiting = threading.Event()   # a request is at the closed gate
+        self._open = threading.Event()
+        self._open.set()
+        self._token = None
+        self._transport: Transport = loop.run(Transport.open(router, connect_timeout_s=10.0))
+        self._transport.serve(keys.reconstructor(worker_id), self._handle)
+        self.announce()
+
+    def announce(self) -> None:
+        self._token = self._transport.declare_token(keys.reconstructor_alive(self.worker_id))
+
+    def withdraw(self) -> None:
+        """Take the liveliness token back: the daemon then sees no reconstructor."""
+        if self._token is not None:
+            self._token.undeclare()
+            self._token = None
+
+    def hold(self) -> None:
+        self.waiting.clear()
+        self._open.clear()
+
+    def release(self) -> None:
+        self._open.set()
+
+    async def _handle(self, request: Request) -> Response:
+        if request.attachment is None or request.payload is None:
+            raise RequestError("missing attachment or payload")
+        self.received.append(request.attachment.decode())
+        if not self._open.is_set():
+            self.waiting.set()
+            if not await asyncio.to_thread(self._open.wait, self.max_hold_s):
+                raise RequestError(f"test gate still closed after {self.max_hold_s:g} s")
+        reply_json = await asyncio.to_thread(reconstruct_request, request.attachment.decode(), request.payload)
+        reply = ReconstructReply.model_validate_json(reply_json)
+        reply.worker = self.worker_id
+        self.answered += 1
+        return Response(reply.model_dump_json())
+
+    def close(self) -> None:
+        self.release()
+        self.loop.run(self._transport.close(), timeout=20.0)

@@ -1,0 +1,131 @@
+"""Several jobs in a row, cancels of queued and moving jobs, and a daemon killed mid-job.
+
+Every part is a child process; the simulated robot takes a fixed time per
+move, so that a job spends a while moving. What happened when is read from
+the events the daemon stored, not from the test's clock.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+
+import pytest
+
+from cell.errors import RemoteError
+from cell.messages import JobEvent, JobState
+
+from .cell_fixtures import cell_config, running_cell, wait_for_footer
+
+MOVE_TIME_S = 0.25
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    config = cell_config(tmp_path_factory.mktemp("cell-pipeline"), cell_id="pipeline",
+                         robot={"move_time_s": MOVE_TIME_S}, timeouts={"worker_wait_s": 5.0})
+    with running_cell(config) as running:
+        yield running
+
+
+def _time(events: list[JobEvent], state: JobState, *, last: bool = False) -> float:
+    times = [e.time for e in events if e.state is state]
+    assert times, f"no {state.value} event in {[e.state.value for e in events]}"
+    return times[-1] if last else times[0]
+
+
+@pytest.fixture(scope="module")
+def pipelined(cell):
+    """Three jobs submitted at once, all run to the end."""
+    ids = [cell.submit(label=f"pipelined {k}").job_id for k in range(3)]
+    for job_id in ids:
+        final = cell.wait(job_id)
+        assert final.state is JobState.SUCCEEDED, final.error
+    return ids
+
+
+def test_reconstruction_overlaps_the_next_jobs_motion(cell, pipelined):
+    events = [cell.events(job_id) for job_id in pipelined]
+    for this, following in zip(events, events[1:]):
+        reconstructing = (_time(this, JobState.RECONSTRUCTING), _time(this, JobState.SUCCEEDED))
+        acquiring = (_time(following, JobState.MOVING), _time(following, JobState.RECONSTRUCTING))
+        # One robot and one camera: the next job moves only once this one's pictures are taken ...
+        assert acquiring[0] >= reconstructing[0]
+        # ... but it does not wait for this one's reconstruction.
+        assert max(reconstructing[0], acquiring[0]) < min(reconstructing[1], acquiring[1])
+
+
+def test_jobs_moves_and_captures_do_not_interleave(cell, pipelined):
+    spans = []
+    for job_id in pipelined:
+        events = cell.events(job_id)
+        spans.append((_time(events, JobState.MOVING), _time(events, JobState.CAPTURING, last=True)))
+    assert spans == sorted(spans)
+    assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:]))
+
+
+def test_cancel_a_queued_job(cell):
+    first = cell.submit(label="in front")
+    queued = cell.submit(label="to cancel")
+    cell.wait_state(first.job_id, {JobState.MOVING, JobState.CAPTURING})
+    assert cell.client.status(queued.job_id).state is JobState.QUEUED
+    cancelled = cell.client.cancel(queued.job_id)
+    assert cancelled.state is JobState.CANCELLED
+    assert cell.wait(first.job_id).state is JobState.SUCCEEDED
+    assert [e.state for e in cell.events(queued.job_id)] == [JobState.QUEUED, JobState.CANCELLED]
+    with pytest.raises(RemoteError, match="has no result: it is cancelled"):
+        cell.client.result(queued.job_id)
+    assert cell.client.cancel(queued.job_id).state is JobState.CANCELLED  # again: no harm
+
+
+def test_cancel_a_moving_job(cell):
+    status = cell.submit(label="cancel while moving")
+    cell.wait_state(status.job_id, {JobState.MOVING})
+    assert cell.client.cancel(status.job_id).state is JobState.CANCELLED  # the reply waits for the effect
+    final = cell.wait(status.job_id, timeout=10)
+    assert final.state is JobState.CANCELLED
+    assert [(e.state, e.view) for e in cell.events(status.job_id)] == \
+        [(JobState.QUEUED, None), (JobState.MOVING, 0), (JobState.CANCELLED, None)]
+    # The cell goes on with the next job.
+    after = cell.submit(label="after the cancel")
+    assert cell.wait(after.job_id).state is JobState.SUCCEEDED
+
+
+def test_a_cancel_accepted_is_honoured_whenever_it_comes(cell):
+    """Cancels at moments spread over a job's life, step boundaries included: each either comes
+    too late (the job had ended) or ends the job cancelled; a lost cancel once let a job succeed."""
+    rng = random.Random(3)
+    for k in range(6):
+        status = cell.submit(label=f"cancel {k}")
+        cell.wait_state(status.job_id, {JobState.MOVING})
+        time.sleep(rng.uniform(0.0, 3.5 * MOVE_TIME_S))
+        try:
+            reply = cell.client.cancel(status.job_id)
+        except RemoteError as exc:
+            assert "already succeeded: nothing to cancel" in str(exc)
+            continue
+        assert reply.state is JobState.CANCELLED, reply
+        assert cell.wait(status.job_id, timeout=10).state is JobState.CANCELLED
+        assert JobState.SUCCEEDED not in [e.state for e in cell.events(status.job_id)]
+
+
+def test_daemon_killed_mid_job_restarts_keeping_results(cell, pipelined):
+    done = pipelined[0]
+    result_before = cell.client.result(done)
+    interrupted = cell.submit(label="interrupted")
+    queued = [cell.submit(label=f"queued {k}").job_id for k in range(2)]
+    cell.wait_state(interrupted.job_id, {JobState.MOVING, JobState.CAPTURING})
+    assert cell.loop.run(cell.processes.stop_child("daemon", kill=True)) == -9
+    # The daemon's recorder notices, and closes what the daemon was recording.
+    wait_for_footer(cell.config.run_dir / f"{interrupted.job_id}.rrd", timeout=20)
+    cell.loop.run(cell.processes.start_child("daemon"))
+
+    assert cell.client.result(done) == result_before
+    final = cell.wait(interrupted.job_id, timeout=10)
+    assert final.state is JobState.FAILED and "interrupted" in final.error
+    assert cell.events(interrupted.job_id)[-1].state is JobState.FAILED
+    for job_id in queued:
+        status = cell.wait(job_id)
+        assert status.state is JobState.SUCCEEDED, status.error
+        assert cell.client.result(job_id).job_id == job_id
+    assert cell.tracebacks() == {}

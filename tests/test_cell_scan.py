@@ -1,0 +1,258 @@
+"""The whole cell, end to end: every part a real process, talking Zenoh on loopback.
+
+One cell serves the module (simulated robot moving instantly, simulated Axis
+camera, camera and reconstruction workers, daemon). Scans are scored against
+the simulated object's truth; the recording is read back with Rerun's reader;
+one client speaks nothing but plain ``zenoh`` and the documented keys.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from cell import keys
+from cell.errors import RemoteError
+from cell.messages import JobState, MoveRequest, ScanRequest
+from cell.recording import recording_summary
+from cell.sim.scene import truth_from_config
+from cell.transport import Transport, session_config
+from core_cy.scoring import volumetric_iou
+from core_cy.superquadric import Superquadric
+
+from .cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, truth_target, wait_for_footer,
+                            wait_until)
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    config = cell_config(tmp_path_factory.mktemp("cell-scan"), cell_id="scan")
+    with running_cell(config) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def scanned(cell):
+    """One scan of the simulated object, from submit to result."""
+    status = cell.submit(label="scored")
+    assert status.state is JobState.QUEUED
+    final = cell.wait(status.job_id)
+    assert final.state is JobState.SUCCEEDED, final.error
+    return final, cell.client.result(status.job_id)
+
+
+def test_scan_scores_well_against_the_truth(cell, scanned):
+    status, result = scanned
+    truth = Superquadric.from_dict(truth_from_config(cell.config.sim))
+    fit = Superquadric.from_dict(result.superquadric)
+    assert volumetric_iou(truth, fit) > 0.7
+    assert len(result.silhouette_iou) == 3 and min(result.silhouette_iou) > 0.85
+    assert np.linalg.norm(fit.T_world_object[:3, 3] - truth.T_world_object[:3, 3]) < 0.01
+    assert result.timings_ms["total"] > 0
+    assert len(result.T_base_cam) == 3
+
+
+def test_scan_goes_through_every_state_in_order(cell, scanned):
+    status, _ = scanned
+    steps = [(e.state, e.view) for e in cell.events(status.job_id)]
+    expected = [(JobState.QUEUED, None)]
+    for view in range(3):
+        expected += [(JobState.MOVING, view), (JobState.CAPTURING, view)]
+    expected += [(JobState.RECONSTRUCTING, None), (JobState.SUCCEEDED, None)]
+    assert steps == expected
+    times = [e.time for e in cell.events(status.job_id)]
+    assert times == sorted(times)
+
+
+def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
+    status, result = scanned
+    assert status.recording == result.recording
+    wait_for_footer(result.recording)
+    summary = recording_summary(result.recording)
+    for view in range(3):
+        assert summary[f"/world/camera{view}"] == ["Pinhole", "Transform3D"]
+        assert summary[f"/world/camera{view}/image"] == ["EncodedImage"]
+        assert summary[f"/world/camera{view}/silhouette"] == ["SegmentationImage"]
+    assert summary["/world/points/sphere"] == ["Points3D"]
+    assert summary["/world/points/carved"] == ["Points3D"]
+    assert summary["/world/fit"] == ["Mesh3D"]
+    assert summary["/world/truth"] == ["Mesh3D"]
+    assert summary["/log"] == ["TextLog"]
+
+
+def test_plain_zenoh_client_with_only_the_documented_keys(cell):
+    """What a program in another language does: JSON on documented keys, nothing of robocell's code."""
+    prefix = f"robocell/{cell.config.cell_id}"
+    request = json.dumps({"schema_version": 1, "target": truth_target(cell.config), "label": "plain zenoh"})
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([cell.router]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    events: list[dict] = []
+    with zenoh.open(conf) as session:
+        replies = list(session.get(f"{prefix}/submit", payload=request, timeout=10.0))
+        assert len(replies) == 1 and replies[0].ok is not None, replies
+        status = json.loads(replies[0].ok.payload.to_bytes())
+        job_id = status["job_id"]
+        assert status["state"] == "queued"
+        subscriber = session.declare_subscriber(f"{prefix}/events/{job_id}",
+                                                lambda sample: events.append(json.loads(sample.payload.to_bytes())))
+        try:
+            def finished():
+                for reply in session.get(f"{prefix}/jobs/{job_id}", timeout=10.0):
+                    state = json.loads(reply.ok.payload.to_bytes())["state"]
+                    return state if state in ("succeeded", "failed", "cancelled") else None
+                return None
+
+            assert wait_until(finished, timeout=JOB_TIMEOUT_S, interval=0.05, what="the job") == "succeeded"
+            reply = next(iter(session.get(f"{prefix}/jobs/{job_id}/result", timeout=10.0)))
+            result = json.loads(reply.ok.payload.to_bytes())
+            wait_until(lambda: events and events[-1]["state"] == "succeeded", timeout=5.0, what="the last event")
+        finally:
+            subscriber.undeclare()
+    assert result["job_id"] == job_id
+    assert set(result["superquadric"]) >= {"size", "shape", "T_world_object"}
+    truth = Superquadric.from_dict(truth_from_config(cell.config.sim))
+    assert volumetric_iou(truth, Superquadric.from_dict(result["superquadric"])) > 0.7
+    # The subscription may have started after the first events: what came is the tail, in order.
+    states = [e["state"] for e in events]
+    assert states[-2:] == ["reconstructing", "succeeded"]
+    assert all(e["job_id"] == job_id for e in events)
+
+
+async def _ask(router: str, key: str, payload: str | bytes | None = None, parameters: str = ""):
+    async with await Transport.open(router) as transport:
+        return await transport.query(key, payload, timeout=10.0, parameters=parameters)
+
+
+@pytest.mark.parametrize("payload, named", [
+    (b"", "empty payload"),
+    (b"{not json", "Invalid JSON"),
+    (b"[1, 2]", "ScanRequest"),
+    (json.dumps({"target": [0.6, 0.0]}), "target"),
+    (json.dumps({"target": [0.6, 0.0, "high"]}), "target.2"),
+    (json.dumps({"target": [0.6, 0.0, 0.05], "colour": "red"}), "colour"),
+    (json.dumps({"target": [0.6, 0.0, 0.05], "schema_version": 2}), "schema_version"),
+    (json.dumps({"target": [0.6, 0.0, 0.05], "plan": {"standoff": -1}}), "plan.standoff"),
+    (json.dumps({"flange_poses": [np.eye(4).tolist()] * 3, "target": [0.6, 0.0, 0.05]}), "exactly one"),
+    (json.dumps({"flange_poses": [[[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.4], [0, 0, 0, 1]],
+                                  [[2, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.4], [0, 0, 0, 1]]]}),
+     "flange_poses.1"),
+])
+def test_invalid_request_is_refused_naming_the_field(cell, payload, named):
+    before = len(cell.client.list(limit=1000))
+    with pytest.raises(RemoteError, match=named):
+        cell.loop.run(_ask(cell.router, keys.submit(cell.config.cell_id), payload))
+    assert len(cell.client.list(limit=1000)) == before
+    assert cell.daemon_running()
+
+
+def test_pose_outside_the_workspace_is_refused_before_the_robot_moves(cell):
+    before = cell.robot_state()
+    inside = np.asarray(cell.config.robot.home)
+    above = inside.copy()
+    above[2, 3] = 1.4
+    poses = [inside.tolist(), above.tolist(), inside.tolist()]
+    n_jobs = len(cell.client.list(limit=1000))
+    with pytest.raises(RemoteError, match=r"view 1 is outside the workspace: z = 1.4 m is above"):
+        cell.client.submit(ScanRequest(flange_poses=poses))
+    assert len(cell.client.list(limit=1000)) == n_jobs  # no job was made
+    # The robot worker checks too, for callers other than the daemon.
+    with pytest.raises(RemoteError, match="move refused before moving: z = 1.4 m"):
+        cell.loop.run(_ask(cell.router, keys.robot_move(cell.config.cell_id),
+                           MoveRequest(T_base_flange=above.tolist()).model_dump_json()))
+    after = cell.robot_state()
+    assert after.T_base_flange == before.T_base_flange and not after.moving
+
+
+def test_workers_refuse_malformed_requests_naming_the_field(cell):
+    cell_id = cell.config.cell_id
+    with pytest.raises(RemoteError, match=r"invalid MoveRequest: T_base_flange: Field required"):
+        cell.loop.run(_ask(cell.router, keys.robot_move(cell_id), json.dumps({"job_id": "x"})))
+    with pytest.raises(RemoteError, match=r"invalid MoveRequest: T_base_flange: .*rigid"):
+        cell.loop.run(_ask(cell.router, keys.robot_move(cell_id),
+                           json.dumps({"T_base_flange": (2 * np.eye(4)).tolist()})))
+    reconstructors = cell.loop.run(_alive(cell.router, keys.RECONSTRUCTORS_ALIVE))
+    worker = reconstructors[0].rsplit("/", 1)[-1]
+    with pytest.raises(RemoteError, match=r"invalid ReconstructRequest: views: List should have at least 2 items"):
+        cell.loop.run(_ask_with_attachment(cell.router, keys.reconstructor(worker), b"\xff\xd8",
+                                           json.dumps({"job_id": "x", "views": []})))
+    with pytest.raises(RemoteError, match=r"missing attachment"):
+        cell.loop.run(_ask(cell.router, keys.reconstructor(worker), b"\xff\xd8"))
+    assert cell.robot_state().T_base_flange  # the workers are still there
+    assert cell.tracebacks() == {}
+
+
+async def _alive(router: str, key_expr: str) -> list[str]:
+    async with await Transport.open(router) as transport:
+        return await transport.alive(key_expr)
+
+
+async def _ask_with_attachment(router: str, key: str, payload: bytes, attachment: str):
+    async with await Transport.open(router) as transport:
+        return await transport.query(key, payload, attachment=attachment, timeout=10.0)
+
+
+def test_reconstruction_error_fails_the_job_with_the_cores_message(cell):
+    status = cell.submit(flange_poses=look_away_poses(cell.config), label="nothing in view")
+    final = cell.wait(status.job_id)
+    assert final.state is JobState.FAILED
+    assert final.error.startswith("reconstructing: view 0: the silhouette is empty"), final.error
+    with pytest.raises(RemoteError, match=f"job {status.job_id} has no result: it is failed"):
+        cell.client.result(status.job_id)
+
+
+def test_job_queries_list_idempotency_and_unknown_jobs(cell, scanned):
+    status, _ = scanned
+    listed = cell.client.list(limit=1000)
+    assert status.job_id in [job.job_id for job in listed]
+    succeeded = cell.client.list({JobState.SUCCEEDED}, limit=1000)
+    assert succeeded and all(job.state is JobState.SUCCEEDED for job in succeeded)
+    with pytest.raises(RemoteError, match="no job 'nope'"):
+        cell.client.status("nope")
+    with pytest.raises(RemoteError, match="already succeeded: nothing to cancel"):
+        cell.client.cancel(status.job_id)
+    with pytest.raises(RemoteError, match="unknown job query 'frobnicate'"):
+        cell.loop.run(_ask(cell.router, f"{keys.job(cell.config.cell_id, status.job_id)}/frobnicate"))
+    with pytest.raises(RemoteError, match="bad parameters"):
+        cell.loop.run(_ask(cell.router, keys.jobs(cell.config.cell_id), parameters="state=sleeping"))
+    first = cell.client.submit(cell.scan_request(request_id="same-request"))
+    again = cell.client.submit(cell.scan_request(request_id="same-request"))
+    assert again.job_id == first.job_id
+    assert cell.wait(first.job_id).state is JobState.SUCCEEDED
+
+
+def test_every_query_gets_exactly_one_answer(cell, scanned):
+    """``jobs``, ``jobs/<id>`` and ``jobs/<id>/result`` each reach exactly one queryable."""
+    status, _ = scanned
+    prefix = f"robocell/{cell.config.cell_id}"
+    with zenoh.open(session_config(cell.router)) as session:
+        for key in (f"{prefix}/jobs", f"{prefix}/jobs/{status.job_id}", f"{prefix}/jobs/{status.job_id}/result"):
+            for _ in range(5):
+                replies = list(session.get(key, timeout=10.0, consolidation=zenoh.ConsolidationMode.NONE))
+                assert len(replies) == 1 and replies[0].ok is not None, (key, replies)
+                json.loads(replies[0].ok.payload.to_bytes())
+
+
+def test_command_line_scan_shows_progress_and_the_result(cell):
+    argv = [sys.executable, "-m", "cell.cli", "--config", str(cell.processes.config_path), "scan",
+            "--target", *map(str, truth_target(cell.config)), "--timeout", "60"]
+    began = time.monotonic()
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=90)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("job ") and lines[0].endswith(" queued")
+    assert any("capturing view 2" in line for line in lines)
+    result = json.loads(lines[-1])
+    assert result["silhouette_iou"] and result["recording"].endswith(".rrd")
+    assert time.monotonic() - began < 90
+
+
+def test_no_process_logged_a_traceback(cell):
+    assert cell.tracebacks() == {}
