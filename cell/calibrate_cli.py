@@ -303,7 +303,7 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
     cell, timeouts = client_config.cell_id, client_config.timeouts
     images: list[Path] = []
     reached: list[list[list[float]]] = []
-    async with await Transport.open(client_config.zenoh.router, settings=client_config.zenoh.settings,
+    async with await Transport.open(client_config.zenoh.router, settings=client_config.zenoh.client_settings(),
                                     connect_timeout_s=10.0) as transport:
         for i, move in enumerate(moves):
             reply = await transport.query(keys.robot_move(cell), move.model_dump_json(), timeout=timeouts.move_s)

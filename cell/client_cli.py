@@ -69,7 +69,7 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
 
 
 async def _run(args: argparse.Namespace, config: CellConfig) -> int:
-    client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id, settings=config.zenoh.settings)
+    client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id, settings=config.zenoh.client_settings())
     async with client:
         if args.action == "scan":
             return await _scan(client, args)

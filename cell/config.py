@@ -15,6 +15,8 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, model_validator
 
+from workers.kuka.config import KukaConfig
+
 from .errors import ConfigError
 from .messages import Point, Pose, ViewPlan, field_errors
 
@@ -32,8 +34,24 @@ class _Section(BaseModel):
 class ZenohConfig(_Section):
     #: The router's endpoint: ``robocell router`` listens on it, every other process connects to it.
     router: str = "tcp/127.0.0.1:7447"
-    #: Extra Zenoh configuration (JSON5 keys to values), e.g. TLS and credentials.
+    #: Zenoh configuration keys (JSON5 key to value) for every session, e.g. the CA to trust.
     settings: dict[str, object] = {}
+    #: Keys for the router's session only: its certificate and key, the users' dictionary file.
+    router_settings: dict[str, object] = {}
+    #: Zenoh user/password authentication; the password comes from ROBOCELL_ZENOH_PASSWORD.
+    user: str | None = None
+
+    def client_settings(self) -> dict[str, object]:
+        """What a client session (every process but the router) adds to its configuration."""
+        settings = dict(self.settings)
+        if self.user is not None:
+            settings["transport/auth/usrpwd/user"] = self.user
+            settings["transport/auth/usrpwd/password"] = os.environ.get("ROBOCELL_ZENOH_PASSWORD", "")
+        return settings
+
+    def router_session_settings(self) -> dict[str, object]:
+        """What the router's session adds to its configuration."""
+        return {**self.settings, **self.router_settings}
 
 
 class Workspace(_Section):
@@ -52,7 +70,9 @@ class Workspace(_Section):
 
 
 class RobotConfig(_Section):
-    backend: Literal["sim"] = "sim"
+    #: ``sim``: the simulated robot; ``kuka``: a KUKA controller through the bridge in ``[robot.kuka]``.
+    backend: Literal["sim", "kuka"] = "sim"
+    kuka: KukaConfig = KukaConfig()
     #: Linear speed of the simulated robot, m/s; 0 moves instantly.
     speed: Annotated[float, Field(ge=0)] = 0.5
     #: Rotation speed of the simulated robot, degrees/s; 0 rotates instantly.
@@ -77,6 +97,11 @@ class CameraConfig(_Section):
     dist: list[float] | None = None
     timeout_s: Annotated[float, Field(gt=0)] = 3.0
     retries: Annotated[int, Field(ge=0, le=10)] = 2
+    #: HTTPS certificate check: true (the system's CAs), false (none: only on a closed network),
+    #: or the path of a CA bundle that signed the camera's certificate.
+    verify: bool | str = True
+    #: Axis JPEG compression 0-100 (higher: smaller files, more artefacts); None: the camera's default.
+    compression: Annotated[int, Field(ge=0, le=100)] | None = None
 
     def resolved_password(self) -> str | None:
         from_env = os.environ.get("ROBOCELL_CAMERA_PASSWORD")
@@ -92,7 +117,10 @@ class ScanConfig(_Section):
 
 
 class ReconstructConfig(_Section):
+    #: Size of a reconstruction worker's process pool: its capacity, announced to the daemons.
     processes: Annotated[int, Field(ge=1, le=64)] = 1
+    #: How many workers a job's reconstruction is tried on (one after another) before it fails.
+    max_attempts: Annotated[int, Field(ge=1, le=10)] = 3
     n_points: Annotated[int, Field(ge=50)] = 1000
     inside_weight: Annotated[float, Field(gt=0)] | None = None
     cauchy_scale: Annotated[float, Field(gt=0)] | None = None
@@ -114,6 +142,9 @@ class Timeouts(_Section):
     reconstruct_s: Annotated[float, Field(gt=0)] = 60.0
     #: How long a job waits for a missing worker before failing.
     worker_wait_s: Annotated[float, Field(gt=0)] = 10.0
+    #: A reconstruction worker whose heartbeat is silent this long is taken for hung: its jobs
+    #: go to another worker (a hung Python process can keep its Zenoh liveliness alive).
+    heartbeat_s: Annotated[float, Field(gt=0)] = 5.0
 
 
 class CellConfig(_Section):

@@ -21,7 +21,7 @@ WORKER_LEASE_MS = 3000
 async def open_transport(config: CellConfig, *, lease_ms: int | None = WORKER_LEASE_MS,
                          connect_timeout_s: float = 10.0) -> Transport:
     """A client session to the cell's router, waiting for the router to come up."""
-    return await Transport.open(config.zenoh.router, settings=config.zenoh.settings, lease_ms=lease_ms,
+    return await Transport.open(config.zenoh.router, settings=config.zenoh.client_settings(), lease_ms=lease_ms,
                                 connect_timeout_s=connect_timeout_s)
 
 

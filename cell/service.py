@@ -20,7 +20,7 @@ def run_router(config: CellConfig, endpoint: str | None = None) -> int:
     endpoint = endpoint or config.zenoh.router
 
     async def run(stop: asyncio.Event) -> None:
-        router = await Transport.open(endpoint, mode="router", settings=config.zenoh.settings)
+        router = await Transport.open(endpoint, mode="router", settings=config.zenoh.router_session_settings())
         log.info("Zenoh router listening on %s", endpoint)
         try:
             await stop.wait()

@@ -118,7 +118,7 @@ class CellProcesses:
         assert child.process is not None
         if name in ("daemon", "robot", "camera"):
             token = keys.alive(self.config.cell_id, name)
-            async with await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.settings,
+            async with await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
                                             connect_timeout_s=gone_timeout) as transport:
                 deadline = asyncio.get_running_loop().time() + gone_timeout
                 while token in await transport.alive(token, timeout=1.0):
@@ -150,7 +150,7 @@ class CellProcesses:
             If a child exits meanwhile, or something is still missing after ``timeout`` seconds.
         """
         expected, n_reconstructors, sim_camera = self._expected()
-        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.settings,
+        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
                                          connect_timeout_s=min(timeout, 20.0))
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout

@@ -163,11 +163,16 @@ class AxisCamera:
 
     @classmethod
     def from_config(cls, camera: CameraConfig, *, transport: httpx.AsyncBaseTransport | None = None) -> AxisCamera:
-        """The camera described by the cell's ``[camera]`` section (password from the environment first)."""
+        """The camera described by the cell's ``[camera]`` section (password from the environment first).
+
+        ``verify`` may name a CA bundle: the certificate check then trusts that CA.
+        """
+        verify = ssl.create_default_context(cafile=camera.verify) if isinstance(camera.verify, str) \
+            else camera.verify
         return cls(
-            camera.url, resolution=camera.resolution, username=camera.username,
+            camera.url, resolution=tuple(camera.resolution), username=camera.username,
             password=camera.resolved_password(), auth=camera.auth, timeout_s=camera.timeout_s,
-            retries=camera.retries, transport=transport,
+            retries=camera.retries, verify=verify, compression=camera.compression, transport=transport,
         )
 
     @property

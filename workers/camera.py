@@ -49,9 +49,7 @@ def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
         transport = await open_transport(config)
         try:
-            async with AxisCamera(settings.url, resolution=tuple(settings.resolution), username=settings.username,
-                                  password=settings.resolved_password(), auth=settings.auth,
-                                  timeout_s=settings.timeout_s, retries=settings.retries) as camera:
+            async with AxisCamera.from_config(settings) as camera:
                 serve_camera(transport, config, camera)
                 transport.declare_token(keys.alive(config.cell_id, "camera"))
                 log.info("camera worker of cell %s ready: %s", config.cell_id, camera.source)

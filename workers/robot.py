@@ -17,6 +17,7 @@ import numpy as np
 
 from cell import keys
 from cell.config import CellConfig, RobotConfig
+from cell.errors import CellError
 from cell.messages import MoveReply, MoveRequest, RobotState, parse
 from cell.plan import workspace_violation
 from cell.transport import Request, RequestError, Response, Transport
@@ -29,11 +30,19 @@ log = logging.getLogger(__name__)
 
 
 class RobotBackend(Protocol):
+    """What the worker needs of a robot. Errors are ``cell.errors.CellError``s that say why."""
+
+    async def open(self) -> None:
+        """Connect, and learn where the flange is."""
+
+    async def close(self) -> None:
+        """Let go of the robot."""
+
     async def move(self, target: np.ndarray, on_progress) -> np.ndarray:
         """Move the flange to ``target`` (4x4, base frame); return the pose reached."""
 
     def pose(self) -> np.ndarray:
-        """The flange's pose now (4x4, base frame)."""
+        """The flange's pose as last known (4x4, base frame)."""
 
 
 def _rotation_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -48,6 +57,12 @@ class SimRobot:
     def __init__(self, config: RobotConfig) -> None:
         self._config = config
         self._pose = np.asarray(config.home, dtype=np.float64)
+
+    async def open(self) -> None:
+        pass
+
+    async def close(self) -> None:
+        pass
 
     def pose(self) -> np.ndarray:
         return self._pose.copy()
@@ -80,9 +95,11 @@ class SimRobot:
 
 
 def make_backend(config: RobotConfig) -> RobotBackend:
-    if config.backend == "sim":
-        return SimRobot(config)
-    raise ValueError(f"unknown robot backend {config.backend!r}")
+    if config.backend == "kuka":
+        from .kuka.backend import KukaBackend
+
+        return KukaBackend.from_config(config.kuka, config.workspace)
+    return SimRobot(config)
 
 
 def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend) -> None:
@@ -110,6 +127,8 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
             moving = True
             try:
                 reached = await backend.move(target, publish)
+            except CellError as exc:  # the robot refused or failed: the caller hears why
+                raise RequestError(str(exc)) from None
             finally:
                 moving = False
             publish(reached, False)
@@ -127,13 +146,16 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
 
 def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
+        backend = make_backend(config.robot)
+        await backend.open()
         transport = await open_transport(config)
         try:
-            serve_robot(transport, config, make_backend(config.robot))
+            serve_robot(transport, config, backend)
             transport.declare_token(keys.alive(config.cell_id, "robot"))
             log.info("robot worker (%s) of cell %s ready", config.robot.backend, config.cell_id)
             await stop.wait()
         finally:
             await transport.close()
+            await backend.close()
 
     return run_until_stopped(run, "robot worker")

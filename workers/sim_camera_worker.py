@@ -43,7 +43,7 @@ def main(config: CellConfig) -> int:
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    session = zenoh.open(session_config(config.zenoh.router, settings=config.zenoh.settings,
+    session = zenoh.open(session_config(config.zenoh.router, settings=config.zenoh.client_settings(),
                                         connect_timeout_ms=10_000))
     camera = config.camera
     address = urlsplit(camera.url)  # the simulated camera serves where the camera worker looks
