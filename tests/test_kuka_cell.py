@@ -21,7 +21,7 @@ def simulated_kuka(request, tmp_path):
     port = free_port()
     log = open(tmp_path / "sim-kuka.log", "wb")
     process = subprocess.Popen([sys.executable, "-m", "cell.cli", "sim", "kuka", "--protocol", request.param,
-                                "--port", str(port), "--speed", "3000"], stdout=log, stderr=subprocess.STDOUT)
+                                "--port", str(port), "--speed", "10000", "--rotation-speed", "3000"], stdout=log, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 30
         while b"simulated KUKA controller" not in (tmp_path / "sim-kuka.log").read_bytes():
@@ -42,7 +42,8 @@ def simulated_kuka(request, tmp_path):
 def test_scan_on_the_simulated_kuka(simulated_kuka, tmp_path):
     protocol, port = simulated_kuka
     config = cell_config(tmp_path / "run", robot={"backend": "kuka",
-                                                  "kuka": {"protocol": protocol, "port": port}},
+                                                  "kuka": {"protocol": protocol, "port": port,
+                                                           "override": 30, "max_override": 30}},
                          timeouts={"move_s": 30.0})
     with running_cell(config, sim_camera=True) as cell:
         job = cell.submit(target=truth_target(config))

@@ -342,6 +342,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, help="port (default 7000 for kvp, 7766 for opc)")
     parser.add_argument("--speed", type=float, default=500.0, metavar="MM_S",
                         help="linear speed at 100 %% override, mm/s (default 500)")
+    parser.add_argument("--rotation-speed", type=float, default=90.0, metavar="DEG_S",
+                        help="rotation speed at 100 %% override, degrees/s (default 90)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -349,6 +351,7 @@ def run(args: argparse.Namespace) -> int:
     from cell.process import run_until_stopped
 
     async def serve(stop: asyncio.Event) -> None:
-        await main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed)
+        await main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,
+                   rotation_deg_s=args.rotation_speed)
 
     return run_until_stopped(serve, "simulated KUKA controller")
