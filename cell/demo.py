@@ -62,7 +62,8 @@ async def _demo(run_dir: Path) -> int:
 
     fit = Superquadric.from_dict(result.superquadric)
     print(f"\nsuperquadric of job {result.job_id}:        truth                            fit")
-    print(_row("size (m)", truth.size, fit.size))
+    # Axis order is a choice of parameterisation (DESIGN.md §1): compare the sizes sorted.
+    print(_row("size (m)", np.sort(truth.size), np.sort(fit.size)))
     print(_row("shape", truth.shape, fit.shape))
     print(_row("centre (m)", truth.T_world_object[:3, 3], fit.T_world_object[:3, 3]))
     print(f"  volumetric IoU {volumetric_iou(truth, fit):.3f}, centre error "
