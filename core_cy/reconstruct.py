@@ -213,7 +213,7 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     stride = max(1, len(points) // options.fit_points)
     fit = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
                            outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
-                           support_plane=None if plane is None else plane)
+                           support_plane=plane)
     lap("fit")
 
     superquadric = fit.superquadric
@@ -227,6 +227,6 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         if np.mean(refined_ious) > np.mean(ious):
             superquadric, ious = refined, refined_ious
         lap("refine")
+    residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
-    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious,
-                          radial_residual(superquadric, points), timings)
+    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings)
