@@ -16,8 +16,8 @@ import threading
 from collections.abc import AsyncIterator, Callable
 
 from . import keys
-from .errors import CellError
-from .messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
+from .errors import CellError, RemoteError, TransportError
+from .messages import CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
 from .transport import Transport
 
 __all__ = ["AsyncCellClient", "CellClient", "JobFailed"]
@@ -53,9 +53,41 @@ class AsyncCellClient:
         reply = await self._transport.query(key, payload, timeout=self.timeout, parameters=parameters)
         return reply.payload
 
-    async def submit(self, request: ScanRequest) -> JobStatus:
-        """Queue a scan; with ``request.request_id`` set, submitting again returns the same job."""
-        return parse(JobStatus, await self._ask(keys.submit(self.cell), request.model_dump_json()))
+    async def submit(self, request: ScanRequest, *, retry_s: float = 0.0) -> JobStatus:
+        """Queue a scan; with ``request.request_id`` set, submitting again returns the same job.
+
+        With a ``request_id``, ``retry_s`` > 0 sends the request again, for up to that
+        many seconds, while no daemon answers (it is restarting, say) or its answer is
+        lost: the daemon has stored the job at most once, whichever attempt reached it.
+
+        Raises
+        ------
+        ValueError
+            ``retry_s`` without a ``request_id``: a retry could make a second job.
+        RemoteError
+            The daemon refused the request (invalid, or the queue is full): not retried.
+        TransportError
+            No answer, after the retries.
+        """
+        if retry_s > 0 and request.request_id is None:
+            raise ValueError("retrying a submit needs a request_id: without one a retry may make a second job")
+        payload = request.model_dump_json()
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + retry_s
+        while True:
+            try:
+                return parse(JobStatus, await self._ask(keys.submit(self.cell), payload))
+            except RemoteError:
+                raise
+            except TransportError:
+                if loop.time() >= deadline:
+                    raise
+            await asyncio.sleep(0.1)
+
+    async def cell_status(self, *, failures: int = 10) -> CellStatus:
+        """The cell at a glance: its workers, each reconstructor's load, the queue, jobs by state,
+        and the ``failures`` most recent failed jobs."""
+        return parse(CellStatus, await self._ask(keys.status(self.cell), parameters=f"failures={failures}"))
 
     async def status(self, job_id: str) -> JobStatus:
         return parse(JobStatus, await self._ask(keys.job(self.cell, job_id)))
@@ -175,8 +207,11 @@ class CellClient:
     def __exit__(self, *exc_info) -> None:
         self.close()
 
-    def submit(self, request: ScanRequest) -> JobStatus:
-        return self._call(self._client.submit(request))
+    def submit(self, request: ScanRequest, *, retry_s: float = 0.0) -> JobStatus:
+        return self._call(self._client.submit(request, retry_s=retry_s))
+
+    def cell_status(self, *, failures: int = 10) -> CellStatus:
+        return self._call(self._client.cell_status(failures=failures))
 
     def status(self, job_id: str) -> JobStatus:
         return self._call(self._client.status(job_id))

@@ -1,4 +1,4 @@
-"""``robocell scan``, ``robocell jobs``, ``robocell status`` and ``robocell cancel``: the cell from a shell."""
+"""``robocell scan``, ``jobs``, ``job``, ``status`` and ``cancel``: the cell from a shell."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import time
 from .client import AsyncCellClient
 from .config import CellConfig
 from .errors import CellError
-from .messages import JobEvent, JobState, ScanRequest
+from .messages import CellStatus, JobEvent, JobState, ScanRequest
 
 __all__ = ["add_commands", "run"]
 
@@ -33,8 +33,14 @@ def add_commands(commands, handler) -> None:
     jobs.add_argument("--limit", type=int, default=20)
     jobs.set_defaults(run=handler, action="jobs")
 
-    status = commands.add_parser("status", help="show one job's status and, if done, its result")
-    status.add_argument("job_id")
+    job = commands.add_parser("job", help="show one job's status and, if done, its result")
+    job.add_argument("job_id")
+    job.set_defaults(run=handler, action="job")
+
+    status = commands.add_parser("status", help="the cell at a glance: workers and their load, the queue, "
+                                                "jobs by state, recent failures")
+    status.add_argument("--failures", type=int, default=10, help="recent failures to show (default %(default)s)")
+    status.add_argument("--json", action="store_true", help="print the daemon's CellStatus as JSON")
     status.set_defaults(run=handler, action="status")
 
     cancel = commands.add_parser("cancel", help="cancel a job")
@@ -68,6 +74,42 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     return 0
 
 
+def _age(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def format_status(status: CellStatus) -> str:
+    """The cell's status as a few lines of text for a terminal."""
+    lines = [f"cell {status.cell}: daemon up {_age(status.time - status.started)}",
+             "workers: " + ", ".join(f"{part} {'up' if alive else 'DOWN'}" for part, alive in status.workers.items())]
+    pool = status.reconstructors
+    healthy = [r for r in pool if r.healthy]
+    lines.append(f"reconstructors: {len(pool)} live, capacity {sum(r.capacity for r in healthy)}, "
+                 f"{sum(r.in_flight for r in pool)} in flight")
+    if pool:
+        lines.append(f"  {'worker':<32}{'capacity':>9}{'load':>6}{'of ours':>8}{'heartbeat':>11}"
+                     f"{'sent':>7}{'failed':>7}")
+        for r in pool:
+            heard = "none yet" if r.heartbeat_age_s is None else f"{r.heartbeat_age_s:.1f} s ago"
+            if not r.healthy:
+                heard = "SILENT " + heard
+            lines.append(f"  {r.worker:<32}{r.capacity:>9}{r.in_flight:>6}{r.in_flight_here:>8}{heard:>11}"
+                         f"{r.sent:>7}{r.failed:>7}")
+    lines.append(f"queue: {status.queued} waiting for the robot (at most {status.max_queued}), "
+                 f"{status.waiting_for_reconstructor} for a reconstructor")
+    lines.append("jobs: " + ", ".join(f"{state} {n}" for state, n in status.jobs.items()))
+    if status.recent_failures:
+        lines.append("recent failures:")
+        for failure in status.recent_failures:
+            when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(failure.updated))
+            lines.append(f"  {failure.job_id}  {when}  {failure.error}")
+    return "\n".join(lines)
+
+
 async def _run(args: argparse.Namespace, config: CellConfig) -> int:
     client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id, settings=config.zenoh.client_settings())
     async with client:
@@ -80,6 +122,10 @@ async def _run(args: argparse.Namespace, config: CellConfig) -> int:
                 print(f"{job.job_id}  {created}  {job.state.value:<14} {job.error or job.request.label}")
             return 0
         if args.action == "status":
+            overview = await client.cell_status(failures=args.failures)
+            print(overview.model_dump_json(indent=1) if args.json else format_status(overview))
+            return 0
+        if args.action == "job":
             status = await client.status(args.job_id)
             print(status.model_dump_json(indent=1))
             if status.state is JobState.SUCCEEDED:

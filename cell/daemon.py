@@ -9,6 +9,13 @@ its reconstruction runs as a task of its own, so it overlaps the next job's
 motion. Every state change is stored (SQLite), published as a JobEvent and
 written to the job's Rerun recording.
 
+Reconstructions go to the pool of reconstruction workers that every cell on
+the network shares (``cell.pool``): each to the least loaded live worker.
+An attempt whose worker dies, hangs, runs out of time or answers an error is
+made again on another worker, up to ``reconstruct.max_attempts`` attempts in
+all; then the job fails, naming each attempt's worker and what went wrong.
+Each retry is a JobEvent of its own.
+
 The event loop only decides, asks and publishes. The job store runs in a
 thread of its own, in order (an SQLite connection belongs to one thread); the
 recordings are written by a process of their own (``cell.recorder``: their
@@ -18,7 +25,10 @@ done once its query to the worker is on its way. What the loop remembers of
 the jobs (the queue, the jobs in flight) is what its decisions need, so no
 decision waits for the store. What must outlive a crash is awaited before
 anyone hears of it: a job is stored before its submit is answered, a result
-before the job is announced succeeded.
+before the job is announced succeeded, and the end of a job (succeeded,
+failed, cancelled) before its event is published. After a crash, the
+restarted daemon fails the jobs caught mid-step ("interrupted") and runs the
+queued ones.
 
 Cancelling cancels the job's task and sets a flag every step checks: on
 Python 3.11 a cancel that arrives as an awaited answer does can be lost.
@@ -40,10 +50,11 @@ import numpy as np
 from . import keys
 from .config import CellConfig
 from .errors import CellError, NoResponder, RemoteError, TransportError
-from .messages import (CameraModel, CaptureInfo, CaptureRequest, JobEvent, JobState, JobStatus, MoveReply,
-                       MoveRequest, ReconstructReply, ReconstructRequest, ReconstructView, ScanRequest,
-                       ScanResult, parse)
+from .messages import (CameraModel, CaptureInfo, CaptureRequest, CellStatus, FailedJob, JobEvent, JobState,
+                       JobStatus, MoveReply, MoveRequest, ReconstructReply, ReconstructRequest, ReconstructView,
+                       ScanRequest, ScanResult, parse)
 from .plan import camera_poses, plan_flange_poses, workspace_violation
+from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
 from .recorder import Recorder
 from .store import JobStore
 from .transport import Request, RequestError, Response, Transport
@@ -52,6 +63,7 @@ __all__ = ["CellDaemon", "StepFailed"]
 
 log = logging.getLogger(__name__)
 _CANCEL_WAIT_S = 2.0
+_RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 
 
 class StepFailed(CellError):
@@ -88,12 +100,19 @@ class _Serial:
         if not handed.cancelled():  # the caller gave up before the call was handed over: skip it
             handed.set_result(self._executor.submit(call))
 
-    def post(self, function: Callable, *args, **kwargs) -> None:
-        """Run ``function`` in the thread after everything posted before; a failure is logged."""
-        _later(self._post, functools.partial(function, *args, **kwargs))
+    def post(self, function: Callable, *args, then: Callable[[], None] | None = None, **kwargs) -> None:
+        """Run ``function`` in the thread after everything posted before; a failure is logged.
 
-    def _post(self, call: Callable) -> None:
-        self._executor.submit(call).add_done_callback(self._log_failure)
+        ``then`` is called on the event loop once ``function`` has returned (or failed).
+        """
+        _later(self._post, functools.partial(function, *args, **kwargs), then)
+
+    def _post(self, call: Callable, then: Callable[[], None] | None = None) -> None:
+        future = self._executor.submit(call)
+        future.add_done_callback(self._log_failure)
+        if then is not None:
+            loop = asyncio.get_running_loop()
+            future.add_done_callback(lambda _: loop.call_soon_threadsafe(then))
 
     def _log_failure(self, future: Future) -> None:
         exc = future.exception()
@@ -153,9 +172,11 @@ class CellDaemon:
         self._queued: dict[str, ScanRequest] = {}   # waiting jobs, in order
         self._active: dict[str, _ActiveJob] = {}    # jobs being moved for, captured or reconstructed
         self._alive: set[str] = set()                   # this cell's workers with a liveliness token
-        self._reconstructors: dict[str, int] = {}       # live reconstructor -> jobs in flight
+        self._pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
         self._presence = asyncio.Condition()
         self._background: set[asyncio.Task] = set()
+        self._submitting = 0                            # submits between the queue check and the queue
+        self._started = clock()
 
     # --- lifecycle -----------------------------------------------------------------------------
 
@@ -175,9 +196,10 @@ class CellDaemon:
     async def _serve(self, stop: asyncio.Event) -> None:
         transport, cell = self._transport, self.cell
         self._spawn(self._watch(transport.watch_liveliness(keys.alive(cell)), self._on_cell_worker))
-        self._spawn(self._watch(transport.watch_liveliness(keys.RECONSTRUCTORS_ALIVE), self._on_reconstructor))
+        self._pool.start()
         transport.serve(keys.submit(cell), self._on_submit)
         transport.serve(keys.jobs(cell), self._on_list)
+        transport.serve(keys.status(cell), self._on_status)
         # Not "jobs/**": that matches "jobs" too, and a list query would get a second, wrong answer.
         transport.serve(keys.job(cell, "*"), self._on_job_query)
         transport.serve(f"{keys.job(cell, '*')}/*", self._on_job_query)
@@ -191,6 +213,7 @@ class CellDaemon:
             for task in list(self._background):
                 task.cancel()
             await asyncio.gather(*self._background, return_exceptions=True)
+            await self._pool.close()
 
     def _spawn(self, coroutine) -> asyncio.Task:
         task = asyncio.create_task(coroutine)
@@ -232,14 +255,6 @@ class CellDaemon:
         (self._alive.add if alive else self._alive.discard)(part)
         log.info("%s worker %s", part, "is up" if alive else "is gone")
 
-    def _on_reconstructor(self, key: str, alive: bool) -> None:
-        worker = key.rsplit("/", 1)[-1]
-        if alive:
-            self._reconstructors.setdefault(worker, 0)
-        else:
-            self._reconstructors.pop(worker, None)
-        log.info("reconstructor %s %s", worker, "joined" if alive else "left")
-
     async def _wait_for(self, ready, what: str) -> None:
         if ready():
             return
@@ -268,6 +283,7 @@ class CellDaemon:
         """Record a state change: in the job's recording, in the store, and as a publication.
 
         A finished job's recording is closed: the recorder writes its footer a moment later.
+        The end of a job is published only once the store has it (see the module's text).
         """
         event = JobEvent(job_id=job_id, state=state, view=view, message=message, time=now)
         active = self._active.get(job_id)
@@ -277,8 +293,11 @@ class CellDaemon:
             if state.finished:
                 del self._active[job_id]
                 _later(self._recorder.close, job_id)
-        self._db.post(self._store.add_event, event)
-        _later(self._publish, event)
+        if state.finished:
+            self._db.post(self._store.add_event, event, then=functools.partial(self._publish, event))
+        else:
+            self._db.post(self._store.add_event, event)
+            _later(self._publish, event)
 
     def _publish(self, event: JobEvent) -> None:
         self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
@@ -372,30 +391,44 @@ class CellDaemon:
     # --- reconstruction ------------------------------------------------------------------------
 
     async def _reconstruct(self, active: _ActiveJob) -> None:
-        job_id = active.job_id
+        job_id, settings = active.job_id, self.config.reconstruct
+        failures: list[str] = []      # "attempt <k> on <worker>: <why>"
+        tried: set[str] = set()
         try:
-            await self._wait_for(lambda: bool(self._reconstructors), "reconstruction worker")
-            worker = min(self._reconstructors, key=self._reconstructors.get)
-            self._reconstructors[worker] += 1
-            began = time.perf_counter()
-            try:
-                reply = await self._transport.query(
-                    keys.reconstructor(worker), b"".join(c.jpeg for c in active.captures),
-                    attachment=self._reconstruct_request(active).model_dump_json(),
-                    timeout=self.config.timeouts.reconstruct_s)
-            finally:
-                if worker in self._reconstructors:
-                    self._reconstructors[worker] -= 1
-            active.check_cancel()
-            active.durations_s["reconstruct"] = time.perf_counter() - began
-            answer = parse(ReconstructReply, reply.payload)
-            if answer.error:
-                raise StepFailed(answer.error)
-            active.finishing = True
-            _later(self._recorder.reconstruction, job_id, self._clock() - active.started, reply.payload)
-            await self._succeed(active, answer)
+            payload = b"".join(c.jpeg for c in active.captures)
+            request = self._reconstruct_request(active)
+            for attempt in range(1, settings.max_attempts + 1):
+                request.ticket = keys.ticket(self.cell, job_id, attempt)
+                began = time.perf_counter()
+                try:
+                    worker, reply = await self._pool.run(
+                        request.ticket, payload, request.model_dump_json(),
+                        timeout=self.config.timeouts.reconstruct_s, wait_s=self.config.timeouts.worker_wait_s,
+                        avoid=tried)
+                except AttemptFailed as exc:
+                    active.check_cancel()
+                    tried.add(exc.worker)
+                    failures.append(f"attempt {attempt} on {exc.worker}: {exc.reason}")
+                    log.warning("job %s: %s", job_id, failures[-1])
+                    if attempt < settings.max_attempts:
+                        self._event(job_id, JobState.RECONSTRUCTING, f"{failures[-1]}; trying again",
+                                    now=self._clock())
+                    continue
+                active.check_cancel()
+                active.durations_s["reconstruct"] = time.perf_counter() - began
+                answer = parse(ReconstructReply, reply.payload)
+                if answer.error:
+                    raise StepFailed(answer.error)  # the core's verdict on these pictures: no use retrying
+                active.finishing = True
+                _later(self._recorder.reconstruction, job_id, self._clock() - active.started, reply.payload)
+                await self._succeed(active, answer, worker=worker, attempts=attempt)
+                return
+            raise StepFailed(f"gave up after {settings.max_attempts} attempts: {'; '.join(failures)}")
         except asyncio.CancelledError:
             self._cancelled(active)
+        except NoReconstructor as exc:
+            earlier = f" (after {'; '.join(failures)})" if failures else ""
+            self._fail(job_id, f"reconstructing: {exc}{earlier}")
         except (StepFailed, TransportError, ValueError) as exc:
             self._fail(job_id, f"reconstructing: {exc}")
         except Exception as exc:  # a bug must not leave the job hanging
@@ -412,20 +445,22 @@ class CellDaemon:
         return ReconstructRequest(job_id=active.job_id, views=views, support_plane=self.config.support_plane,
                                   options=options)
 
-    async def _succeed(self, active: _ActiveJob, answer: ReconstructReply) -> None:
+    async def _succeed(self, active: _ActiveJob, answer: ReconstructReply, *, worker: str, attempts: int) -> None:
         result = answer.result
         scan_result = ScanResult(job_id=active.job_id, superquadric=result["superquadric"],
                                  silhouette_iou=result["silhouette_iou"], residual=result["residual"],
                                  timings_ms=result["timings_ms"],
                                  T_base_cam=[c.T_base_cam.tolist() for c in active.captures],
                                  durations_s=active.durations_s,
-                                 recording=str(self._recording_path(active.job_id)))
+                                 recording=str(self._recording_path(active.job_id)),
+                                 worker=answer.worker or worker, attempts=attempts)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
         now = self._clock()
         await asyncio.shield(self._db.call(self._store.save_result, scan_result, now=now))
         total = result["timings_ms"].get("total", float("nan"))
-        self._event(active.job_id, JobState.SUCCEEDED, f"reconstructed by {answer.worker} in {total:.1f} ms",
-                    now=now)
+        attempt = f" (attempt {attempts})" if attempts > 1 else ""
+        self._event(active.job_id, JobState.SUCCEEDED,
+                    f"reconstructed by {scan_result.worker} in {total:.1f} ms{attempt}", now=now)
 
     # --- requests ------------------------------------------------------------------------------
 
@@ -439,13 +474,43 @@ class CellDaemon:
             violation = workspace_violation(pose, self.config.robot.workspace)
             if violation:
                 raise RequestError(f"view {view} is outside the workspace: {violation}")
-        if len(self._queued) >= self.config.max_queued:
+        if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
+            known = await self._db.call(self._store.find_request, scan.request_id)
+            if known is not None:
+                return Response(known.model_dump_json())
+        # Submits on their way to the store count: a burst cannot slip past the bound.
+        if len(self._queued) + self._submitting >= self.config.max_queued:
             raise RequestError(f"the queue is full ({self.config.max_queued} jobs waiting): try again later")
-        # Stored for good before the answer: a submitted job survives a crash.
-        status, created = await self._db.call(self._store.add, scan, n_views=len(poses), now=self._clock())
+        self._submitting += 1
+        try:
+            # Stored for good before the answer: a submitted job survives a crash.
+            status, created = await self._db.call(self._store.add, scan, n_views=len(poses), now=self._clock())
+        finally:
+            self._submitting -= 1
         if created:
             self._event(status.job_id, status.state, "queued", now=status.created)
             self._enqueue(status.job_id, scan)
+        return Response(status.model_dump_json())
+
+    async def _on_status(self, request: Request) -> Response:
+        try:
+            n_failures = int(request.parameters.get("failures", _RECENT_FAILURES))
+        except ValueError as exc:
+            raise RequestError(f"bad parameters: {exc}") from None
+        n_failures = max(0, min(n_failures, 1000))
+
+        def read(store: JobStore) -> tuple[dict[JobState, int], list[JobStatus]]:
+            failed = store.list(states={JobState.FAILED}, limit=n_failures) if n_failures else []
+            return store.counts(), failed
+
+        counts, failed = await self._db.call(read, self._store)
+        status = CellStatus(
+            cell=self.cell, time=self._clock(), started=self._started,
+            workers={part: part in self._alive for part in ("robot", "camera")},
+            reconstructors=self._pool.snapshot(), queued=len(self._queued), max_queued=self.config.max_queued,
+            waiting_for_reconstructor=self._pool.waiting,
+            jobs={state.value: n for state, n in counts.items()},
+            recent_failures=[FailedJob(job_id=s.job_id, error=s.error, updated=s.updated) for s in failed])
         return Response(status.model_dump_json())
 
     async def _on_list(self, request: Request) -> Response:

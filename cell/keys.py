@@ -3,13 +3,52 @@
 Everything of one cell lives under ``robocell/<cell-id>/``; the reconstruction
 pool, shared by every cell on the network, under ``robocell/_pool/``. Cell ids
 cannot start with ``_``, so the two never meet.
+
+The reconstruction pool
+-----------------------
+A reconstruction worker ``<worker>`` (an id unique on the network) declares:
+
+- ``robocell/_pool/alive/<worker>``: its liveliness token, for as long as its
+  session lives. This is membership: a worker is in the pool while its token
+  is there. Zenoh withdraws the token at once when the process dies, and
+  after the worker's lease (3 s) when its host or network freezes.
+- ``robocell/_pool/heartbeat/<worker>``: a ``WorkerLoad`` publication every
+  :data:`HEARTBEAT_PERIOD_S` seconds, sent from the worker's event loop, and
+  whenever its load changes (at once, or :data:`HEARTBEAT_CHANGE_GAP_S` after
+  the previous one, whichever is later). This is health: a worker whose event
+  loop hangs keeps its token (Zenoh's own threads keep the lease alive) but
+  falls silent here. It is also the load: ``capacity`` (the worker's process
+  pool size) and ``in_flight`` (requests received and not yet answered, from
+  every cell), with the ``tickets`` of those requests.
+- ``robocell/_pool/info/<worker>``: a query answered with the same ``WorkerLoad``,
+  for whoever cannot wait for the next heartbeat (a daemon that has just seen
+  the worker's token).
+- ``robocell/_pool/reconstruct/<worker>``: the work itself (below).
+
+Every cell daemon watches all of these and sends each reconstruction to the
+live, healthy worker with the lowest ``in_flight / capacity`` that has a free
+slot (load = what the worker last reported, plus what the daemon sent since);
+ties go to the worker used least recently; when every slot is taken, jobs
+wait, oldest first. A worker whose token goes, or whose heartbeat is silent
+for ``timeouts.heartbeat_s``, loses its requests: they are sent to another
+worker, each job at most ``reconstruct.max_attempts`` times. An attempt that
+outlasts ``timeouts.reconstruct_s``, or that the worker answers with an error
+reply, counts as failed too (a ReconstructReply whose ``error`` is the core's
+verdict on the pictures fails the job at once). The answer of an abandoned
+attempt, should it come, is ignored.
+
+Each attempt carries a ``ticket``, ``<cell>/<job_id>/<attempt>``, unique on the
+network; the worker lists the tickets it holds in its heartbeat and echoes the
+ticket in its reply.
 """
 
 from __future__ import annotations
 
 __all__ = [
     "submit", "jobs", "job", "result", "cancel", "events", "robot_move", "robot_state",
-    "camera_capture", "alive", "reconstructor", "reconstructor_alive", "RECONSTRUCTORS_ALIVE",
+    "camera_capture", "alive", "status", "reconstructor", "reconstructor_alive", "reconstructor_info",
+    "reconstructor_heartbeat", "ticket", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
+    "HEARTBEAT_CHANGE_GAP_S",
 ]
 
 ROOT = "robocell"
@@ -46,6 +85,13 @@ def events(cell: str, job_id: str = "*") -> str:
     return f"{ROOT}/{cell}/events/{job_id}"
 
 
+def status(cell: str) -> str:
+    """Query (parameter ``failures=10``: how many recent failures); the reply is the cell's
+    CellStatus: its live workers, each reconstructor's capacity and load, the queue, jobs by
+    state, and the most recent failed jobs with their reasons."""
+    return f"{ROOT}/{cell}/status"
+
+
 def robot_move(cell: str) -> str:
     """Query with a MoveRequest; replies with a MoveReply once the robot is there."""
     return f"{ROOT}/{cell}/robot/move"
@@ -74,8 +120,28 @@ def reconstructor(worker_id: str) -> str:
 
 
 def reconstructor_alive(worker_id: str) -> str:
-    """Liveliness token of a reconstruction worker."""
+    """Liveliness token of a reconstruction worker: it is in the pool while this exists."""
     return f"{POOL}/alive/{worker_id}"
 
 
+def reconstructor_info(worker_id: str) -> str:
+    """Query; the reply is the worker's WorkerLoad (capacity and load) now."""
+    return f"{POOL}/info/{worker_id}"
+
+
+def reconstructor_heartbeat(worker_id: str = "*") -> str:
+    """Publications of WorkerLoad, every HEARTBEAT_PERIOD_S and at each change of load."""
+    return f"{POOL}/heartbeat/{worker_id}"
+
+
+def ticket(cell: str, job_id: str, attempt: int) -> str:
+    """The id of one attempt at a job's reconstruction, unique on the network."""
+    return f"{cell}/{job_id}/{attempt}"
+
+
 RECONSTRUCTORS_ALIVE = f"{POOL}/alive/*"
+RECONSTRUCTORS_HEARTBEAT = f"{POOL}/heartbeat/*"
+#: Seconds between two heartbeats of a reconstruction worker.
+HEARTBEAT_PERIOD_S = 0.5
+#: The least seconds between two heartbeats sent because the worker's load changed.
+HEARTBEAT_CHANGE_GAP_S = 0.05

@@ -19,7 +19,8 @@ __all__ = [
     "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
     "JobStatus", "JobEvent", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
     "RobotState", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
-    "ReconstructRequest", "ReconstructReply", "parse", "field_errors",
+    "ReconstructRequest", "ReconstructReply", "WorkerLoad", "ReconstructorStatus", "FailedJob",
+    "CellStatus", "parse", "field_errors",
 ]
 
 SCHEMA_VERSION = 1
@@ -155,9 +156,13 @@ class ScanResult(Message):
     timings_ms: dict[str, float]
     T_base_cam: list[Pose]           # where each picture was taken from
     #: What the job waited for, seconds: ``move<i>`` and ``capture<i>`` as the robot and camera
-    #: workers reported them, ``reconstruct`` the round trip to the reconstruction worker.
+    #: workers reported them, ``reconstruct`` the round trip to the reconstruction worker (of the
+    #: attempt that succeeded, with its wait for a free worker).
     durations_s: dict[str, float] = {}
     recording: str | None = None
+    #: The reconstruction worker that made this result, and on which attempt (see ``cell/keys.py``).
+    worker: str | None = None
+    attempts: Annotated[int, Field(ge=1)] = 1
 
 
 class ErrorReply(Message):
@@ -219,6 +224,9 @@ class ReconstructRequest(Message):
     segmentation: dict | None = None        # as in scan.json
     support_plane: Row4 | None = None
     options: dict = {}                      # core_cy.reconstruct.Options fields
+    #: This attempt's id, ``<cell>/<job_id>/<attempt>``: unique on the network, listed in the
+    #: worker's heartbeat while it works on it, and echoed in its reply.
+    ticket: Annotated[str, Field(max_length=300)] | None = None
 
 
 class ReconstructReply(Message):
@@ -229,3 +237,56 @@ class ReconstructReply(Message):
     silhouettes_png: list[str] = []         # base64 PNG of each view's silhouette, for the recording
     error: str | None = None
     worker: str = ""
+    ticket: str | None = None               # the request's ticket
+
+
+class WorkerLoad(Message):
+    """A reconstruction worker's heartbeat, and its answer on ``robocell/_pool/info/<worker>``."""
+
+    worker: str
+    capacity: Annotated[int, Field(ge=1)]   # its process pool's size: reconstructions at a time
+    in_flight: Annotated[int, Field(ge=0)]  # requests received and not yet answered, from every cell
+    tickets: list[str] = []                 # the tickets of those requests (of those that had one)
+    answered: Annotated[int, Field(ge=0)] = 0   # requests answered since the worker started
+    period_s: Annotated[float, Field(gt=0)]     # seconds between two heartbeats
+    time: float                             # unix time, the worker's clock
+    started: float                          # unix time the worker started
+
+
+# --- cell status -------------------------------------------------------------------------------
+
+class ReconstructorStatus(BaseModel):
+    """One reconstruction worker as a cell daemon sees it."""
+
+    model_config = ConfigDict(extra="forbid")
+    worker: str
+    capacity: int
+    in_flight: int              # from every cell: the worker's last report plus what this daemon sent since
+    in_flight_here: int         # of which this cell's
+    tickets_here: list[str] = []    # the tickets of this cell's requests there, ``<cell>/<job_id>/<attempt>``
+    healthy: bool               # false while its heartbeat is silent: it gets no work
+    heartbeat_age_s: float | None   # since its last heartbeat; None: none heard yet
+    sent: int = 0               # attempts this daemon sent it
+    failed: int = 0             # of which failed: it died, hung, ran out of time or answered an error
+
+
+class FailedJob(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    job_id: str
+    error: str | None
+    updated: float
+
+
+class CellStatus(Message):
+    """The answer on ``robocell/<cell>/status``: the cell at a glance."""
+
+    cell: str
+    time: float
+    started: float                          # when the daemon started
+    workers: dict[str, bool]                # the cell's own workers (robot, camera): alive or not
+    reconstructors: list[ReconstructorStatus]
+    queued: int                             # jobs waiting for the robot
+    max_queued: int                         # submits beyond this many waiting jobs are refused
+    waiting_for_reconstructor: int          # jobs whose pictures are taken, waiting for a free worker
+    jobs: dict[str, int]                    # every job in the store, by state
+    recent_failures: list[FailedJob]        # newest first

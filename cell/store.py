@@ -244,6 +244,17 @@ class JobStore:
         where, params = _in_states(states)
         return self._read(f"SELECT COUNT(*) FROM jobs {where}", params, lambda row: row[0])[0]
 
+    def counts(self) -> dict[JobState, int]:
+        """How many jobs are in each state (every state, zero included)."""
+        found = dict(self._read("SELECT state, COUNT(*) FROM jobs GROUP BY state", [],
+                                lambda row: (JobState(row[0]), row[1])))
+        return {state: found.get(state, 0) for state in JobState}
+
+    def find_request(self, request_id: str) -> JobStatus | None:
+        """The job submitted with the client's ``request_id``, or None."""
+        rows = self._read(f"SELECT {_COLUMNS} FROM jobs WHERE request_id = ?", [request_id], _status)
+        return rows[0] if rows else None
+
     # --- plumbing ---------------------------------------------------------------------------
 
     @contextlib.contextmanager

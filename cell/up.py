@@ -3,7 +3,8 @@
 The children share one configuration, written as JSON into the run directory
 (every ``--config`` option reads TOML or JSON). Their logs go to
 ``<run dir>/logs/<name>.log``. Stopping sends SIGTERM in reverse start
-order, waits, and kills what is left.
+order, waits, and kills what is left. Each child leads a process group of
+its own; once it has stopped, whatever is left in its group is killed too.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ _STOP_WAIT_S = 5.0
 class _Child:
     name: str
     argv: list[str]
+    token: str | None = None    # the liveliness token it declares once ready, if any
     process: asyncio.subprocess.Process | None = None
     stopped: bool = False   # on purpose, by stop_child: not a failure
 
@@ -53,18 +55,21 @@ class CellProcesses:
         command = [sys.executable, "-m", "cell.cli", "--config", str(self.config_path)]
         if sim_camera is None:
             sim_camera = config.robot.backend == "sim"
+        self.command = command
+        cell = config.cell_id
         children = [_Child("router", [*command, "router"])] if with_router else []
         if robot:
-            children.append(_Child("robot", [*command, "worker", "robot"]))
+            children.append(_Child("robot", [*command, "worker", "robot"], keys.alive(cell, "robot")))
         if sim_camera:
             children.append(_Child("sim-camera", [*command, "sim", "camera"]))
         if camera:
-            children.append(_Child("camera", [*command, "worker", "camera"]))
+            children.append(_Child("camera", [*command, "worker", "camera"], keys.alive(cell, "camera")))
         for index in range(reconstructors):
-            children.append(_Child(f"reconstruct-{index}", [*command, "worker", "reconstruct",
-                                                            "--id", f"{config.cell_id}-r{index}-{os.getpid()}"]))
+            worker_id = f"{cell}-r{index}-{os.getpid()}"
+            children.append(_Child(f"reconstruct-{index}", [*command, "worker", "reconstruct", "--id", worker_id],
+                                   keys.reconstructor_alive(worker_id)))
         if daemon:
-            children.append(_Child("daemon", [*command, "cell"]))
+            children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon")))
         self.children = children
         self._environment: dict[str, str] = {}
 
@@ -95,6 +100,21 @@ class CellProcesses:
                 *child.argv, stdin=asyncio.subprocess.DEVNULL, stdout=log_file, stderr=log_file,
                 env=self._environment, start_new_session=True)  # Ctrl-C goes to `up`, which stops the children in order
 
+    def add_child(self, name: str, argv: list[str], *, token: str | None = None) -> None:
+        """Add a child (not started: see :meth:`start_child`); ``token`` is the liveliness key
+        it declares once ready. A reconstruction worker, say, on a machine of its own::
+
+            cell.add_child("reconstruct-extra", [*cell.command, "worker", "reconstruct", "--id", "extra"],
+                           token=keys.reconstructor_alive("extra"))
+        """
+        if any(child.name == name for child in self.children):
+            raise CellError(f"there is already a child named {name!r}")
+        self.children.append(_Child(name, argv, token))
+
+    def reconstructor_argv(self, worker_id: str) -> list[str]:
+        """The command line of a reconstruction worker of this cell's configuration."""
+        return [*self.command, "worker", "reconstruct", "--id", worker_id]
+
     async def start_child(self, name: str, *, ready_timeout: float = 30.0) -> None:
         """(Re)start one child that is not running, and wait until the cell is ready again.
 
@@ -116,8 +136,8 @@ class CellProcesses:
         child.stopped = True
         await self._stop(child, signal.SIGKILL if kill else signal.SIGTERM)
         assert child.process is not None
-        if name in ("daemon", "robot", "camera"):
-            token = keys.alive(self.config.cell_id, name)
+        if child.token is not None:
+            token = child.token
             async with await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
                                             connect_timeout_s=gone_timeout) as transport:
                 deadline = asyncio.get_running_loop().time() + gone_timeout
@@ -127,19 +147,17 @@ class CellProcesses:
                     await asyncio.sleep(0.05)
         return child.process.returncode
 
-    def _expected(self) -> tuple[set[str], int, bool]:
-        """Liveliness keys, how many reconstructors, and whether the simulated camera, of running children."""
-        tokens, n_reconstructors, sim_camera = set(), 0, False
+    def _expected(self) -> tuple[set[str], bool]:
+        """Liveliness keys, and whether the simulated camera, of running children."""
+        tokens, sim_camera = set(), False
         for child in self.children:
             if child.process is None or child.process.returncode is not None:
                 continue
-            if child.name in ("daemon", "robot", "camera"):
-                tokens.add(keys.alive(self.config.cell_id, child.name))
-            elif child.name.startswith("reconstruct"):
-                n_reconstructors += 1
+            if child.token is not None:
+                tokens.add(child.token)
             elif child.name == "sim-camera":
                 sim_camera = True
-        return tokens, n_reconstructors, sim_camera
+        return tokens, sim_camera
 
     async def wait_ready(self, timeout: float) -> None:
         """Wait until every running child that announces itself has done so.
@@ -149,7 +167,7 @@ class CellProcesses:
         CellError
             If a child exits meanwhile, or something is still missing after ``timeout`` seconds.
         """
-        expected, n_reconstructors, sim_camera = self._expected()
+        expected, sim_camera = self._expected()
         transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
                                          connect_timeout_s=min(timeout, 20.0))
         loop = asyncio.get_running_loop()
@@ -160,9 +178,6 @@ class CellProcesses:
                 self._check_running()
                 alive = set(await transport.alive(f"{keys.ROOT}/**", timeout=1.0))
                 missing = sorted(expected - alive)
-                pool = [key for key in alive if key.startswith(keys.RECONSTRUCTORS_ALIVE[:-1])]
-                if len(pool) < n_reconstructors:
-                    missing.append("reconstruction workers")
                 if sim_camera and not await self._sim_camera_listening():
                     missing.append(f"the simulated camera at {self.config.camera.url}")
                 if not missing:
@@ -210,16 +225,31 @@ class CellProcesses:
             await self._stop(child, signal.SIGTERM)
 
     async def _stop(self, child: _Child, signum: int) -> None:
+        """Stop a running child. After a SIGTERM, whatever is left of its process group is
+        killed; after a SIGKILL (a crash, as tests make them) what is left is left alone: the
+        daemon's recorder, say, closes the recordings of a killed daemon on its own."""
         process = child.process
         if process is None or process.returncode is not None:
             return
         process.send_signal(signum)
+        if signum != signal.SIGKILL:
+            process.send_signal(signal.SIGCONT)  # a frozen child must wake up to hear the SIGTERM
         try:
             await asyncio.wait_for(process.wait(), _STOP_WAIT_S)
         except asyncio.TimeoutError:
             log.warning("%s did not stop in %g s: killing it", child.name, _STOP_WAIT_S)
             process.kill()
             await process.wait()
+        if signum != signal.SIGKILL:
+            _kill_group(process.pid)
+
+
+def _kill_group(pgid: int) -> None:
+    """Kill what is left of a child's process group (the child itself has exited)."""
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):  # nothing left: the usual case
+        pass
 
 
 def up(config: CellConfig) -> int:

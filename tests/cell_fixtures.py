@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import socket
+import sys
 import threading
 import time
 import warnings
@@ -25,18 +27,19 @@ from rerun.chunk import RrdReader
 from cell import keys
 from cell.client import CellClient
 from cell.config import CellConfig
-from cell.messages import JobEvent, JobState, JobStatus, ReconstructReply, RobotState, ScanRequest
+from cell.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
 from cell.sim.scene import scene_from_config, truth_from_config
 from cell.store import JobStore
-from cell.transport import Request, RequestError, Response, Transport, session_config
+from cell.transport import RequestError, Transport, session_config
 from cell.up import CellProcesses
 from core_cy.superquadric import Superquadric
-from workers.reconstruct import reconstruct_request
+from workers.reconstruct import ReconstructWorker, reconstruct_request
 from workers.sim_camera import SimCameraServer
 from workers.sim_camera_worker import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
-           "GatedReconstructor", "wait_until", "wait_for_footer", "truth_target", "look_away_poses"]
+           "GatedReconstructor", "wait_until", "wait_for_footer", "truth_target", "look_away_poses",
+           "add_worker", "InProcessWorker"]
 
 # Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
 START_TIMEOUT_S = 60.0
@@ -151,6 +154,7 @@ class RunningCell:
         self.processes = processes
         self.loop = loop
         self.client = client
+        self.worker_ids: dict[str, str] = {}    # reconstruction workers added by name (running_cell's workers)
 
     @property
     def router(self) -> str:
@@ -205,17 +209,72 @@ class RunningCell:
         process = self.processes.child("daemon").process
         return process is not None and process.returncode is None
 
+    # --- the reconstruction pool ---------------------------------------------------------------
+
+    def status(self) -> CellStatus:
+        return self.client.cell_status()
+
+    def reconstructor(self, worker_id: str) -> ReconstructorStatus | None:
+        """The worker as the daemon sees it now; None if the daemon does not know it (any more)."""
+        return next((r for r in self.status().reconstructors if r.worker == worker_id), None)
+
+    def start_worker(self, name: str, *, delay: float = 0.0, fail: bool = False) -> str:
+        """Start one more reconstruction worker process (see :func:`add_worker`); its id, once ready."""
+        worker_id = add_worker(self.processes, name, delay=delay, fail=fail)
+        self.loop.run(self.processes.start_child(name, ready_timeout=START_TIMEOUT_S), timeout=START_TIMEOUT_S + 10)
+        return worker_id
+
+    def put_job_on(self, worker_id: str, *, tries: int = 4) -> str:
+        """Submit jobs, one at a time, until one is in flight at ``worker_id`` (a slow worker); its id.
+
+        Ties between idle workers go to the one used least recently, so a few tries do.
+        """
+        for _ in range(tries):
+            job_id = self.submit(label=f"for {worker_id}").job_id
+            prefix = f"{self.config.cell_id}/{job_id}/"
+
+            def placed() -> str | None:
+                if self.client.status(job_id).state.finished:
+                    return "elsewhere"
+                for worker in self.status().reconstructors:
+                    if any(ticket.startswith(prefix) for ticket in worker.tickets_here):
+                        return "there" if worker.worker == worker_id else "elsewhere"
+                return None
+
+            if wait_until(placed, timeout=JOB_TIMEOUT_S, interval=0.02, what=f"job {job_id} placed") == "there":
+                return job_id
+        raise AssertionError(f"no job went to {worker_id} in {tries} tries")
+
+
+def add_worker(processes: CellProcesses, name: str, *, delay: float = 0.0, fail: bool = False) -> str:
+    """Add (not start) a reconstruction worker child running ``tests/scale_worker.py``: the real
+    worker, its jobs ``delay`` seconds longer (or failing, with ``fail``); returns its id."""
+    worker_id = f"{processes.config.cell_id}-{name}-{os.getpid()}"
+    argv = [sys.executable, str(Path(__file__).with_name("scale_worker.py")), "--config",
+            str(processes.config_path), "--id", worker_id, "--delay", str(delay)]
+    if fail:
+        argv.append("--fail")
+    processes.add_child(name, argv, token=keys.reconstructor_alive(worker_id))
+    return worker_id
+
 
 @contextlib.contextmanager
-def running_cell(config: CellConfig, **parts) -> Iterator[RunningCell]:
-    """Start a cell as child processes (``parts`` as for CellProcesses); stop it all afterwards."""
+def running_cell(config: CellConfig, *, workers: dict[str, float] | None = None, **parts) -> Iterator[RunningCell]:
+    """Start a cell as child processes (``parts`` as for CellProcesses); stop it all afterwards.
+
+    ``workers`` adds reconstruction workers (:func:`add_worker`), name to delay; their ids are
+    ``RunningCell.worker_ids[name]``.
+    """
     loop = LoopThread()
     processes = CellProcesses(config, **parts)
+    worker_ids = {name: add_worker(processes, name, delay=delay) for name, delay in (workers or {}).items()}
     client = None
     try:
         loop.run(processes.start(ready_timeout=START_TIMEOUT_S), timeout=START_TIMEOUT_S + 10)
         client = CellClient(config.zenoh.router, config.cell_id, timeout=10.0)
-        yield RunningCell(config, processes, loop, client)
+        running = RunningCell(config, processes, loop, client)
+        running.worker_ids = worker_ids
+        yield running
     finally:
         try:
             if client is not None:
@@ -272,10 +331,9 @@ class InProcessSimCamera:
 class GatedReconstructor:
     """A reconstruction worker served in the test process: the real core, behind a gate.
 
-    It serves ``keys.reconstructor(worker_id)`` with ``Transport.serve`` and
-    announces itself with ``keys.reconstructor_alive(worker_id)``, as
-    ``robocell worker reconstruct`` does. While :meth:`hold` is in force a
-    request waits (at most ``max_hold_s``) until :meth:`release`.
+    It serves the pool keys with ``workers.reconstruct.ReconstructWorker``
+    (capacity 1), as ``robocell worker reconstruct`` does. While :meth:`hold`
+    is in force a request waits (at most ``max_hold_s``) until :meth:`release`.
     """
 
     def __init__(self, loop: LoopThread, router: str, worker_id: str = "gated", *, max_hold_s: float = 30.0) -> None:
@@ -287,19 +345,16 @@ class GatedReconstructor:
         self.waiting = threading.Event()   # a request is at the closed gate
         self._open = threading.Event()
         self._open.set()
-        self._token = None
         self._transport: Transport = loop.run(Transport.open(router, connect_timeout_s=10.0))
-        self._transport.serve(keys.reconstructor(worker_id), self._handle)
-        self.announce()
+        self._worker = ReconstructWorker(self._transport, worker_id, 1, self._run)
+        loop.run(self._worker.start())
 
     def announce(self) -> None:
-        self._token = self._transport.declare_token(keys.reconstructor_alive(self.worker_id))
+        self.loop.run(_call(self._worker.announce))
 
     def withdraw(self) -> None:
         """Take the liveliness token back: the daemon then sees no reconstructor."""
-        if self._token is not None:
-            self._token.undeclare()
-            self._token = None
+        self.loop.run(_call(self._worker.withdraw))
 
     def hold(self) -> None:
         self.waiting.clear()
@@ -308,20 +363,42 @@ class GatedReconstructor:
     def release(self) -> None:
         self._open.set()
 
-    async def _handle(self, request: Request) -> Response:
-        if request.attachment is None or request.payload is None:
-            raise RequestError("missing attachment or payload")
-        self.received.append(request.attachment.decode())
+    async def _run(self, request_json: str, payload: bytes) -> str:
+        self.received.append(request_json)
         if not self._open.is_set():
             self.waiting.set()
             if not await asyncio.to_thread(self._open.wait, self.max_hold_s):
                 raise RequestError(f"test gate still closed after {self.max_hold_s:g} s")
-        reply_json = await asyncio.to_thread(reconstruct_request, request.attachment.decode(), request.payload)
-        reply = ReconstructReply.model_validate_json(reply_json)
-        reply.worker = self.worker_id
+        reply_json = await asyncio.to_thread(reconstruct_request, request_json, payload, self.worker_id)
         self.answered += 1
-        return Response(reply.model_dump_json())
+        return reply_json
 
     def close(self) -> None:
         self.release()
-        self.loop.run(self._transport.close(), timeout=20.0)
+        try:
+            self.loop.run(self._worker.close(), timeout=20.0)
+        finally:
+            self.loop.run(self._transport.close(), timeout=20.0)
+
+
+async def _call(function: Callable[[], object]) -> object:
+    """``function()`` on the event loop (Zenoh declarations of a transport belong to its loop)."""
+    return function()
+
+
+class InProcessWorker:
+    """A reconstruction worker served in the test process (``ReconstructWorker``), whose work is
+    ``run(request_json, payload) -> reply JSON``, a coroutine function of the test's."""
+
+    def __init__(self, loop: LoopThread, router: str, worker_id: str, run, *, capacity: int = 1) -> None:
+        self.loop = loop
+        self.worker_id = worker_id
+        self._transport: Transport = loop.run(Transport.open(router, connect_timeout_s=10.0))
+        self._worker = ReconstructWorker(self._transport, worker_id, capacity, run)
+        loop.run(self._worker.start())
+
+    def close(self) -> None:
+        try:
+            self.loop.run(self._worker.close(), timeout=20.0)
+        finally:
+            self.loop.run(self._transport.close(), timeout=20.0)

@@ -1,0 +1,375 @@
+"""The shared pool of reconstruction workers, as one cell daemon sees and uses it.
+
+Every worker announces itself (liveliness token), its health and its load
+(heartbeat: capacity, requests in flight and their tickets); the contract is
+in ``cell/keys.py``. :class:`ReconstructorPool` follows them and runs one
+*attempt* at a reconstruction at a time for its caller::
+
+    pool = ReconstructorPool(transport, heartbeat_s=5.0)
+    pool.start()
+    worker, reply = await pool.run(ticket, payload, attachment, timeout=60, wait_s=10)
+
+``run`` waits for a live, healthy worker with a free slot, sends the request
+to the one with the lowest ``in_flight / capacity``, and returns its reply;
+should the worker die (its token goes), hang (its heartbeat falls silent for
+``heartbeat_s``), run out of time or answer an error, ``run`` raises
+:class:`AttemptFailed` naming the worker and why. Deciding whether to try
+again, and where not to, is the caller's (the daemon's).
+
+Load is counted across cells: a worker's ``in_flight`` comes from its own
+heartbeat, so it includes the requests of every daemon on the network; to it
+the pool adds what it sent since that heartbeat, and takes off what was
+answered since. A worker is sent at most ``capacity`` requests at a time by
+this reckoning; when every worker is full, callers wait in a queue, and each
+free slot goes to the caller that has waited longest.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import logging
+import time
+from dataclasses import dataclass, field
+
+from . import keys
+from .errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
+from .messages import ReconstructorStatus, WorkerLoad, parse
+from .transport import Reply, Transport
+
+__all__ = ["ReconstructorPool", "AttemptFailed", "NoReconstructor"]
+
+log = logging.getLogger(__name__)
+_INFO_TIMEOUT_S = 2.0
+_GONE_GRACE_S = 0.5         # after "nobody answers", how long to wait for the token's withdrawal
+_ANSWERED_MEMORY_S = 5.0    # how long an answered ticket may still show in a late heartbeat
+
+
+class AttemptFailed(CellError):
+    """One attempt failed in a way another worker might not: ``worker`` died, hung, ran out of time
+    or answered an error (``reason``)."""
+
+    def __init__(self, worker: str, reason: str) -> None:
+        super().__init__(f"{worker}: {reason}")
+        self.worker = worker
+        self.reason = reason
+
+
+class NoReconstructor(CellError):
+    """No live, healthy reconstruction worker appeared within the wait."""
+
+
+@dataclass
+class _Worker:
+    """What the pool knows of one worker."""
+
+    worker: str
+    joined: float                               # monotonic time its token appeared
+    capacity: int = 1                           # until it says
+    heard: float | None = None                  # monotonic time of its last heartbeat
+    reported: frozenset[str] = frozenset()      # tickets in flight, by its last heartbeat
+    reported_in_flight: int = 0                 # in flight, by its last heartbeat (ticketless included)
+    mine: set[str] = field(default_factory=set)             # this pool's requests there, unanswered
+    answered: dict[str, float] = field(default_factory=dict)  # this pool's answered tickets -> when
+    hung: bool = False
+    lost: asyncio.Event = field(default_factory=asyncio.Event)  # set when it dies or hangs
+    lost_reason: str = ""
+    last_sent: float = float("-inf")
+    sent: int = 0
+    failed: int = 0
+
+    @property
+    def load(self) -> int:
+        """Requests in flight there, from every cell, as well as this pool can tell."""
+        stale = sum(1 for ticket in self.answered if ticket in self.reported)
+        return max(0, self.reported_in_flight - stale) + len(self.mine - self.reported)
+
+    def silence(self, now: float) -> float:
+        return now - (self.heard if self.heard is not None else self.joined)
+
+
+@dataclass
+class _Waiter:
+    """A caller waiting for a worker: the pool hands it one by setting ``granted``."""
+
+    ticket: str
+    avoid: set[str]
+    granted: asyncio.Future
+
+
+class ReconstructorPool:
+    """The reconstruction workers of the network, from one Zenoh session; see the module's text.
+
+    ``heartbeat_s``: a worker silent this long is taken for hung. ``clock`` is
+    monotonic seconds (for tests). Use from one event loop; :meth:`start`
+    subscribes, :meth:`close` undoes it.
+    """
+
+    def __init__(self, transport: Transport, *, heartbeat_s: float, clock=time.monotonic) -> None:
+        self._transport = transport
+        self.heartbeat_s = heartbeat_s
+        self._clock = clock
+        self._workers: dict[str, _Worker] = {}
+        self._waiters: collections.deque[_Waiter] = collections.deque()   # oldest first
+        self._membership = asyncio.Event()      # set (and replaced) when workers come, go, hang or recover
+        self._tasks: set[asyncio.Task] = set()
+
+    # --- lifecycle -------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._spawn(self._follow(self._transport.watch_liveliness(keys.RECONSTRUCTORS_ALIVE),
+                                 lambda change: self._on_token(*change)))
+        self._spawn(self._follow(self._transport.subscribe(keys.RECONSTRUCTORS_HEARTBEAT),
+                                 lambda sample: self._on_heartbeat(sample.payload)))
+        self._spawn(self._check_heartbeats())
+
+    async def close(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+
+    def _spawn(self, coroutine) -> asyncio.Task:
+        task = asyncio.create_task(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
+
+    async def _follow(self, subscription, handle) -> None:
+        try:
+            async for item in subscription:
+                handle(item)
+        finally:
+            subscription.close()
+
+    # --- what the workers say ---------------------------------------------------------------
+
+    @property
+    def waiting(self) -> int:
+        """Callers waiting for a worker, or for a free slot."""
+        return len(self._waiters)
+
+    def _notify(self) -> None:
+        """Something changed that may free a slot: hand free slots to the waiting callers, oldest first."""
+        if not self._waiters:
+            return
+        healthy = [r for r in self._workers.values() if not r.hung]
+        for waiter in list(self._waiters):
+            if waiter.granted.done():       # its caller gave up
+                self._waiters.remove(waiter)
+                continue
+            record = self._choose(healthy, waiter.avoid)
+            if record is None:
+                if not any(r.load < r.capacity for r in healthy):
+                    break                   # nothing free for anyone
+                continue                    # what is free, this caller would rather avoid
+            self._grant(record, waiter.ticket)
+            waiter.granted.set_result(record)
+            self._waiters.remove(waiter)
+
+    def _members_changed(self) -> None:
+        """Wake the waiting callers to look again whether any worker is there at all."""
+        self._membership.set()
+        self._membership = asyncio.Event()
+        self._notify()
+
+    def _grant(self, record: _Worker, ticket: str) -> None:
+        record.mine.add(ticket)             # its slot is taken from now on
+        record.sent += 1
+        record.last_sent = self._clock()
+
+    def _on_token(self, key: str, alive: bool) -> None:
+        worker = key.rsplit("/", 1)[-1]
+        if alive:
+            if worker not in self._workers:
+                self._workers[worker] = _Worker(worker, joined=self._clock())
+                log.info("reconstructor %s joined", worker)
+                self._spawn(self._ask_info(worker))
+        else:
+            record = self._workers.pop(worker, None)
+            if record is not None:
+                self._lose(record, "the worker is gone (its liveliness token was withdrawn)")
+                log.warning("reconstructor %s left", worker)
+        self._members_changed()
+
+    async def _ask_info(self, worker: str) -> None:
+        """Capacity and load at once, rather than at the next heartbeat."""
+        try:
+            reply = await self._transport.query(keys.reconstructor_info(worker), timeout=_INFO_TIMEOUT_S)
+        except TransportError as exc:
+            log.debug("no info from reconstructor %s: %s", worker, exc)
+            return
+        self._on_heartbeat(reply.payload)
+
+    def _on_heartbeat(self, payload: bytes) -> None:
+        try:
+            load = parse(WorkerLoad, payload)
+        except ValueError as exc:
+            log.warning("ignoring a bad heartbeat: %s", exc)
+            return
+        record = self._workers.get(load.worker)
+        if record is None:
+            return  # no token (yet, or any more): not a member
+        now = self._clock()
+        record.capacity = load.capacity
+        record.heard = now
+        record.reported = frozenset(load.tickets)
+        record.reported_in_flight = load.in_flight
+        record.answered = {t: at for t, at in record.answered.items()
+                           if t in record.reported and now - at < _ANSWERED_MEMORY_S}
+        if record.hung:
+            record.hung = False
+            record.lost = asyncio.Event()
+            log.warning("reconstructor %s is answering again", load.worker)
+            self._members_changed()
+        else:
+            self._notify()
+
+    def _lose(self, record: _Worker, reason: str) -> None:
+        record.lost_reason = reason
+        record.lost.set()
+
+    async def _check_heartbeats(self) -> None:
+        period = min(0.25, self.heartbeat_s / 4)
+        expected = self._clock() + period
+        while True:
+            await asyncio.sleep(period)
+            now = self._clock()
+            # After a stall of this loop, heartbeats that came meanwhile may not be counted yet.
+            stalled = now - expected > self.heartbeat_s / 2
+            expected = now + period
+            if stalled:
+                continue
+            for record in self._workers.values():
+                silence = record.silence(now)
+                if not record.hung and silence > self.heartbeat_s:
+                    record.hung = True
+                    heard = "no heartbeat" if record.heard is not None else "no heartbeat ever"
+                    self._lose(record, f"{heard} for {silence:.1f} s (hung, or its host or network is)")
+                    log.warning("reconstructor %s: %s", record.worker, record.lost_reason)
+                    self._members_changed()
+
+    # --- sending work -----------------------------------------------------------------------
+
+    async def run(self, ticket: str, payload: bytes, attachment: str, *, timeout: float, wait_s: float,
+                  avoid: set[str] = frozenset()) -> tuple[str, Reply]:
+        """One attempt: the worker that answered and its reply.
+
+        Waits for a live, healthy worker with a free slot (preferring those not in
+        ``avoid``); gives up if there is no live, healthy worker at all for ``wait_s``
+        seconds. ``timeout`` bounds the worker's answer.
+
+        Raises
+        ------
+        NoReconstructor
+            No live, healthy worker within ``wait_s``.
+        AttemptFailed
+            The worker died, hung, did not answer within ``timeout``, or answered an error.
+        """
+        record = await self._acquire(ticket, avoid, wait_s)
+        lost = record.lost
+        query = asyncio.ensure_future(self._transport.query(
+            keys.reconstructor(record.worker), payload, attachment=attachment, timeout=timeout))
+        gone = asyncio.ensure_future(lost.wait())
+        try:
+            await asyncio.wait({query, gone}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            gone.cancel()
+            abandoned = not query.done()
+            if abandoned:
+                query.cancel()  # its answer, should it come, is dropped with the query
+            record.mine.discard(ticket)
+            if not abandoned:
+                record.answered[ticket] = self._clock()
+            self._notify()
+        if abandoned:
+            record.failed += 1
+            raise AttemptFailed(record.worker, record.lost_reason)
+        try:
+            return record.worker, query.result()
+        except TransportError as exc:
+            record.failed += 1
+            reason = _attempt_error(exc, timeout)
+        if isinstance(query.exception(), NoResponder):
+            # A worker killed outright drops its queries a moment before its token: say why.
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(_GONE_GRACE_S):
+                    await lost.wait()
+            if lost.is_set():
+                reason = record.lost_reason
+        raise AttemptFailed(record.worker, reason)
+
+    async def _acquire(self, ticket: str, avoid: set[str], wait_s: float) -> _Worker:
+        """The worker to send ``ticket`` to, its slot taken; once there is one with a free slot."""
+        if not self._waiters:  # nobody waits before this caller
+            record = self._choose([r for r in self._workers.values() if not r.hung], avoid)
+            if record is not None:
+                self._grant(record, ticket)
+                return record
+        waiter = _Waiter(ticket, set(avoid), asyncio.get_running_loop().create_future())
+        self._waiters.append(waiter)
+        self._notify()      # a slot that those before it would rather avoid may suit this caller
+        try:
+            deadline = None     # while no healthy worker is there at all: when to give up
+            while True:
+                if any(not r.hung for r in self._workers.values()):
+                    deadline, delay = None, None
+                else:
+                    now = self._clock()
+                    deadline = deadline if deadline is not None else now + wait_s
+                    if now >= deadline:
+                        raise NoReconstructor(self._none_message(wait_s))
+                    delay = deadline - now
+                members = asyncio.ensure_future(self._membership.wait())
+                try:
+                    await asyncio.wait({waiter.granted, members}, timeout=delay,
+                                       return_when=asyncio.FIRST_COMPLETED)
+                finally:
+                    members.cancel()
+                if waiter.granted.done():
+                    return waiter.granted.result()
+        except BaseException:
+            if waiter.granted.done() and not waiter.granted.cancelled():
+                waiter.granted.result().mine.discard(ticket)     # granted, but nobody will send: free it
+                self._notify()
+            else:
+                waiter.granted.cancel()
+            raise
+        finally:
+            if waiter in self._waiters:
+                self._waiters.remove(waiter)
+
+    def _choose(self, healthy: list[_Worker], avoid: set[str]) -> _Worker | None:
+        """The least loaded worker with a free slot, not one to avoid if another will do; None: wait."""
+        preferred = [r for r in healthy if r.worker not in avoid] or healthy
+        free = [r for r in preferred if r.load < r.capacity]
+        if not free:
+            return None
+        return min(free, key=lambda r: (r.load / r.capacity, r.last_sent))
+
+    def _none_message(self, wait_s: float) -> str:
+        if not self._workers:
+            return f"no reconstruction worker is running (waited {wait_s:g} s)"
+        silent = ", ".join(f"{r.worker}: {r.lost_reason}" for r in self._workers.values())
+        return f"no reconstruction worker is answering (waited {wait_s:g} s): {silent}"
+
+    # --- looking on -------------------------------------------------------------------------
+
+    def snapshot(self) -> list[ReconstructorStatus]:
+        """Every live worker, by id."""
+        now = self._clock()
+        return [ReconstructorStatus(worker=r.worker, capacity=r.capacity, in_flight=r.load,
+                                    in_flight_here=len(r.mine), tickets_here=sorted(r.mine), healthy=not r.hung,
+                                    heartbeat_age_s=None if r.heard is None else round(now - r.heard, 3),
+                                    sent=r.sent, failed=r.failed)
+                for r in sorted(self._workers.values(), key=lambda r: r.worker)]
+
+
+def _attempt_error(exc: TransportError, timeout: float) -> str:
+    if isinstance(exc, TransportTimeout):
+        return f"no answer within {timeout:g} s"
+    if isinstance(exc, NoResponder):
+        return "nobody answers on its key (it went away)"
+    if isinstance(exc, RemoteError):
+        return f"answered with an error: {exc}"
+    return str(exc)
