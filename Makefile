@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.robocell-installed
 
-.PHONY: demo test bench contract clean
+.PHONY: demo test bench bench-cell bench-scale contract clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,12 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_core.py
+
+bench-cell: $(STAMP)
+	$(BIN)/python bench/bench_cell.py
+
+bench-scale: $(STAMP)
+	$(BIN)/python bench/bench_scale.py
 
 # Scores `robocell reconstruct` on scans from a renderer written apart from ours.
 contract: $(STAMP)

@@ -17,7 +17,9 @@
     │   └── CameraConnectionError  no connection to the camera (refused, DNS, reset)
     └── CalibrationError   calibration images or poses cannot give a calibration
 
-Errors of the reconstruction itself are ``core_cy.errors.CoreError``.
+Errors of the reconstruction itself are ``core_cy.errors.CoreError``; the
+reconstruction pool's (``AttemptFailed``, ``NoReconstructor``) live in
+``cell/pool.py``, the KUKA bridges' (``KukaError``) in ``workers/kuka/errors.py``.
 """
 
 from __future__ import annotations
