@@ -8,7 +8,7 @@ import numpy as np
 from .camera import Camera
 from .superquadric import Superquadric, inside_outside, surface_points
 
-__all__ = ["silhouette_iou", "radial_residual"]
+__all__ = ["silhouette_iou", "hull_iou", "radial_residual"]
 
 _SUBPIXEL_BITS = 4
 
@@ -33,18 +33,37 @@ def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.nd
         In [0, 1]; 0 if the superquadric is behind the camera.
     """
     uv, depth = camera.project(surface_points(superquadric))
-    uv = uv[depth > 0]
-    projected = np.zeros_like(silhouette)
+    return hull_iou(uv[depth > 0], silhouette)
+
+
+def hull_iou(uv: np.ndarray, silhouette: np.ndarray) -> float:
+    """Intersection over union of the convex hull of pixel points and a silhouette.
+
+    Parameters
+    ----------
+    uv : (N, 2) ndarray of float
+        Pixel coordinates (column, row), to sub-pixel precision; fewer than
+        three cover nothing.
+    silhouette : (H, W) ndarray
+        Nonzero = object.
+
+    Examples
+    --------
+    >>> square = np.zeros((10, 10), np.uint8); square[2:6, 2:6] = 1
+    >>> hull_iou(np.array([[2.0, 2.0], [5.0, 2.0], [5.0, 5.0], [2.0, 5.0]]), square)
+    1.0
+    """
+    covered = np.zeros(silhouette.shape, np.uint8)
     if len(uv) >= 3:
         # Clamp far off-image points: fillConvexPoly takes int32 coordinates.
         limit = 4.0 * max(silhouette.shape)
         hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32))
         fixed_point = np.round(hull * (1 << _SUBPIXEL_BITS)).astype(np.int32)
-        cv2.fillConvexPoly(projected, fixed_point, 255, shift=_SUBPIXEL_BITS)
-    object_pixels = silhouette > 0
-    overlap = np.count_nonzero(object_pixels & (projected > 0))
-    union = np.count_nonzero(object_pixels | (projected > 0))
-    return overlap / union if union else 0.0
+        cv2.fillConvexPoly(covered, fixed_point, 1, shift=_SUBPIXEL_BITS)
+    covered = covered.view(bool)
+    object_pixels = silhouette != 0
+    union = np.count_nonzero(object_pixels | covered)
+    return float(np.count_nonzero(object_pixels & covered) / union) if union else 0.0
 
 
 def radial_residual(superquadric: Superquadric, points) -> float:

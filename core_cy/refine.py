@@ -16,12 +16,12 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 from .camera import Camera
+from .quality import hull_iou
 from .superquadric import Superquadric, surface_points
 
 __all__ = ["refine_to_silhouettes"]
 
 _WORKING_SIZE_PX = 200
-_SUBPIXEL_BITS = 4
 # Parameters: log size ratios (3), shape (2), offset in mean sizes (3), rotation vector (3).
 _BOUNDS = [(-1.0, 1.0)] * 3 + [(0.1, 1.9)] * 2 + [(-1.0, 1.0)] * 3 + [(-np.pi / 2, np.pi / 2)] * 3
 
@@ -72,14 +72,7 @@ def refine_to_silhouettes(start: Superquadric, cameras, silhouettes, *,
             homogeneous = surface @ projection[:, :3].T + projection[:, 3]
             if np.any(homogeneous[:, 2] <= 0):
                 return 1.0
-            uv = homogeneous[:, :2] / homogeneous[:, 2:3]
-            limit = 4.0 * max(silhouette.shape)
-            hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32))
-            covered = np.zeros(silhouette.shape, np.uint8)
-            cv2.fillConvexPoly(covered, np.round(hull * (1 << _SUBPIXEL_BITS)).astype(np.int32), 1,
-                               shift=_SUBPIXEL_BITS)
-            covered = covered.view(bool)
-            total += np.count_nonzero(covered & silhouette) / max(1, np.count_nonzero(covered | silhouette))
+            total += hull_iou(homogeneous[:, :2] / homogeneous[:, 2:3], silhouette)
         return 1.0 - total / len(views)
 
     x0 = np.zeros(11)
