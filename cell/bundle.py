@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
@@ -19,8 +19,9 @@ from core_cy.reconstruct import View
 from core_cy.segment import RED_HSV, Segmentation
 
 from .errors import BundleError
+from .messages import field_errors
 
-__all__ = ["ScanJson", "ViewSpec", "Bundle", "load_bundle", "describe_validation_error"]
+__all__ = ["ScanJson", "ViewSpec", "SegmentationSpec", "Bundle", "load_bundle", "core_segmentation"]
 
 Row3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
@@ -58,21 +59,38 @@ class ViewSpec(_Strict):
         return self
 
 
+SegmentationSpec = Annotated[Union[HsvSegmentation, ThresholdSegmentation], Field(discriminator="method")]
+_SEGMENTATION_SPEC = TypeAdapter(SegmentationSpec | None)
+
+
+def core_segmentation(spec: dict | HsvSegmentation | ThresholdSegmentation | None) -> Segmentation:
+    """The core's Segmentation for a scan.json ``segmentation`` (None: red, the default).
+
+    Raises
+    ------
+    ValueError
+        If a dict does not follow the scan.json format (the message names the field).
+    CoreError
+        If a bound is out of its range.
+    """
+    if isinstance(spec, dict):
+        try:
+            spec = _SEGMENTATION_SPEC.validate_python(spec)
+        except ValidationError as exc:
+            raise ValueError(f"segmentation: {field_errors(exc, whole='segmentation')}") from None
+    if spec is None:
+        return RED_HSV
+    if isinstance(spec, HsvSegmentation):
+        return Segmentation("hsv", lower=tuple(spec.lower), upper=tuple(spec.upper))
+    return Segmentation("threshold", value=spec.value, invert=spec.invert)
+
+
 class ScanJson(_Strict):
     """The content of scan.json."""
 
     views: list[ViewSpec]
-    segmentation: Annotated[Union[HsvSegmentation, ThresholdSegmentation],
-                            Field(discriminator="method")] | None = None
+    segmentation: SegmentationSpec | None = None
     support_plane: Row4 | None = None
-
-    def core_segmentation(self) -> Segmentation:
-        spec = self.segmentation
-        if spec is None:
-            return RED_HSV
-        if isinstance(spec, HsvSegmentation):
-            return Segmentation("hsv", lower=tuple(spec.lower), upper=tuple(spec.upper))
-        return Segmentation("threshold", value=spec.value, invert=spec.invert)
 
 
 class Bundle(BaseModel):
@@ -84,15 +102,6 @@ class Bundle(BaseModel):
     views: list[View]
     segmentation: Segmentation
     support_plane: list[float] | None
-
-
-def describe_validation_error(exc: ValidationError) -> str:
-    """One line naming each invalid field: ``views.1.K: List should have at most 3 items``."""
-    parts = []
-    for error in exc.errors():
-        location = ".".join(str(part) for part in error["loc"]) or "scan.json"
-        parts.append(f"{location}: {error['msg']}")
-    return "; ".join(parts)
 
 
 def _read(path: Path, what: str, view: int) -> bytes:
@@ -127,7 +136,7 @@ def load_bundle(directory: str | Path) -> Bundle:
     except json.JSONDecodeError as exc:
         raise BundleError(f"scan.json is not valid JSON: {exc}") from exc
     except ValidationError as exc:
-        raise BundleError(f"scan.json: {describe_validation_error(exc)}") from exc
+        raise BundleError(f"scan.json: {field_errors(exc, whole='scan.json')}") from exc
 
     views = []
     for index, view in enumerate(spec.views):
@@ -141,7 +150,7 @@ def load_bundle(directory: str | Path) -> Bundle:
         else:
             views.append(View(camera, image=_read(directory / view.image, "image", index)))
     try:
-        segmentation = spec.core_segmentation()
+        segmentation = core_segmentation(spec.segmentation)
     except CoreError as exc:
         raise BundleError(str(exc)) from exc
     return Bundle(path=directory, views=views, segmentation=segmentation,

@@ -58,10 +58,13 @@ class Message(BaseModel):
     schema_version: Literal[1] = SCHEMA_VERSION
 
 
-def field_errors(exc: ValidationError) -> str:
-    """One line naming each invalid field: ``target: List should have at least 3 items``."""
+def field_errors(exc: ValidationError, *, whole: str = "message") -> str:
+    """One line naming each invalid field: ``target: List should have at least 3 items``.
+
+    ``whole`` names what an error about the whole input (no field) is about.
+    """
     return "; ".join(
-        f"{'.'.join(str(p) for p in error['loc']) or 'message'}: {error['msg']}" for error in exc.errors()
+        f"{'.'.join(str(p) for p in error['loc']) or whole}: {error['msg']}" for error in exc.errors()
     )
 
 

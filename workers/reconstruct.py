@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from cell import keys
+from cell.bundle import core_segmentation
 from cell.config import CellConfig
 from cell.errors import TransportError
 from cell.messages import ReconstructReply, ReconstructRequest, WorkerLoad, parse
@@ -38,8 +39,6 @@ from cell.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
 from core_cy.reconstruct import Options, View, reconstruct
-from core_cy.segment import RED_HSV, Segmentation
-
 from cell.process import open_transport, run_until_stopped
 
 __all__ = ["reconstruct_request", "ReconstructWorker", "Job", "Run", "main", "default_worker_id"]
@@ -51,15 +50,6 @@ _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3     # glibc's mallopt parameters
 
 def default_worker_id() -> str:
     return f"{socket.gethostname()}-{os.getpid()}".replace("/", "_").replace("*", "_")
-
-
-def _segmentation(spec: dict | None) -> Segmentation:
-    if spec is None:
-        return RED_HSV
-    method = spec.get("method")
-    if method == "hsv":
-        return Segmentation("hsv", lower=tuple(spec["lower"]), upper=tuple(spec["upper"]))
-    return Segmentation("threshold", value=spec["value"], invert=spec.get("invert", False))
 
 
 def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> str:
@@ -74,9 +64,9 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
             camera = Camera(K=view.camera.K, T_world_cam=view.T_world_cam, dist=view.camera.dist, view=index)
             views.append(View(camera, image=payload[offset:offset + view.length]))
             offset += view.length
-        result = reconstruct(views, segmentation=_segmentation(request.segmentation),
+        result = reconstruct(views, segmentation=core_segmentation(request.segmentation),
                              support_plane=request.support_plane, options=Options(**request.options))
-    except (CoreError, ValueError, KeyError) as exc:
+    except (CoreError, ValueError) as exc:
         return ReconstructReply(job_id=request.job_id, error=str(exc), worker=worker,
                                 ticket=request.ticket).model_dump_json()
     silhouettes = [base64.b64encode(cv2.imencode(".png", s)[1].tobytes()).decode("ascii")
