@@ -31,6 +31,7 @@ __all__ = ["run_demo"]
 
 
 def free_port() -> int:
+    """A TCP port nobody listens on now (bound to port 0 on loopback, then released)."""
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         return probe.getsockname()[1]

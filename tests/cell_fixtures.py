@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import socket
 import sys
 import threading
 import time
@@ -27,6 +26,7 @@ from rerun.chunk import RrdReader
 from cell import keys
 from cell.client import CellClient
 from cell.config import CellConfig
+from cell.demo import free_port
 from cell.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
 from cell.sim.scene import scene_from_config, truth_from_config
 from cell.store import JobStore
@@ -44,13 +44,6 @@ __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cel
 # Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
 START_TIMEOUT_S = 60.0
 JOB_TIMEOUT_S = 60.0
-
-
-def free_port() -> int:
-    """A TCP port nobody listens on now (bound to port 0 on loopback, then released)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None = None,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cell.plan import look_at
 from core_cy.camera import Camera
 
 WIDTH, HEIGHT, FOCAL = 640, 480, 600.0
@@ -11,22 +12,6 @@ WIDTH, HEIGHT, FOCAL = 640, 480, 600.0
 
 def intrinsics(focal: float = FOCAL, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
     return np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
-
-
-def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """Camera-to-world pose of a camera at ``position`` looking at ``target`` (OpenCV axes)."""
-    position = np.asarray(position, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - position
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, up)
-    if np.linalg.norm(right) < 1e-9:  # looking straight along "up"
-        right = np.cross(forward, (0.0, 1.0, 0.0))
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    pose = np.eye(4)
-    pose[:3, :3] = np.stack([right, down, forward], axis=1)
-    pose[:3, 3] = position
-    return pose
 
 
 def sphere_silhouette(camera: Camera, centre, radius: float, shape=(HEIGHT, WIDTH)) -> np.ndarray:

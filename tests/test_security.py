@@ -7,7 +7,6 @@ it can neither submit a job nor read an image.
 import asyncio
 import datetime
 import ipaddress
-import socket
 
 import pytest
 from cryptography import x509
@@ -15,14 +14,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
+from cell.demo import free_port
 from cell.errors import TransportError
 from cell.transport import Response, Transport
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def _certificate(subject: str, key, issuer_name, issuer_key, *, ca: bool) -> x509.Certificate:
@@ -63,7 +57,7 @@ def _run(coroutine):
 
 
 async def _with_router(pki, check):
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     router = await Transport.open(endpoint, mode="router", settings={
         "transport/link/tls/listen_certificate": str(pki / "router.pem"),
         "transport/link/tls/listen_private_key": str(pki / "router.key"),
