@@ -85,6 +85,17 @@ def _bytes(value) -> bytes | None:
     return None if value is None else value.to_bytes()
 
 
+def _direct(callback: Callable, drop: Callable[[], None] | None = None) -> zenoh.handlers.Callback:
+    """``callback`` run on the Zenoh thread that received the data.
+
+    Zenoh's default runs every callback in a Python thread of its own: one more
+    thread hop per message, and a thread started per query. Every callback here
+    only copies the data and hands it to the event loop, so it cannot hold
+    Zenoh's thread up.
+    """
+    return zenoh.handlers.Callback(callback, drop, indirect=False)
+
+
 class Subscription:
     """Samples (or liveliness changes) of a key expression, as an async iterator."""
 
@@ -191,7 +202,7 @@ class Transport:
         if attachment is not None:
             kwargs["attachment"] = attachment
         try:
-            self._session.get(selector, zenoh.handlers.Callback(on_reply, on_finished), **kwargs)
+            self._session.get(selector, _direct(on_reply, on_finished), **kwargs)
             # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
             # Not asyncio.wait_for: on Python 3.11 it swallows a cancel that comes with the answer.
             async with asyncio.timeout(timeout + 5.0):
@@ -226,7 +237,7 @@ class Transport:
             except RuntimeError:  # the loop is gone: we are shutting down
                 query.drop()
 
-        self._declared.append(self._session.declare_queryable(key, on_query, complete=complete))
+        self._declared.append(self._session.declare_queryable(key, _direct(on_query), complete=complete))
 
     @staticmethod
     async def _answer(query: zenoh.Query, request: Request, handler: Handler) -> None:
@@ -273,7 +284,7 @@ class Transport:
                          _bytes(sample.attachment))
             loop.call_soon_threadsafe(queue.put_nowait, item)
 
-        subscriber = self._session.declare_subscriber(key, on_sample)
+        subscriber = self._session.declare_subscriber(key, _direct(on_sample))
         subscription._undeclare = subscriber.undeclare
         return subscription
 
@@ -294,7 +305,7 @@ class Transport:
             alive = sample.kind == zenoh.SampleKind.PUT
             loop.call_soon_threadsafe(queue.put_nowait, (str(sample.key_expr), alive))
 
-        subscriber = self._session.liveliness().declare_subscriber(key_expr, on_change, history=True)
+        subscriber = self._session.liveliness().declare_subscriber(key_expr, _direct(on_change), history=True)
         subscription._undeclare = subscriber.undeclare
         return subscription
 
@@ -311,7 +322,7 @@ class Transport:
         def on_finished() -> None:
             loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
 
-        self._session.liveliness().get(key_expr, zenoh.handlers.Callback(on_reply, on_finished), timeout=timeout)
+        self._session.liveliness().get(key_expr, _direct(on_reply, on_finished), timeout=timeout)
         async with asyncio.timeout(timeout + 5.0):
             await done
         return sorted(keys)
