@@ -12,7 +12,6 @@ import enum
 import math
 from typing import Annotated, Literal
 
-import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 __all__ = [
@@ -28,12 +27,17 @@ _RIGID_TOLERANCE = 1e-5
 
 
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
-    T = np.asarray(matrix, dtype=np.float64)
-    if not np.all(np.isfinite(T)):
+    # Plain Python, not NumPy: every move and every result carries poses, and on sixteen
+    # numbers NumPy's per-call overhead is ten times the arithmetic.
+    if not all(math.isfinite(v) for row in matrix for v in row):
         raise ValueError("pose contains NaN or infinity")
-    R = T[:3, :3]
-    if not np.allclose(T[3], [0, 0, 0, 1]) or np.abs(R.T @ R - np.eye(3)).max() > _RIGID_TOLERANCE \
-            or np.linalg.det(R) < 0:
+    columns = [[matrix[i][j] for i in range(3)] for j in range(3)]
+    gram_error = max(abs(sum(a * b for a, b in zip(columns[i], columns[j])) - (i == j))
+                     for i in range(3) for j in range(i, 3))
+    (a, b, c), (d, e, f), (g, h, k) = (row[:3] for row in matrix[:3])
+    determinant = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
+    last_row_ok = all(abs(v - w) <= 1e-8 + 1e-5 * abs(w) for v, w in zip(matrix[3], (0.0, 0.0, 0.0, 1.0)))
+    if not last_row_ok or gram_error > _RIGID_TOLERANCE or determinant < 0:
         raise ValueError("pose must be a rigid 4x4 transform (orthonormal rotation, last row 0 0 0 1)")
     return matrix
 
@@ -143,14 +147,6 @@ class JobStatus(Message):
     request: ScanRequest
 
 
-class JobEvent(Message):
-    job_id: str
-    state: JobState
-    view: int | None = None
-    message: str
-    time: float
-
-
 class ScanResult(Message):
     job_id: str
     superquadric: dict               # {"size", "shape", "T_world_object"} as in DESIGN.md §3
@@ -166,6 +162,17 @@ class ScanResult(Message):
     #: The reconstruction worker that made this result, and on which attempt (see ``cell/keys.py``).
     worker: str | None = None
     attempts: Annotated[int, Field(ge=1)] = 1
+
+
+class JobEvent(Message):
+    job_id: str
+    state: JobState
+    view: int | None = None
+    message: str
+    time: float
+    #: The result, in the published ``succeeded`` event only: a client waiting for the job
+    #: needs no further query. (The stored history leaves it out; the result is stored once.)
+    result: ScanResult | None = None
 
 
 class ErrorReply(Message):
