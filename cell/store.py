@@ -25,7 +25,7 @@ from pydantic import ValidationError
 from .errors import StoreError
 from .messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
 
-__all__ = ["JobStore", "SCHEMA_VERSION", "INTERRUPTED"]
+__all__ = ["JobStore", "SCHEMA_VERSION", "INTERRUPTED", "queued_event"]
 
 #: Kept in ``PRAGMA user_version``; a file with another version is refused, not guessed at.
 SCHEMA_VERSION = 1
@@ -102,7 +102,7 @@ class JobStore:
     # --- writing ----------------------------------------------------------------------------
 
     def add(self, request: ScanRequest, *, n_views: int, now: float) -> tuple[JobStatus, bool]:
-        """Queue a new job; returns ``(status, True)``.
+        """Queue a new job, with its first event ("queued"); returns ``(status, True)``.
 
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
@@ -130,11 +130,15 @@ class JobStore:
                 (seq, job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
                  request.model_dump_json()),
             )
-            return self._get(db, job_id), True
+            status = self._get(db, job_id)
+            self._insert_event(db, queued_event(status))
+            return status, True
 
     def update(self, job_id: str, state: JobState, *, view: int | None = None, error: str | None = None,
-               recording: str | None = None, now: float) -> JobStatus:
+               recording: str | None = None, now: float, event: JobEvent | None = None) -> JobStatus:
         """Move a job to ``state``; ``view`` and ``error`` are replaced, ``recording`` kept unless given.
+
+        ``event``, if given, is added to the job's history in the same transaction.
 
         Raises
         ------
@@ -151,10 +155,12 @@ class JobStore:
                 " updated = ? WHERE job_id = ?",
                 (state.value, view, error, recording, now, job_id),
             )
+            if event is not None:
+                self._insert_event(db, event)
             return self._get(db, job_id)
 
     def add_event(self, event: JobEvent) -> None:
-        """Append a progress event to its job's history.
+        """Append a progress event to its job's history (without its ``result``: that is stored once).
 
         Raises
         ------
@@ -162,15 +168,12 @@ class JobStore:
             There is no job ``event.job_id``.
         """
         with self._write() as db:
-            inserted = db.execute(
-                "INSERT INTO events (job_id, event) SELECT job_id, ? FROM jobs WHERE job_id = ?",
-                (event.model_dump_json(), event.job_id),
-            ).rowcount
-            if inserted == 0:
-                raise KeyError(f"no job {event.job_id!r}")
+            self._insert_event(db, event)
 
-    def save_result(self, result: ScanResult, *, now: float) -> JobStatus:
+    def save_result(self, result: ScanResult, *, now: float, event: JobEvent | None = None) -> JobStatus:
         """Store the result of job ``result.job_id`` and mark it succeeded, both or neither.
+
+        ``event``, if given, is added to the job's history in the same transaction.
 
         Raises
         ------
@@ -188,6 +191,8 @@ class JobStore:
                 " updated = ? WHERE job_id = ?",
                 (JobState.SUCCEEDED.value, result.recording, now, result.job_id),
             )
+            if event is not None:
+                self._insert_event(db, event)
             return self._get(db, result.job_id)
 
     def interrupt_unfinished(self, *, now: float, reason: str = INTERRUPTED) -> list[JobStatus]:
@@ -286,6 +291,15 @@ class JobStore:
                     db.execute("ROLLBACK")
                 raise
 
+    @staticmethod
+    def _insert_event(db: sqlite3.Connection, event: JobEvent) -> None:
+        inserted = db.execute(
+            "INSERT INTO events (job_id, event) SELECT job_id, ? FROM jobs WHERE job_id = ?",
+            (event.model_dump_json(exclude={"result"}), event.job_id),
+        ).rowcount
+        if inserted == 0:
+            raise KeyError(f"no job {event.job_id!r}")
+
     def _get(self, db: sqlite3.Connection, job_id: str) -> JobStatus:
         return _status(db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE job_id = ?", (job_id,)).fetchone())
 
@@ -295,6 +309,11 @@ class JobStore:
             raise KeyError(f"no job {job_id!r}")
         if JobState(row[0]).finished:
             raise ValueError(f"job {job_id} is {row[0]}, which is final: it cannot become {new.value}")
+
+
+def queued_event(status: JobStatus) -> JobEvent:
+    """A job's first event, which :meth:`JobStore.add` stores with the job."""
+    return JobEvent(job_id=status.job_id, state=JobState.QUEUED, message="queued", time=status.created)
 
 
 def _status(row: tuple) -> JobStatus:

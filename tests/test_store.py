@@ -11,7 +11,7 @@ import pytest
 
 from cell.errors import StoreError
 from cell.messages import JobEvent, JobState, ScanRequest, ScanResult
-from cell.store import INTERRUPTED, JobStore
+from cell.store import INTERRUPTED, JobStore, queued_event
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -116,10 +116,32 @@ def test_events_come_back_in_order(store):
               for v in (0, 1, 2)]
     for event in events:
         store.add_event(event)
-    store.add_event(JobEvent(job_id=other.job_id, state=JobState.QUEUED, message="queued", time=T0))
-    assert store.events(job.job_id) == events
-    assert [e.message for e in store.events(other.job_id)] == ["queued"]
+    store.add_event(JobEvent(job_id=other.job_id, state=JobState.FAILED, message="gone", time=T0))
+    # add() stores the job's first event with it.
+    assert store.events(job.job_id) == [queued_event(job), *events]
+    assert [e.message for e in store.events(other.job_id)] == ["queued", "gone"]
     assert store.events("nope") == []
+
+
+def test_a_state_change_and_its_event_are_one_transaction(store):
+    job, _ = store.add(request(), n_views=3, now=T0)
+    moving = JobEvent(job_id=job.job_id, state=JobState.MOVING, view=0, message="moving to view 0", time=T0 + 1)
+    store.update(job.job_id, JobState.MOVING, view=0, now=T0 + 1, event=moving)
+    assert store.get(job.job_id).state is JobState.MOVING and store.events(job.job_id)[-1] == moving
+    # An event for another job fails the whole transaction: the state is left as it was.
+    stray = moving.model_copy(update={"job_id": "nope"})
+    with pytest.raises(KeyError, match="nope"):
+        store.update(job.job_id, JobState.CAPTURING, view=0, now=T0 + 2, event=stray)
+    assert store.get(job.job_id).state is JobState.MOVING and len(store.events(job.job_id)) == 2
+
+
+def test_the_succeeded_event_is_stored_without_its_result(store):
+    job, _ = store.add(request(), n_views=3, now=T0)
+    done = JobEvent(job_id=job.job_id, state=JobState.SUCCEEDED, message="reconstructed", time=T0 + 2,
+                    result=result(job.job_id))
+    store.save_result(result(job.job_id), now=T0 + 2, event=done)
+    assert store.events(job.job_id)[-1] == done.model_copy(update={"result": None})
+    assert store.result(job.job_id) == result(job.job_id)
 
 
 def test_save_result_stores_it_and_marks_the_job_succeeded(store):
@@ -166,7 +188,7 @@ def test_a_reopened_store_keeps_everything(tmp_path):
         queued, _ = store.add(request(), n_views=2, now=T0 + 3)
     with JobStore(path) as store:
         assert store.list() == [queued, done]
-        assert store.events(job.job_id) == [event]
+        assert store.events(job.job_id) == [queued_event(job), event]
         assert store.result(job.job_id) == result(job.job_id)
         assert store.add(request("r1"), n_views=3, now=T0 + 4) == (done, False)
         # The counter carries on from where it was.
