@@ -12,15 +12,22 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import threading
+from collections import OrderedDict
 from collections.abc import AsyncIterator, Callable
 
 from . import keys
 from .errors import CellError, RemoteError, TransportError
 from .messages import CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
-from .transport import Transport
+from .transport import Subscription, Transport
 
 __all__ = ["AsyncCellClient", "CellClient", "JobFailed"]
+
+log = logging.getLogger(__name__)
+#: Events of jobs nobody waits for yet, kept for that many jobs: a job's first events can
+#: arrive before the answer to its submit says which job it is.
+_EARLY_JOBS = 256
 
 
 class JobFailed(CellError):
@@ -34,6 +41,11 @@ class AsyncCellClient:
         self._transport = transport
         self.cell = cell_id
         self.timeout = timeout
+        # One subscription to all the cell's events, opened by the first wait, shared by every wait.
+        self._events: Subscription | None = None
+        self._dispatcher: asyncio.Task | None = None
+        self._waiting: dict[str, list[asyncio.Queue]] = {}
+        self._early: OrderedDict[str, list[JobEvent]] = OrderedDict()
 
     @classmethod
     async def connect(cls, endpoint: str, cell_id: str, *, settings: dict | None = None,
@@ -41,6 +53,10 @@ class AsyncCellClient:
         return cls(await Transport.open(endpoint, settings=settings), cell_id, timeout=timeout)
 
     async def close(self) -> None:
+        if self._dispatcher is not None:
+            self._dispatcher.cancel()
+            await asyncio.gather(self._dispatcher, return_exceptions=True)
+            self._events.close()
         await self._transport.close()
 
     async def __aenter__(self) -> "AsyncCellClient":
@@ -129,30 +145,69 @@ class AsyncCellClient:
         await self._wait_finished(job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
         return await self.status(job_id)
 
+    def _subscribe_events(self) -> bool:
+        """Make sure this client hears every event of the cell; whether it already did."""
+        if self._events is not None:
+            return True
+        self._events = self._transport.subscribe(keys.events(self.cell, "*"))
+        self._dispatcher = asyncio.create_task(self._dispatch(self._events))
+        return False
+
+    async def _dispatch(self, subscription: Subscription) -> None:
+        async for sample in subscription:
+            try:
+                event = parse(JobEvent, sample.payload)
+            except ValueError as exc:
+                log.warning("ignoring an event on %s: %s", sample.key, exc)
+                continue
+            queues = self._waiting.get(event.job_id)
+            if queues:
+                for queue in queues:
+                    queue.put_nowait(event)
+                continue
+            self._early.setdefault(event.job_id, []).append(event)
+            while len(self._early) > _EARLY_JOBS:
+                self._early.popitem(last=False)
+
     async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
-                             poll_s: float) -> JobState:
-        """The job's final state, from its events (or, should one be lost, from polling its status)."""
-        subscription = self._transport.subscribe(keys.events(self.cell, job_id))
+                             poll_s: float, heard_from_start: bool = False) -> tuple[JobState, JobEvent | None]:
+        """The job's final state and final event, from its events (or, should one be lost, from
+        polling its status: then the event is None).
+
+        ``heard_from_start``: this client was listening before the job was submitted, so no
+        event of it can have been missed and the status need not be asked first.
+        """
+        heard_from_start = self._subscribe_events() and heard_from_start
+        queue: asyncio.Queue[JobEvent] = asyncio.Queue()
+        for early in self._early.pop(job_id, []):
+            queue.put_nowait(early)
+        self._waiting.setdefault(job_id, []).append(queue)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         try:
-            state = (await self.status(job_id)).state  # after subscribing: an end in between is not missed
+            # Asked after subscribing: an end in between is not missed.
+            state = JobState.QUEUED if heard_from_start else (await self.status(job_id)).state
             while not state.finished:
                 remaining = deadline - loop.time()
                 if remaining <= 0:
                     raise TimeoutError(f"job {job_id} is still {state.value} after {timeout:g} s")
                 try:
-                    sample = await subscription.get(timeout=min(poll_s, remaining))
+                    async with asyncio.timeout(min(poll_s, remaining)):
+                        event = await queue.get()
                 except TimeoutError:
                     state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
                     continue
-                event = parse(JobEvent, sample.payload)
                 if on_event is not None:
                     on_event(event)
                 state = event.state
-            return state
+                if state.finished:
+                    return state, event
+            return state, None
         finally:
-            subscription.close()
+            queues = self._waiting[job_id]
+            queues.remove(queue)
+            if not queues:
+                del self._waiting[job_id]
 
     async def scan(self, request: ScanRequest, *, timeout: float = 120.0,
                    on_event: Callable[[JobEvent], None] | None = None, poll_s: float = 1.0) -> ScanResult:
@@ -165,12 +220,16 @@ class AsyncCellClient:
         TimeoutError
             If the job is not finished within ``timeout`` seconds.
         """
+        self._subscribe_events()  # before submitting: every event of the job is heard
         status = await self.submit(request)
-        state = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
+        state, final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event,
+                                                 poll_s=poll_s, heard_from_start=True)
         if state is JobState.SUCCEEDED:
-            return await self.result(status.job_id)
-        final = await self.status(status.job_id)
-        raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}")
+            if final is not None and final.result is not None:
+                return final.result
+            return await self.result(status.job_id)  # the end was learnt by polling
+        ended = await self.status(status.job_id)
+        raise JobFailed(f"job {ended.job_id} {ended.state.value}: {ended.error or 'no reason given'}")
 
 
 class CellClient:

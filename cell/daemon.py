@@ -20,10 +20,12 @@ The event loop only decides, asks and publishes. The job store runs in a
 thread of its own, in order (an SQLite connection belongs to one thread); the
 recordings are written by a process of their own (``cell.recorder``: their
 milliseconds of logging would otherwise delay every job), and are complete a
-moment after the job ends. A step's bookkeeping (store, event, recording) is
-done once its query to the worker is on its way. What the loop remembers of
-the jobs (the queue, the jobs in flight) is what its decisions need, so no
-decision waits for the store. What must outlive a crash is awaited before
+moment after the job ends. A step's bookkeeping (store, event) is done once its
+query to the worker is on its way; its recording messages wait with the job and
+are handed over while the job waits for something slow (a snapshot, the
+reconstruction), and a job's last ones after its end is published. What the
+loop remembers of the jobs (the queue, the jobs in flight) is what its
+decisions need, so no decision waits for the store. What must outlive a crash is awaited before
 anyone hears of it: a job is stored before its submit is answered, a result
 before the job is announced succeeded, and the end of a job (succeeded,
 failed, cancelled) before its event is published. After a crash, the
@@ -56,7 +58,7 @@ from .messages import (CameraModel, CaptureInfo, CaptureRequest, CellStatus, Fai
 from .plan import camera_poses, plan_flange_poses, workspace_violation
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
 from .recorder import Recorder
-from .store import JobStore
+from .store import JobStore, queued_event
 from .transport import Request, RequestError, Response, Transport
 
 __all__ = ["CellDaemon", "StepFailed"]
@@ -135,11 +137,13 @@ class _Capture:
 class _ActiveJob:
     job_id: str
     request: ScanRequest
+    poses: list[np.ndarray] | None      # planned at submit; None: plan when the job starts
     started: float
     task: asyncio.Task | None = None
     cancel_requested: bool = False
     finishing: bool = False                 # the result is being stored: too late to cancel
     captures: list[_Capture] = field(default_factory=list)
+    unrecorded: list[tuple] = field(default_factory=list)   # see CellDaemon._record
     durations_s: dict[str, float] = field(default_factory=dict)   # what the job waited for, see ScanResult
 
     def check_cancel(self) -> None:
@@ -169,7 +173,7 @@ class CellDaemon:
         self._recorder = Recorder(n_points=config.reconstruct.n_points,
                                   sim=config.sim.model_dump() if config.robot.backend == "sim" else None)
         self._queue: asyncio.Queue[str] = asyncio.Queue()
-        self._queued: dict[str, ScanRequest] = {}   # waiting jobs, in order
+        self._queued: dict[str, tuple[ScanRequest, list[np.ndarray] | None]] = {}   # waiting jobs, in order
         self._active: dict[str, _ActiveJob] = {}    # jobs being moved for, captured or reconstructed
         self._alive: set[str] = set()                   # this cell's workers with a liveliness token
         self._pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
@@ -214,6 +218,8 @@ class CellDaemon:
                 task.cancel()
             await asyncio.gather(*self._background, return_exceptions=True)
             await self._pool.close()
+            for active in self._active.values():  # jobs cut short keep what they recorded
+                self._hand_to_recorder(active)
 
     def _spawn(self, coroutine) -> asyncio.Task:
         task = asyncio.create_task(coroutine)
@@ -233,8 +239,9 @@ class CellDaemon:
         for status in waiting:
             self._enqueue(status.job_id, status.request)
 
-    def _enqueue(self, job_id: str, request: ScanRequest) -> None:
-        self._queued[job_id] = request
+    def _enqueue(self, job_id: str, request: ScanRequest, poses: list[np.ndarray] | None = None) -> None:
+        """Queue the job; ``poses`` are its flange poses, if already planned."""
+        self._queued[job_id] = (request, poses)
         self._queue.put_nowait(job_id)
 
     # --- worker presence -----------------------------------------------------------------------
@@ -280,35 +287,41 @@ class CellDaemon:
 
     def _event(self, job_id: str, state: JobState, message: str, *, view: int | None = None,
                now: float) -> None:
-        """Record a state change: in the job's recording, in the store, and as a publication.
-
-        A finished job's recording is closed: the recorder writes its footer a moment later.
-        The end of a job is published only once the store has it (see the module's text).
-        """
+        """An event that changes no state (a retry, a restart's verdict): stored, recorded, published."""
         event = JobEvent(job_id=job_id, state=state, view=view, message=message, time=now)
-        active = self._active.get(job_id)
-        if active is not None:
-            level = "ERROR" if state is JobState.FAILED else "INFO"
-            self._record(active, "log_text", f"{state.value}: {message}", level)
-            if state.finished:
-                del self._active[job_id]
-                _later(self._recorder.close, job_id)
-        if state.finished:
-            self._db.post(self._store.add_event, event, then=functools.partial(self._publish, event))
-        else:
-            self._db.post(self._store.add_event, event)
-            _later(self._publish, event)
-
-    def _publish(self, event: JobEvent) -> None:
-        self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
+        self._note(event)
+        self._db.post(self._store.add_event, event, then=functools.partial(self._publish, event))
 
     def _set(self, job_id: str, state: JobState, message: str, *, view: int | None = None,
              error: str | None = None, recording: Path | None = None) -> None:
-        """Move the job to ``state``: the store is written in its thread, in order, without waiting."""
-        now = self._clock()
-        self._db.post(self._store.update, job_id, state, view=view, error=error, now=now,
-                      recording=None if recording is None else str(recording))
-        self._event(job_id, state, message, view=view, now=now)
+        """Move the job to ``state``: the store is written in its thread, in order, without waiting.
+
+        A step's event is published at once; the end of a job only once the store has it
+        (see the module's text).
+        """
+        event = JobEvent(job_id=job_id, state=state, view=view, message=message, time=self._clock())
+        self._note(event)
+        stored = functools.partial(self._publish, event) if state.finished else None
+        self._db.post(self._store.update, job_id, state, view=view, error=error, now=event.time,
+                      recording=None if recording is None else str(recording), event=event, then=stored)
+        if stored is None:
+            _later(self._publish, event)
+
+    def _note(self, event: JobEvent) -> None:
+        """Write the event into the job's recording; a finished job's recording is closed (the
+        recorder writes its footer a moment later)."""
+        active = self._active.get(event.job_id)
+        if active is None:
+            return
+        level = "ERROR" if event.state is JobState.FAILED else "INFO"
+        self._record(active, "log_text", f"{event.state.value}: {event.message}", level)
+        if event.state.finished:
+            del self._active[event.job_id]
+            self._hand_to_recorder(active)
+            _later(self._recorder.close, event.job_id)
+
+    def _publish(self, event: JobEvent) -> None:
+        self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
 
     def _recording_path(self, job_id: str) -> Path:
         return self.run_dir / f"{job_id}.rrd"
@@ -320,18 +333,29 @@ class CellDaemon:
         return plan_flange_poses(request.target, plan, self.config.T_flange_cam)
 
     def _record(self, active: _ActiveJob, method: str, *args, **kwargs) -> None:
-        """``JobRecording.<method>(*args, **kwargs)`` on the job's recording, at the job time of now."""
-        _later(self._recorder.call, active.job_id, self._clock() - active.started, method, *args, **kwargs)
+        """``JobRecording.<method>(*args, **kwargs)`` on the job's recording, at the job time of now.
+
+        Kept with the job until :meth:`_hand_to_recorder`: handing a message over costs the
+        event loop and the interpreter time, and a robot that moves at once answers in under a
+        millisecond. So the messages go over while the job waits for something slow.
+        """
+        active.unrecorded.append((self._clock() - active.started, method, args, kwargs))
+
+    def _hand_to_recorder(self, active: _ActiveJob) -> None:
+        """Hand the job's recording messages to the recorder, when the event loop next looks round."""
+        for at, method, args, kwargs in active.unrecorded:
+            _later(self._recorder.call, active.job_id, at, method, *args, **kwargs)
+        active.unrecorded.clear()
 
     # --- the motion lane -----------------------------------------------------------------------
 
     async def _motion_lane(self) -> None:
         while True:
             job_id = await self._queue.get()
-            request = self._queued.pop(job_id, None)
-            if request is None:
+            queued = self._queued.pop(job_id, None)
+            if queued is None:
                 continue  # cancelled while it waited
-            active = _ActiveJob(job_id, request, self._clock())
+            active = _ActiveJob(job_id, *queued, started=self._clock())
             self._active[job_id] = active
             _later(self._recorder.open, job_id, self._recording_path(job_id))
             active.task = asyncio.create_task(self._acquire(active))
@@ -342,7 +366,7 @@ class CellDaemon:
         job_id, timeouts = active.job_id, self.config.timeouts
         step = "planning"
         try:
-            poses = self._flange_poses(active.request)
+            poses = active.poses if active.poses is not None else self._flange_poses(active.request)
             for view, pose in enumerate(poses):
                 step = f"moving to view {view}"
                 self._set(job_id, JobState.MOVING, step, view=view, recording=self._recording_path(job_id))
@@ -355,6 +379,7 @@ class CellDaemon:
                 self._record(active, "log_robot_pose", reached)
                 step = f"capturing view {view}"
                 self._set(job_id, JobState.CAPTURING, step, view=view)
+                self._hand_to_recorder(active)  # during the snapshot, which takes tens of milliseconds
                 reply = await self._ask("camera", keys.camera_capture(self.cell),
                                         CaptureRequest(job_id=job_id, view=view), timeouts.capture_s)
                 active.check_cancel()
@@ -397,6 +422,7 @@ class CellDaemon:
         try:
             payload = b"".join(c.jpeg for c in active.captures)
             request = self._reconstruct_request(active)
+            self._hand_to_recorder(active)
             for attempt in range(1, settings.max_attempts + 1):
                 request.ticket = keys.ticket(self.cell, job_id, attempt)
                 began = time.perf_counter()
@@ -420,8 +446,7 @@ class CellDaemon:
                 if answer.error:
                     raise StepFailed(answer.error)  # the core's verdict on these pictures: no use retrying
                 active.finishing = True
-                _later(self._recorder.reconstruction, job_id, self._clock() - active.started, reply.payload)
-                await self._succeed(active, answer, worker=worker, attempts=attempt)
+                await self._succeed(active, answer, reply.payload, worker=worker, attempts=attempt)
                 return
             raise StepFailed(f"gave up after {settings.max_attempts} attempts: {'; '.join(failures)}")
         except asyncio.CancelledError:
@@ -445,7 +470,9 @@ class CellDaemon:
         return ReconstructRequest(job_id=active.job_id, views=views, support_plane=self.config.support_plane,
                                   options=options)
 
-    async def _succeed(self, active: _ActiveJob, answer: ReconstructReply, *, worker: str, attempts: int) -> None:
+    async def _succeed(self, active: _ActiveJob, answer: ReconstructReply, reply_json: bytes, *, worker: str,
+                       attempts: int) -> None:
+        arrived = self._clock() - active.started
         result = answer.result
         scan_result = ScanResult(job_id=active.job_id, superquadric=result["superquadric"],
                                  silhouette_iou=result["silhouette_iou"], residual=result["residual"],
@@ -454,13 +481,16 @@ class CellDaemon:
                                  durations_s=active.durations_s,
                                  recording=str(self._recording_path(active.job_id)),
                                  worker=answer.worker or worker, attempts=attempts)
-        # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
-        now = self._clock()
-        await asyncio.shield(self._db.call(self._store.save_result, scan_result, now=now))
         total = result["timings_ms"].get("total", float("nan"))
         attempt = f" (attempt {attempts})" if attempts > 1 else ""
-        self._event(active.job_id, JobState.SUCCEEDED,
-                    f"reconstructed by {scan_result.worker} in {total:.1f} ms{attempt}", now=now)
+        event = JobEvent(job_id=active.job_id, state=JobState.SUCCEEDED, time=self._clock(), result=scan_result,
+                         message=f"reconstructed by {scan_result.worker} in {total:.1f} ms{attempt}")
+        # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
+        await asyncio.shield(self._db.call(self._store.save_result, scan_result, now=event.time, event=event))
+        self._publish(event)
+        # The client has its result: now the recording's share, whose hand-off would delay it.
+        _later(self._recorder.reconstruction, active.job_id, arrived, reply_json)
+        self._note(event)
 
     # --- requests ------------------------------------------------------------------------------
 
@@ -487,9 +517,9 @@ class CellDaemon:
             status, created = await self._db.call(self._store.add, scan, n_views=len(poses), now=self._clock())
         finally:
             self._submitting -= 1
-        if created:
-            self._event(status.job_id, status.state, "queued", now=status.created)
-            self._enqueue(status.job_id, scan)
+        if created:  # the store added the job's "queued" event with it
+            _later(self._publish, queued_event(status))
+            self._enqueue(status.job_id, scan, poses)
         return Response(status.model_dump_json())
 
     async def _on_status(self, request: Request) -> Response:

@@ -81,7 +81,8 @@ def cancel(cell: str, job_id: str) -> str:
 
 
 def events(cell: str, job_id: str = "*") -> str:
-    """Publications of JobEvent, one per state change or step of the job."""
+    """Publications of JobEvent, one per state change or step of the job; the ``succeeded``
+    event carries the job's ScanResult."""
     return f"{ROOT}/{cell}/events/{job_id}"
 
 

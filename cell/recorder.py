@@ -27,6 +27,7 @@ from __future__ import annotations
 import base64
 import logging
 import multiprocessing
+import os
 import queue
 import threading
 from multiprocessing.connection import Connection
@@ -36,6 +37,7 @@ __all__ = ["Recorder"]
 
 log = logging.getLogger(__name__)
 _STOP_WAIT_S = 10.0
+_NICENESS = 10
 _LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
 
@@ -116,6 +118,8 @@ class Recorder:
 def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -> None:
     """The recorder process: apply messages until told to stop, or until the daemon is gone."""
     logging.basicConfig(level=level or logging.INFO, format=_LOG_FORMAT)
+    # Recording is background work: on a busy machine the processes that run the jobs go first.
+    os.nice(_NICENESS)
     from .recording import JobRecording
 
     recordings: dict[str, JobRecording] = {}

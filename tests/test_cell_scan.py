@@ -70,6 +70,21 @@ def test_scan_goes_through_every_state_in_order(cell, scanned):
     assert times == sorted(times)
 
 
+def test_a_clients_scan_hears_every_event_and_gets_the_result_from_the_last(cell):
+    for label in ("first scan of this client", "second"):  # the second reuses the client's subscription
+        heard = []
+        result = cell.client.scan(ScanRequest(target=truth_target(cell.config), label=label),
+                                  timeout=JOB_TIMEOUT_S, on_event=heard.append)
+        states = [(e.state, e.view) for e in heard]
+        assert states == [(JobState.QUEUED, None), *[(state, view) for view in range(3)
+                                                      for state in (JobState.MOVING, JobState.CAPTURING)],
+                          (JobState.RECONSTRUCTING, None), (JobState.SUCCEEDED, None)]
+        assert {e.job_id for e in heard} == {result.job_id}
+        assert heard[-1].result == result == cell.client.result(result.job_id)
+        # The stored history leaves the result out: it is stored once.
+        assert cell.events(result.job_id)[-1] == heard[-1].model_copy(update={"result": None})
+
+
 def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
     status, result = scanned
     assert status.recording == result.recording
@@ -124,6 +139,9 @@ def test_plain_zenoh_client_with_only_the_documented_keys(cell):
     states = [e["state"] for e in events]
     assert states[-2:] == ["reconstructing", "succeeded"]
     assert all(e["job_id"] == job_id for e in events)
+    # The succeeded event carries the result: a client that watches events needs no further query.
+    assert events[-1]["result"] == result
+    assert all(e.get("result") is None for e in events[:-1])
 
 
 async def _ask(router: str, key: str, payload: str | bytes | None = None, parameters: str = ""):
