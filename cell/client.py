@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 #: Events of jobs nobody waits for yet, kept for that many jobs: a job's first events can
 #: arrive before the answer to its submit says which job it is.
 _EARLY_JOBS = 256
+_ALL_JOBS = "*"
 
 
 class JobFailed(CellError):
@@ -41,10 +42,10 @@ class AsyncCellClient:
         self._transport = transport
         self.cell = cell_id
         self.timeout = timeout
-        # One subscription to all the cell's events, opened by the first wait, shared by every wait.
+        # One subscription to all the cell's events, opened by the first wait or watch, shared by all.
         self._events: Subscription | None = None
         self._dispatcher: asyncio.Task | None = None
-        self._waiting: dict[str, list[asyncio.Queue]] = {}
+        self._listeners: dict[str, list[asyncio.Queue]] = {}    # job id (or _ALL_JOBS): its watchers
         self._early: OrderedDict[str, list[JobEvent]] = OrderedDict()
 
     @classmethod
@@ -122,13 +123,19 @@ class AsyncCellClient:
         return [JobStatus.model_validate(item) for item in json.loads(payload)]
 
     async def events(self, job_id: str = "*") -> AsyncIterator[JobEvent]:
-        """Events of one job (or all jobs), as they happen, until the caller stops iterating."""
-        subscription = self._transport.subscribe(keys.events(self.cell, job_id))
+        """Events of one job (or, with ``"*"``, of every job of the cell), as they happen, until the
+        caller stops iterating.
+
+        The client listens from its first scan, wait or watch on: a job's events that came
+        between then and this call come first (a job submitted by this client, say).
+        """
+        self._subscribe_events()
+        queue = self._listen(job_id)
         try:
-            async for sample in subscription:
-                yield parse(JobEvent, sample.payload)
+            while True:
+                yield await queue.get()
         finally:
-            subscription.close()
+            self._unlisten(job_id, queue)
 
     async def wait(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None = None,
                    poll_s: float = 1.0) -> JobStatus:
@@ -160,7 +167,9 @@ class AsyncCellClient:
             except ValueError as exc:
                 log.warning("ignoring an event on %s: %s", sample.key, exc)
                 continue
-            queues = self._waiting.get(event.job_id)
+            for queue in self._listeners.get(_ALL_JOBS, ()):
+                queue.put_nowait(event)
+            queues = self._listeners.get(event.job_id)
             if queues:
                 for queue in queues:
                     queue.put_nowait(event)
@@ -168,6 +177,21 @@ class AsyncCellClient:
             self._early.setdefault(event.job_id, []).append(event)
             while len(self._early) > _EARLY_JOBS:
                 self._early.popitem(last=False)
+
+    def _listen(self, job_id: str) -> asyncio.Queue[JobEvent]:
+        """A queue that gets the job's events (every job's, for ``"*"``), those heard early first."""
+        queue: asyncio.Queue[JobEvent] = asyncio.Queue()
+        if job_id != _ALL_JOBS:
+            for early in self._early.pop(job_id, []):
+                queue.put_nowait(early)
+        self._listeners.setdefault(job_id, []).append(queue)
+        return queue
+
+    def _unlisten(self, job_id: str, queue: asyncio.Queue) -> None:
+        queues = self._listeners[job_id]
+        queues.remove(queue)
+        if not queues:
+            del self._listeners[job_id]
 
     async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
                              poll_s: float, heard_from_start: bool = False) -> tuple[JobState, JobEvent | None]:
@@ -178,10 +202,7 @@ class AsyncCellClient:
         event of it can have been missed and the status need not be asked first.
         """
         heard_from_start = self._subscribe_events() and heard_from_start
-        queue: asyncio.Queue[JobEvent] = asyncio.Queue()
-        for early in self._early.pop(job_id, []):
-            queue.put_nowait(early)
-        self._waiting.setdefault(job_id, []).append(queue)
+        queue = self._listen(job_id)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         try:
@@ -204,10 +225,7 @@ class AsyncCellClient:
                     return state, event
             return state, None
         finally:
-            queues = self._waiting[job_id]
-            queues.remove(queue)
-            if not queues:
-                del self._waiting[job_id]
+            self._unlisten(job_id, queue)
 
     async def scan(self, request: ScanRequest, *, timeout: float = 120.0,
                    on_event: Callable[[JobEvent], None] | None = None, poll_s: float = 1.0) -> ScanResult:

@@ -8,6 +8,8 @@ one client speaks nothing but plain ``zenoh`` and the documented keys.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import subprocess
 import sys
@@ -18,6 +20,7 @@ import pytest
 import zenoh
 
 from cell import keys
+from cell.client import AsyncCellClient
 from cell.errors import RemoteError
 from cell.messages import JobState, MoveRequest, ScanRequest
 from cell.recording import recording_summary
@@ -70,19 +73,49 @@ def test_scan_goes_through_every_state_in_order(cell, scanned):
     assert times == sorted(times)
 
 
+# The (state, view) of every event of a scan that succeeds, in order.
+WHOLE_SCAN = [(JobState.QUEUED, None), *[(state, view) for view in range(3)
+                                         for state in (JobState.MOVING, JobState.CAPTURING)],
+              (JobState.RECONSTRUCTING, None), (JobState.SUCCEEDED, None)]
+
+
 def test_a_clients_scan_hears_every_event_and_gets_the_result_from_the_last(cell):
     for label in ("first scan of this client", "second"):  # the second reuses the client's subscription
         heard = []
         result = cell.client.scan(ScanRequest(target=truth_target(cell.config), label=label),
                                   timeout=JOB_TIMEOUT_S, on_event=heard.append)
-        states = [(e.state, e.view) for e in heard]
-        assert states == [(JobState.QUEUED, None), *[(state, view) for view in range(3)
-                                                      for state in (JobState.MOVING, JobState.CAPTURING)],
-                          (JobState.RECONSTRUCTING, None), (JobState.SUCCEEDED, None)]
+        assert [(e.state, e.view) for e in heard] == WHOLE_SCAN
         assert {e.job_id for e in heard} == {result.job_id}
         assert heard[-1].result == result == cell.client.result(result.job_id)
         # The stored history leaves the result out: it is stored once.
         assert cell.events(result.job_id)[-1] == heard[-1].model_copy(update={"result": None})
+
+
+def test_watching_one_job_and_every_job_loses_no_event(cell):
+    """``events(job)`` started after the job's submit still gets its first events; ``events()``
+    watches every job. Both ride on the client's one subscription."""
+    request = ScanRequest(target=truth_target(cell.config), label="watched")
+
+    async def until_ended(stream, n_jobs: int) -> dict[str, list]:
+        heard: dict[str, list] = {}
+        async with contextlib.aclosing(stream):
+            async for event in stream:
+                heard.setdefault(event.job_id, []).append((event.state, event.view))
+                if sum(steps[-1][0].finished for steps in heard.values()) == n_jobs:
+                    return heard
+
+    async def watch():
+        async with await AsyncCellClient.connect(cell.router, cell.config.cell_id) as client:
+            every_job = asyncio.create_task(until_ended(client.events(), n_jobs=2))
+            await asyncio.sleep(0)  # the watch has begun
+            await client.cell_status()  # a round trip: the router has the subscription before the submits
+            first, second = await client.submit(request), await client.submit(request)
+            one_job = await asyncio.wait_for(until_ended(client.events(second.job_id), n_jobs=1), JOB_TIMEOUT_S)
+            return first.job_id, second.job_id, one_job, await asyncio.wait_for(every_job, JOB_TIMEOUT_S)
+
+    first, second, one_job, every_job = cell.loop.run(watch(), timeout=2 * JOB_TIMEOUT_S)
+    assert one_job == {second: WHOLE_SCAN}
+    assert every_job == {first: WHOLE_SCAN, second: WHOLE_SCAN}
 
 
 def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
