@@ -358,7 +358,7 @@ class CellDaemon:
             active = _ActiveJob(job_id, *queued, started=self._clock())
             self._active[job_id] = active
             _later(self._recorder.open, job_id, self._recording_path(job_id))
-            active.task = asyncio.create_task(self._acquire(active))
+            active.task = self._spawn(self._acquire(active))  # a stopping daemon cancels it too
             # asyncio.wait, unlike await, does not raise when the job (not the lane) is cancelled.
             await asyncio.wait({active.task})
 

@@ -129,3 +129,21 @@ def test_daemon_killed_mid_job_restarts_keeping_results(cell, pipelined):
         assert status.state is JobState.SUCCEEDED, status.error
         assert cell.client.result(job_id).job_id == job_id
     assert cell.tracebacks() == {}
+
+
+def test_daemon_stopped_mid_job_commands_the_robot_no_further(cell):
+    """A daemon stopped (SIGTERM) while the robot moves for a job ends that job's steps with it:
+    no capture, no next move. Restarted, it fails the job as interrupted."""
+    status = cell.submit(label="stopped mid-move")
+    moving = cell.wait_state(status.job_id, {JobState.MOVING})
+    moves_of_the_job = lambda: cell.log("robot").count(f"for job {status.job_id}")  # noqa: E731
+    before = moves_of_the_job()
+    assert cell.loop.run(cell.processes.stop_child("daemon")) == 0
+    time.sleep(3 * MOVE_TIME_S)  # long enough for a capture and the next move, had the job gone on
+    assert moves_of_the_job() <= before + 1  # the move under way may end; no other begins
+    assert cell.events(status.job_id)[-1].state is JobState.MOVING
+    assert [e.view for e in cell.events(status.job_id) if e.state is JobState.MOVING][-1] == moving.view
+    assert cell.tracebacks() == {}
+    cell.loop.run(cell.processes.start_child("daemon"))
+    final = cell.wait(status.job_id, timeout=10)
+    assert final.state is JobState.FAILED and "interrupted" in final.error
