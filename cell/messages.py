@@ -87,9 +87,10 @@ def parse(model: type[BaseModel], payload: bytes | str | None) -> BaseModel:
 class ViewPlan(BaseModel):
     """Where to look at a target from: one view per (elevation, azimuth), at ``standoff`` metres."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     standoff: Annotated[float, Field(gt=0.05, le=3.0)] = 0.5
-    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, le=90)]], Field(min_length=2)] = [55.0, 40.0, 35.0]
+    # Below 90: looking straight down, the camera's image "up" is undefined.
+    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, lt=90)]], Field(min_length=2)] = [55.0, 40.0, 35.0]
     azimuths_deg: Annotated[list[float], Field(min_length=2)] = [0.0, 120.0, 240.0]
 
     @model_validator(mode="after")
