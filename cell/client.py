@@ -122,14 +122,19 @@ class AsyncCellClient:
         payload = await self._ask(keys.jobs(self.cell), parameters=parameters)
         return [JobStatus.model_validate(item) for item in json.loads(payload)]
 
+    def listen(self) -> None:
+        """Hear the cell's events from now on, so that a wait or watch begun after a submit
+        still gets the job's first events. :meth:`scan` does this itself."""
+        self._subscribe_events()
+
     async def events(self, job_id: str = "*") -> AsyncIterator[JobEvent]:
         """Events of one job (or, with ``"*"``, of every job of the cell), as they happen, until the
         caller stops iterating.
 
-        The client listens from its first scan, wait or watch on: a job's events that came
-        between then and this call come first (a job submitted by this client, say).
+        Listening begins at the first iteration, or earlier with :meth:`listen`: a job's events
+        that came between then and this call come first.
         """
-        self._subscribe_events()
+        self.listen()
         queue = self._listen(job_id)
         try:
             while True:

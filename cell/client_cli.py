@@ -59,6 +59,8 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
             request = ScanRequest(flange_poses=json.load(file), label=args.label, request_id=args.request_id)
     else:
         request = ScanRequest(target=args.target, label=args.label, request_id=args.request_id)
+    if not args.no_wait:
+        client.listen()  # before the submit: the job's first events can come before its answer
     status = await client.submit(request)
     print(f"job {status.job_id} {status.state.value}", flush=True)
     if args.no_wait:
