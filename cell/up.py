@@ -262,10 +262,18 @@ def up(config: CellConfig) -> int:
         for signum in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(signum, stop.set)
         try:
-            await cell.start()
+            # Ctrl-C is heard while the parts start too (that can take a minute, if one hangs).
+            starting = asyncio.ensure_future(cell.start())
+            stopped = asyncio.ensure_future(stop.wait())
+            await asyncio.wait({starting, stopped}, return_when=asyncio.FIRST_COMPLETED)
+            if not starting.done():
+                starting.cancel()
+                await asyncio.gather(starting, return_exceptions=True)
+                print("stopped while starting", file=sys.stderr)
+                return 0
+            starting.result()
             print(f"cell {config.cell_id} is up: router {config.zenoh.router}, run directory "
                   f"{config.run_dir}, logs in {cell.log_dir}. Ctrl-C stops it.", flush=True)
-            stopped = asyncio.ensure_future(stop.wait())
             exited = asyncio.ensure_future(cell.wait())
             await asyncio.wait({stopped, exited}, return_when=asyncio.FIRST_COMPLETED)
             if exited.done():
