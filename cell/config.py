@@ -11,9 +11,11 @@ import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
+from urllib.parse import urlsplit
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, SecretStr, ValidationError, field_serializer,
+                      model_validator)
 
 from workers.kuka.config import KukaConfig
 
@@ -42,11 +44,21 @@ class ZenohConfig(_Section):
     user: str | None = None
 
     def client_settings(self) -> dict[str, object]:
-        """What a client session (every process but the router) adds to its configuration."""
+        """What a client session (every process but the router) adds to its configuration.
+
+        Raises
+        ------
+        ConfigError
+            If ``user`` is set but ROBOCELL_ZENOH_PASSWORD is not (the router would refuse the
+            session with nothing better than "unable to connect").
+        """
         settings = dict(self.settings)
         if self.user is not None:
+            password = os.environ.get("ROBOCELL_ZENOH_PASSWORD")
+            if not password:
+                raise ConfigError(f"zenoh.user is {self.user!r}, but ROBOCELL_ZENOH_PASSWORD, its password, is not set")
             settings["transport/auth/usrpwd/user"] = self.user
-            settings["transport/auth/usrpwd/password"] = os.environ.get("ROBOCELL_ZENOH_PASSWORD", "")
+            settings["transport/auth/usrpwd/password"] = password
         return settings
 
     def router_session_settings(self) -> dict[str, object]:
@@ -86,15 +98,39 @@ class RobotConfig(_Section):
     publish_rate_hz: Annotated[float, Field(gt=0, le=200)] = 20.0
 
 
+def _camera_url(url: str) -> str:
+    # The URL is shown in logs and messages and stored in the run directory: no credentials in it.
+    parts = urlsplit(url)
+    if parts.username is not None or parts.password is not None:
+        raise ValueError("no user or password in the URL: put the user in camera.username and the password "
+                         "in ROBOCELL_CAMERA_PASSWORD")
+    try:
+        parts.port  # raises on a bad port
+    except ValueError:  # not shown: what looks like a port may be a password with a "/" in it
+        raise ValueError("its port is not a number from 0 to 65535") from None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        shown = repr(url) if "@" not in url else "a URL with an @ in it (a password?)"
+        raise ValueError(f"must be http:// or https:// with a host, got {shown}")
+    return url
+
+
+def _distortion(dist: list[float] | None) -> list[float] | None:
+    if dist is not None and len(dist) not in (4, 5, 8, 12, 14):
+        raise ValueError(f"OpenCV takes 4, 5, 8, 12 or 14 distortion coefficients, got {len(dist)}")
+    return dist
+
+
 class CameraConfig(_Section):
-    url: str = "http://127.0.0.1:8080"
-    resolution: tuple[int, int] = (640, 480)
+    url: Annotated[str, AfterValidator(_camera_url)] = "http://127.0.0.1:8080"
+    resolution: tuple[Annotated[int, Field(gt=0)], Annotated[int, Field(gt=0)]] = (640, 480)
     username: str | None = None
-    #: Prefer the environment variable ROBOCELL_CAMERA_PASSWORD to writing it here.
+    #: Prefer the environment variable ROBOCELL_CAMERA_PASSWORD to writing it here. Never written
+    #: out: ``robocell config`` and the run directory's copy show null.
     password: SecretStr | None = None
     auth: Literal["digest", "basic"] = "digest"
-    K: list[list[float]] = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
-    dist: list[float] | None = None
+    K: Annotated[list[Annotated[list[float], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)] \
+        = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
+    dist: Annotated[list[float] | None, AfterValidator(_distortion)] = None
     timeout_s: Annotated[float, Field(gt=0)] = 3.0
     retries: Annotated[int, Field(ge=0, le=10)] = 2
     #: HTTPS certificate check: true (the system's CAs), false (none: only on a closed network),
@@ -103,11 +139,31 @@ class CameraConfig(_Section):
     #: Axis JPEG compression 0-100 (higher: smaller files, more artefacts); None: the camera's default.
     compression: Annotated[int, Field(ge=0, le=100)] | None = None
 
+    @field_serializer("password")
+    def _unwritten(self, password: SecretStr | None) -> None:
+        return None
+
     def resolved_password(self) -> str | None:
         from_env = os.environ.get("ROBOCELL_CAMERA_PASSWORD")
         if from_env:
             return from_env
         return self.password.get_secret_value() if self.password else None
+
+    def credentials(self) -> tuple[str | None, str | None]:
+        """(user, password) for the camera, or (None, None) without a user.
+
+        Raises
+        ------
+        ConfigError
+            If a user is set but no password (neither ROBOCELL_CAMERA_PASSWORD nor camera.password).
+        """
+        if self.username is None:
+            return None, None
+        password = self.resolved_password()
+        if not password:
+            raise ConfigError(f"camera.username is {self.username!r}, but it has no password: set "
+                              f"ROBOCELL_CAMERA_PASSWORD (or camera.password)")
+        return self.username, password
 
 
 class ScanConfig(_Section):
@@ -147,9 +203,15 @@ class Timeouts(_Section):
     heartbeat_s: Annotated[float, Field(gt=0)] = 5.0
 
 
+def _run_dir(path: Path) -> Path:
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{str(path)!r} is a file, not a directory")
+    return path
+
+
 class CellConfig(_Section):
     cell_id: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")] = "cell1"
-    run_dir: Path = Path("runs")
+    run_dir: Annotated[Path, AfterValidator(_run_dir)] = Path("runs")
     zenoh: ZenohConfig = ZenohConfig()
     robot: RobotConfig = RobotConfig()
     camera: CameraConfig = CameraConfig()

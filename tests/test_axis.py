@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from cell.config import CameraConfig, SimConfig
-from cell.errors import CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout
+from cell.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+                         ConfigError)
 from cell.sim.scans import default_K, look_at, object_target
 from workers.axis import AxisCamera
 from cell.sim.scene import scene_from_config
@@ -177,6 +178,22 @@ def test_from_config(server, monkeypatch):
             return await camera.snapshot()
 
     assert decodes(asyncio.run(go())) == (240, 320, 3)
+
+
+def test_from_config_names_what_is_missing(tmp_path, monkeypatch):
+    monkeypatch.delenv("ROBOCELL_CAMERA_PASSWORD", raising=False)
+    with pytest.raises(ConfigError, match="camera.username is 'root', but it has no password: set "
+                                          "ROBOCELL_CAMERA_PASSWORD"):
+        AxisCamera.from_config(CameraConfig(username="root"))
+    missing = tmp_path / "ca.pem"
+    with pytest.raises(ConfigError, match=f"camera.verify: cannot use '{missing}' as a CA bundle: No such file"):
+        AxisCamera.from_config(CameraConfig(url="https://camera.test", verify=str(missing)))
+
+
+def test_a_url_that_cannot_be_parsed_is_not_echoed_when_it_holds_credentials():
+    with pytest.raises(ValueError, match=r"invalid camera URL \(not shown: it holds credentials\)") as info:
+        AxisCamera("http://root:Hunter2/x@camera.test")
+    assert "Hunter2" not in str(info.value)
 
 
 # -- protocol edge cases through httpx.MockTransport ------------------------------------------

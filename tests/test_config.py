@@ -28,6 +28,10 @@ def test_no_file_gives_the_defaults_and_a_file_overrides_them(tmp_path):
     ("[timeouts]\nmove_s = inf\n", "timeouts.move_s: Input should be a finite number"),
     ("[scan]\nplan = { azimuths_deg = [0, nan, 240] }\n", "scan.plan.azimuths_deg.1: Input should be a finite"),
     ("[robot\n", "not valid TOML"),
+    ("[camera]\nurl = '192.168.0.90'\n", "camera.url: Value error, must be http:// or https:// with a host"),
+    ("[camera]\nK = [[600, 0, 320], [0, 600, 240]]\n", "camera.K: List should have at least 3 items"),
+    ("[camera]\nresolution = [640, 0]\n", "camera.resolution.1: Input should be greater than 0"),
+    ("[camera]\ndist = [0.1]\n", "camera.dist: .*4, 5, 8, 12 or 14 distortion coefficients, got 1"),
 ])
 def test_an_invalid_file_is_refused_naming_the_file_and_the_field(tmp_path, text, named):
     path = tmp_path / "cell.toml"
@@ -39,3 +43,43 @@ def test_an_invalid_file_is_refused_naming_the_file_and_the_field(tmp_path, text
 def test_a_missing_file_is_named():
     with pytest.raises(ConfigError, match="configuration file 'nowhere.toml' not found"):
         load_config("nowhere.toml")
+
+
+@pytest.mark.parametrize("url", ["http://root:s3cret@192.168.0.90", "http://root:s3c/ret@192.168.0.90"])
+def test_a_camera_password_is_refused_in_the_url_and_never_shown(tmp_path, url):
+    path = tmp_path / "cell.toml"
+    path.write_text(f"[camera]\nurl = '{url}'\n")
+    with pytest.raises(ConfigError, match="camera.url") as info:
+        load_config(path)
+    assert "s3c" not in str(info.value)
+
+
+def test_a_camera_password_is_never_written_out(tmp_path):
+    """``robocell config`` and the run directory's copy of the configuration leave it out."""
+    path = tmp_path / "cell.toml"
+    path.write_text("[camera]\nusername = 'root'\npassword = 's3cret'\n")
+    config = load_config(path)
+    assert config.camera.credentials() == ("root", "s3cret")
+    written = config.model_dump_json()
+    assert "s3cret" not in written and '"password":null' in written
+    copy = tmp_path / "copy.json"
+    copy.write_text(written)
+    assert load_config(copy).camera.password is None  # not a masked string taken for the password
+
+
+def test_a_run_directory_that_is_a_file_is_refused(tmp_path):
+    (tmp_path / "runs").write_text("")
+    path = tmp_path / "cell.toml"
+    path.write_text(f"run_dir = '{tmp_path / 'runs'}'\n")
+    with pytest.raises(ConfigError, match="run_dir: Value error, .* is a file, not a directory"):
+        load_config(path)
+
+
+def test_a_zenoh_user_needs_its_password_in_the_environment(monkeypatch):
+    config = CellConfig.model_validate({"zenoh": {"user": "cell"}})
+    monkeypatch.delenv("ROBOCELL_ZENOH_PASSWORD", raising=False)
+    with pytest.raises(ConfigError, match="zenoh.user is 'cell', but ROBOCELL_ZENOH_PASSWORD, its password, "
+                                          "is not set"):
+        config.zenoh.client_settings()
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", "pw")
+    assert config.zenoh.client_settings()["transport/auth/usrpwd/password"] == "pw"

@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING, Literal
 
 import httpx
 
-from cell.errors import CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout
+from cell.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+                         ConfigError)
 
 if TYPE_CHECKING:
     from cell.config import CameraConfig
@@ -131,7 +132,9 @@ class AxisCamera:
         try:
             parsed = httpx.URL(url)
         except httpx.InvalidURL as exc:
-            raise ValueError(f"invalid camera URL: {exc}") from None
+            # httpx quotes the part it could not parse: with credentials in the URL, a password.
+            raise ValueError("invalid camera URL" + (f": {exc}" if "@" not in url else
+                                                     " (not shown: it holds credentials)")) from None
         safe = str(parsed.copy_with(username=None, password=None)).rstrip("/")
         if parsed.scheme not in ("http", "https") or not parsed.host:
             raise ValueError(f"camera URL must be http:// or https:// with a host, got {safe!r}")
@@ -166,12 +169,23 @@ class AxisCamera:
         """The camera described by the cell's ``[camera]`` section (password from the environment first).
 
         ``verify`` may name a CA bundle: the certificate check then trusts that CA.
+
+        Raises
+        ------
+        ConfigError
+            If the CA bundle cannot be read, or a user has no password.
         """
-        verify = ssl.create_default_context(cafile=camera.verify) if isinstance(camera.verify, str) \
-            else camera.verify
+        verify = camera.verify
+        if isinstance(verify, str):
+            try:
+                verify = ssl.create_default_context(cafile=verify)
+            except (OSError, ssl.SSLError) as exc:
+                raise ConfigError(f"camera.verify: cannot use {camera.verify!r} as a CA bundle: "
+                                  f"{exc.strerror or exc}") from None
+        username, password = camera.credentials()
         return cls(
-            camera.url, resolution=tuple(camera.resolution), username=camera.username,
-            password=camera.resolved_password(), auth=camera.auth, timeout_s=camera.timeout_s,
+            camera.url, resolution=tuple(camera.resolution), username=username,
+            password=password, auth=camera.auth, timeout_s=camera.timeout_s,
             retries=camera.retries, verify=verify, compression=camera.compression, transport=transport,
         )
 

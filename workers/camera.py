@@ -47,9 +47,10 @@ def main(config: CellConfig) -> int:
     settings = config.camera
 
     async def run(stop: asyncio.Event) -> None:
+        camera = AxisCamera.from_config(settings)  # a bad setting is named before anything connects
         transport = await open_transport(config)
         try:
-            async with AxisCamera.from_config(settings) as camera:
+            async with camera:
                 serve_camera(transport, config, camera)
                 transport.declare_token(keys.alive(config.cell_id, "camera"))
                 log.info("camera worker of cell %s ready: %s", config.cell_id, camera.source)

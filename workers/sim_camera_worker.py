@@ -17,6 +17,7 @@ import zenoh
 
 from cell import keys
 from cell.config import CellConfig
+from cell.errors import ConfigError, TransportError
 from cell.messages import RobotState
 from cell.transport import session_config
 
@@ -40,23 +41,41 @@ def robot_camera_pose(session: zenoh.Session, config: CellConfig) -> np.ndarray 
 
 
 def main(config: CellConfig) -> int:
+    """Serve until SIGINT/SIGTERM.
+
+    Raises
+    ------
+    CellError
+        If the router cannot be reached, the camera's address cannot be served, or a user
+        has no password (each named).
+    """
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    session = zenoh.open(session_config(config.zenoh.router, settings=config.zenoh.client_settings(),
-                                        connect_timeout_ms=10_000))
     camera = config.camera
+    username, password = camera.credentials()
     address = urlsplit(camera.url)  # the simulated camera serves where the camera worker looks
+    host, port = address.hostname or "127.0.0.1", address.port or 80
+    try:
+        session = zenoh.open(session_config(config.zenoh.router, settings=config.zenoh.client_settings(),
+                                            connect_timeout_ms=10_000))
+    except zenoh.ZError as exc:
+        raise TransportError(f"cannot reach the Zenoh router at {config.zenoh.router}: {exc}") from None
     try:
         server = SimCameraServer(
             scene_from_config(config.sim), K=np.asarray(camera.K), image_size=tuple(camera.resolution),
-            dist=camera.dist, pose_provider=lambda: robot_camera_pose(session, config),
-            host=address.hostname or "127.0.0.1", port=address.port or 80, username=camera.username,
-            password=camera.resolved_password(), auth=camera.auth if camera.username else None,
-            seed=config.sim.seed)
-        with server:
+            dist=camera.dist, pose_provider=lambda: robot_camera_pose(session, config), host=host, port=port,
+            username=username, password=password, auth=camera.auth if username else None, seed=config.sim.seed)
+        try:
+            server.start()
+        except OSError as exc:
+            raise ConfigError(f"the simulated camera cannot serve camera.url at {host}:{port}: "
+                              f"{exc.strerror or exc}") from None
+        try:
             log.info("simulated camera serving %s", server.url)
             stop.wait()
+        finally:
+            server.stop()
     finally:
         session.close()
     return 0
