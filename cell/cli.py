@@ -12,6 +12,7 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse
 import json
 import logging
+import re
 import sys
 
 from core_cy.errors import CoreError
@@ -62,6 +63,14 @@ def _sim_command(args: argparse.Namespace) -> int:
     from .sim import cli as sim_cli
 
     return sim_cli.run(args)
+
+
+def _worker_id(text: str) -> str:
+    # The id is a Zenoh key chunk: no "/", and none of the characters key expressions reserve.
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}", text):
+        raise argparse.ArgumentTypeError(f"{text!r}: use letters, digits, '.', '_' and '-' (starting with a letter "
+                                         f"or digit), at most 128")
+    return text
 
 
 def _worker_command(args: argparse.Namespace) -> int:
@@ -167,7 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     worker = commands.add_parser("worker", help="run a robot, camera or reconstruction worker")
     worker.add_argument("kind", choices=["robot", "camera", "reconstruct"])
-    worker.add_argument("--id", help="reconstruction worker id (default: host-pid)")
+    worker.add_argument("--id", type=_worker_id, help="reconstruction worker id: letters, digits, '.', '_' "
+                                                       "and '-' (default: host-pid)")
     worker.set_defaults(run=_worker_command)
 
     commands.add_parser("cell", help="run the cell daemon").set_defaults(run=_cell_command)
@@ -204,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         return args.run(args)
-    except (CellError, FileNotFoundError) as exc:
+    except (CellError, OSError) as exc:  # OSError: a file or directory that cannot be read or made
         print(f"robocell {args.command}: {exc}", file=sys.stderr)
         return 1
     except ValueError as exc:  # option values the parser could not check

@@ -8,6 +8,7 @@ import signal
 from collections.abc import Awaitable, Callable
 
 from .config import CellConfig
+from .errors import CellError
 from .transport import Transport
 
 __all__ = ["run_until_stopped", "open_transport"]
@@ -28,7 +29,9 @@ async def open_transport(config: CellConfig, *, lease_ms: int | None = WORKER_LE
 def run_until_stopped(main: Callable[[asyncio.Event], Awaitable[None]], name: str) -> int:
     """Run ``main(stop)`` until it returns or SIGINT/SIGTERM sets ``stop``; 0 on a clean stop.
 
-    A fatal error is logged and gives exit status 1: it is reported, not swallowed.
+    A fatal error is logged and gives exit status 1: it is reported, not swallowed. An error
+    robocell expects (a ``CellError``: an unreachable router or robot, a bad setting) is one
+    line that says what is wrong; anything else comes with its traceback.
     """
 
     async def runner() -> None:
@@ -40,6 +43,9 @@ def run_until_stopped(main: Callable[[asyncio.Event], Awaitable[None]], name: st
 
     try:
         asyncio.run(runner())
+    except CellError as exc:
+        log.error("%s stopped: %s", name, exc)
+        return 1
     except Exception:
         log.exception("%s stopped on an error", name)
         return 1

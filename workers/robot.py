@@ -148,14 +148,16 @@ def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
         backend = make_backend(config.robot)
         await backend.open()
-        transport = await open_transport(config)
         try:
-            serve_robot(transport, config, backend)
-            transport.declare_token(keys.alive(config.cell_id, "robot"))
-            log.info("robot worker (%s) of cell %s ready", config.robot.backend, config.cell_id)
-            await stop.wait()
+            transport = await open_transport(config)
+            try:
+                serve_robot(transport, config, backend)
+                transport.declare_token(keys.alive(config.cell_id, "robot"))
+                log.info("robot worker (%s) of cell %s ready", config.robot.backend, config.cell_id)
+                await stop.wait()
+            finally:
+                await transport.close()
         finally:
-            await transport.close()
-            await backend.close()
+            await backend.close()  # the controller's link too, when the router cannot be reached
 
     return run_until_stopped(run, "robot worker")
