@@ -6,7 +6,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.robocell-installed
 
-.PHONY: demo test bench bench-cell bench-scale contract clean
+.PHONY: install demo test bench bench-cell bench-scale contract clean
+
+# A bare `make`: the venv with robocell installed, nothing run.
+install: $(STAMP)
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
