@@ -1,7 +1,8 @@
 """The cell daemon's job store: every scan job, its events and its result in one SQLite file.
 
-Each method is one short transaction, called straight from the daemon's event
-loop. Every commit is synced to disk (WAL journal, ``synchronous=FULL``), so a
+Each method is one short transaction. A store belongs to the thread that opened
+it (an SQLite connection does): the daemon keeps its own in a thread of its
+own, and calls it there, in order. Every commit is synced to disk (WAL journal, ``synchronous=FULL``), so a
 job is durable once :meth:`JobStore.add` returns, even if the daemon is killed
 with ``kill -9`` right after.
 
