@@ -12,12 +12,12 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse
 import json
 import logging
-import re
 import sys
 
 from core_cy.errors import CoreError
 from core_cy.reconstruct import Options, reconstruct
 
+from . import keys
 from .bundle import load_bundle
 from .config import CellConfig, load_config
 from .errors import BundleError, CellError
@@ -66,8 +66,7 @@ def _sim_command(args: argparse.Namespace) -> int:
 
 
 def _worker_id(text: str) -> str:
-    # The id is a Zenoh key chunk: no "/", and none of the characters key expressions reserve.
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}", text):
+    if not keys.WORKER_ID.fullmatch(text):
         raise argparse.ArgumentTypeError(f"{text!r}: use letters, digits, '.', '_' and '-' (starting with a letter "
                                          f"or digit), at most 128")
     return text

@@ -44,10 +44,12 @@ ticket in its reply.
 
 from __future__ import annotations
 
+import re
+
 __all__ = [
     "submit", "jobs", "job", "result", "cancel", "events", "robot_move", "robot_state",
     "camera_capture", "alive", "status", "reconstructor", "reconstructor_alive", "reconstructor_info",
-    "reconstructor_heartbeat", "ticket", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
+    "reconstructor_heartbeat", "ticket", "WORKER_ID", "safe_worker_id", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
     "HEARTBEAT_CHANGE_GAP_S",
 ]
 
@@ -112,6 +114,18 @@ def camera_capture(cell: str) -> str:
 def alive(cell: str, part: str = "*") -> str:
     """Liveliness tokens of a cell's daemon, robot and camera workers."""
     return f"{ROOT}/{cell}/alive/{part}"
+
+
+# A reconstruction worker's id is one key chunk: no "/", and none of the characters key
+# expressions reserve ("*", "$", "?", "#").
+_WORKER_ID_CHARACTERS = "A-Za-z0-9._-"
+#: What a worker id must match: letters, digits, ".", "_" and "-", starting with a letter or digit.
+WORKER_ID = re.compile(rf"[A-Za-z0-9][{_WORKER_ID_CHARACTERS}]{{0,127}}")
+
+
+def safe_worker_id(text: str) -> str:
+    """``text`` with each character a worker id cannot hold made "_"."""
+    return re.sub(rf"[^{_WORKER_ID_CHARACTERS}]", "_", text)
 
 
 def reconstructor(worker_id: str) -> str:

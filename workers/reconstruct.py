@@ -20,7 +20,6 @@ import gc
 import itertools
 import logging
 import os
-import re
 import signal
 import socket
 import sys
@@ -51,7 +50,7 @@ _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3     # glibc's mallopt parameters
 
 def default_worker_id() -> str:
     """``<host>-<pid>``, with anything a Zenoh key chunk cannot hold made "_"."""
-    return re.sub(r"[^A-Za-z0-9._-]", "_", f"{socket.gethostname()}-{os.getpid()}")
+    return keys.safe_worker_id(f"{socket.gethostname()}-{os.getpid()}")
 
 
 def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> str:
