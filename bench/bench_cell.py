@@ -40,28 +40,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cell import keys  # noqa: E402
 from cell.client import AsyncCellClient  # noqa: E402
 from cell.config import CellConfig  # noqa: E402
-from cell.demo import free_port  # noqa: E402
+from cell.demo import local_config  # noqa: E402
 from cell.messages import (CaptureInfo, CaptureRequest, JobState, MoveReply, MoveRequest, ScanRequest,  # noqa: E402
                            ScanResult, parse)
 from cell.plan import plan_flange_poses  # noqa: E402
-from cell.sim.scene import truth_from_config  # noqa: E402
+from cell.sim.scene import target_from_config  # noqa: E402
 from cell.store import JobStore  # noqa: E402
 from cell.transport import Transport  # noqa: E402
 from cell.up import CellProcesses  # noqa: E402
-from core_cy.superquadric import Superquadric  # noqa: E402
 
 
 def _config(run_dir: Path, **robot) -> CellConfig:
-    return CellConfig.model_validate({
-        "cell_id": "bench", "run_dir": str(run_dir),
-        "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
-        "camera": {"url": f"http://127.0.0.1:{free_port()}"},
-        "robot": {"speed": 0.0, "rotation_speed_deg": 0.0, **robot},
-    })
-
-
-def _target(config: CellConfig) -> list[float]:
-    return Superquadric.from_dict(truth_from_config(config.sim)).T_world_object[:3, 3].tolist()
+    return local_config(run_dir, cell_id="bench", robot={"speed": 0.0, "rotation_speed_deg": 0.0, **robot})
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -114,7 +104,7 @@ async def overhead(n_jobs: int, run_dir: Path) -> float:
     try:
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
-            request = ScanRequest(target=_target(config))
+            request = ScanRequest(target=target_from_config(config.sim))
             await _one_job(client, request)  # warm-up: imports, first connections
             rows = []
             for _ in range(n_jobs):
@@ -159,7 +149,7 @@ async def pipelining(n_jobs: int, move_time: float, run_dir: Path, lane_floor: f
     try:
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
-            request = ScanRequest(target=_target(config))
+            request = ScanRequest(target=target_from_config(config.sim))
             began = time.perf_counter()
             ids = [(await client.submit(request)).job_id for _ in range(n_jobs)]
             for job_id in ids:

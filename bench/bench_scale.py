@@ -41,26 +41,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cell import keys  # noqa: E402
 from cell.client import AsyncCellClient  # noqa: E402
 from cell.config import CellConfig  # noqa: E402
-from cell.demo import free_port  # noqa: E402
+from cell.demo import local_config  # noqa: E402
 from cell.messages import (CameraModel, JobState, ReconstructReply, ReconstructRequest,  # noqa: E402
                            ReconstructView, ScanRequest)
 from cell.pool import ReconstructorPool  # noqa: E402
 from cell.sim.scans import standard_set  # noqa: E402
-from cell.sim.scene import truth_from_config  # noqa: E402
+from cell.sim.scene import target_from_config  # noqa: E402
 from cell.store import JobStore  # noqa: E402
 from cell.transport import Transport  # noqa: E402
 from cell.up import CellProcesses  # noqa: E402
-from core_cy.superquadric import Superquadric  # noqa: E402
 
 
 def _config(run_dir: Path, **fields) -> CellConfig:
-    return CellConfig.model_validate({
-        "cell_id": "bench", "run_dir": str(run_dir),
-        "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
-        "camera": {"url": f"http://127.0.0.1:{free_port()}"},
-        "robot": {"speed": 0.0, "rotation_speed_deg": 0.0},
-        **fields,
-    })
+    return local_config(run_dir, cell_id="bench", robot={"speed": 0.0, "rotation_speed_deg": 0.0}, **fields)
 
 
 # --- (a) throughput --------------------------------------------------------------------------------
@@ -196,7 +189,7 @@ async def scaling(n_jobs: int, root: Path) -> None:
 async def burst(n_jobs: int, root: Path) -> None:
     config = _config(root / "burst", max_queued=max(100, 2 * n_jobs),
                      timeouts={"reconstruct_s": 120.0, "heartbeat_s": 10.0})
-    target = Superquadric.from_dict(truth_from_config(config.sim)).T_world_object[:3, 3].tolist()
+    target = target_from_config(config.sim)
     requests = [ScanRequest(target=target, request_id=f"burst-{k:04d}", label=f"burst {k}") for k in range(n_jobs)]
     cell = CellProcesses(config, reconstructors=2)
     try:

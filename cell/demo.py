@@ -21,13 +21,13 @@ from core_cy.superquadric import Superquadric
 
 from .client import AsyncCellClient
 from .client_cli import _print_event
-from .config import CameraConfig, CellConfig, ZenohConfig
+from .config import CellConfig
 from .errors import CellError
 from .messages import ScanRequest
 from .sim.scene import truth_from_config
 from .up import CellProcesses
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "free_port", "local_config"]
 
 
 def free_port() -> int:
@@ -37,14 +37,27 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+def local_config(run_dir: str | Path, **fields) -> CellConfig:
+    """A cell on this machine, its router and its camera on free loopback ports.
+
+    ``fields`` are the configuration's other top-level fields; a section given as a dict
+    is merged into the one made here (``camera={"timeout_s": 1.0}`` keeps the free port).
+    """
+    data: dict = {"run_dir": str(run_dir), "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
+                  "camera": {"url": f"http://127.0.0.1:{free_port()}"}}
+    for key, value in fields.items():
+        both = isinstance(data.get(key), dict) and isinstance(value, dict)
+        data[key] = {**data[key], **value} if both else value
+    return CellConfig.model_validate(data)
+
+
 def _row(name: str, truth, fit) -> str:
     fmt = lambda values: "  ".join(f"{v:8.4f}" for v in values)  # noqa: E731
     return f"  {name:<10} {fmt(truth):<32} {fmt(fit)}"
 
 
 async def _demo(run_dir: Path) -> int:
-    config = CellConfig(run_dir=run_dir, zenoh=ZenohConfig(router=f"tcp/127.0.0.1:{free_port()}"),
-                        camera=CameraConfig(url=f"http://127.0.0.1:{free_port()}"))
+    config = local_config(run_dir)
     truth = Superquadric.from_dict(truth_from_config(config.sim))
     target = truth.T_world_object[:3, 3]
     print(f"starting a simulated cell in {run_dir} (a {config.sim.shape} on the table at "

@@ -26,19 +26,18 @@ from rerun.chunk import RrdReader
 from cell import keys
 from cell.client import CellClient
 from cell.config import CellConfig
-from cell.demo import free_port
+from cell.demo import free_port, local_config
 from cell.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
-from cell.sim.scene import scene_from_config, truth_from_config
+from cell.sim.scene import scene_from_config, target_from_config
 from cell.store import JobStore
 from cell.transport import RequestError, Transport, session_config
 from cell.up import CellProcesses
-from core_cy.superquadric import Superquadric
 from workers.reconstruct import ReconstructWorker, reconstruct_request
 from workers.sim_camera import SimCameraServer
 from workers.sim_camera_worker import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
-           "GatedReconstructor", "wait_until", "wait_for_footer", "truth_target", "look_away_poses",
+           "GatedReconstructor", "wait_until", "wait_for_footer", "look_away_poses",
            "add_worker", "InProcessWorker"]
 
 # Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
@@ -53,22 +52,11 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
     ``robot``, ``camera`` and ``timeouts`` update those sections; other keyword
     arguments are top-level fields (``cell_id``, ``sim``, ``reconstruct``...).
     """
-    data = {
-        "cell_id": "test",
-        "run_dir": str(run_dir),
-        "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
-        "robot": {"speed": 0.0, "rotation_speed_deg": 0.0, **(robot or {})},
-        "camera": {"url": f"http://127.0.0.1:{free_port()}", "timeout_s": 1.0, "retries": 1, **(camera or {})},
-        "timeouts": {"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0,
-                     **(timeouts or {})},
-        **fields,
-    }
-    return CellConfig.model_validate(data)
-
-
-def truth_target(config: CellConfig) -> list[float]:
-    """The centre of the simulated object: a good scan target."""
-    return Superquadric.from_dict(truth_from_config(config.sim)).T_world_object[:3, 3].tolist()
+    return local_config(
+        run_dir, **{"cell_id": "test", **fields},
+        robot={"speed": 0.0, "rotation_speed_deg": 0.0, **(robot or {})},
+        camera={"timeout_s": 1.0, "retries": 1, **(camera or {})},
+        timeouts={"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0, **(timeouts or {})})
 
 
 def look_away_poses(config: CellConfig) -> list[list[list[float]]]:
@@ -155,7 +143,7 @@ class RunningCell:
 
     def scan_request(self, **fields) -> ScanRequest:
         if "flange_poses" not in fields and "target" not in fields:
-            fields["target"] = truth_target(self.config)
+            fields["target"] = target_from_config(self.config.sim)
         return ScanRequest(**fields)
 
     def submit(self, **fields) -> JobStatus:

@@ -23,12 +23,12 @@ from cell.client import AsyncCellClient
 from cell.errors import RemoteError
 from cell.messages import JobState, MoveRequest, ScanRequest
 from cell.recording import recording_summary
-from cell.sim.scene import truth_from_config
+from cell.sim.scene import target_from_config, truth_from_config
 from cell.transport import Transport, session_config
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, truth_target, wait_for_footer,
+from .cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, wait_for_footer,
                             wait_until)
 
 
@@ -81,7 +81,7 @@ WHOLE_SCAN = [(JobState.QUEUED, None), *[(state, view) for view in range(3)
 def test_a_clients_scan_hears_every_event_and_gets_the_result_from_the_last(cell):
     for label in ("first scan of this client", "second"):  # the second reuses the client's subscription
         heard = []
-        result = cell.client.scan(ScanRequest(target=truth_target(cell.config), label=label),
+        result = cell.client.scan(ScanRequest(target=target_from_config(cell.config.sim), label=label),
                                   timeout=JOB_TIMEOUT_S, on_event=heard.append)
         assert [(e.state, e.view) for e in heard] == WHOLE_SCAN
         assert {e.job_id for e in heard} == {result.job_id}
@@ -93,7 +93,7 @@ def test_a_clients_scan_hears_every_event_and_gets_the_result_from_the_last(cell
 def test_watching_one_job_and_every_job_loses_no_event(cell):
     """``events(job)`` started after the job's submit still gets its first events; ``events()``
     watches every job. Both ride on the client's one subscription."""
-    request = ScanRequest(target=truth_target(cell.config), label="watched")
+    request = ScanRequest(target=target_from_config(cell.config.sim), label="watched")
 
     async def until_ended(stream, n_jobs: int) -> dict[str, list]:
         heard: dict[str, list] = {}
@@ -136,7 +136,7 @@ def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
 def test_plain_zenoh_client_with_only_the_documented_keys(cell):
     """What a program in another language does: JSON on documented keys, nothing of robocell's code."""
     prefix = f"robocell/{cell.config.cell_id}"
-    request = json.dumps({"schema_version": 1, "target": truth_target(cell.config), "label": "plain zenoh"})
+    request = json.dumps({"schema_version": 1, "target": target_from_config(cell.config.sim), "label": "plain zenoh"})
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([cell.router]))
@@ -296,7 +296,7 @@ def test_every_query_gets_exactly_one_answer(cell, scanned):
 
 def test_command_line_scan_shows_progress_and_the_result(cell):
     argv = [sys.executable, "-m", "cell.cli", "--config", str(cell.processes.config_path), "scan",
-            "--target", *map(str, truth_target(cell.config)), "--timeout", "60"]
+            "--target", *map(str, target_from_config(cell.config.sim)), "--timeout", "60"]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=90)
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()

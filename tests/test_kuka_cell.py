@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from cell.messages import JobState
-from cell.sim.scene import truth_from_config
+from cell.sim.scene import target_from_config, truth_from_config
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .cell_fixtures import cell_config, free_port, running_cell, truth_target
+from .cell_fixtures import cell_config, free_port, running_cell
 
 
 @pytest.fixture(params=["kvp", "opc"])
@@ -46,7 +46,7 @@ def test_scan_on_the_simulated_kuka(simulated_kuka, tmp_path):
                                                            "override": 30, "max_override": 30}},
                          timeouts={"move_s": 30.0})
     with running_cell(config, sim_camera=True) as cell:
-        job = cell.submit(target=truth_target(config))
+        job = cell.submit(target=target_from_config(config.sim))
         final = cell.wait(job.job_id)
         assert final.state is JobState.SUCCEEDED, final.error
         result = cell.client.result(job.job_id)

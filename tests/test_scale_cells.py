@@ -21,9 +21,10 @@ import pytest
 from cell.client import CellClient
 from cell.errors import RemoteError
 from cell.messages import JobState, ScanRequest
+from cell.sim.scene import target_from_config
 from cell.store import INTERRUPTED, JobStore
 
-from .cell_fixtures import RunningCell, cell_config, running_cell, truth_target, wait_until
+from .cell_fixtures import RunningCell, cell_config, running_cell, wait_until
 
 WORK_S = 1.0
 
@@ -82,7 +83,7 @@ def test_a_full_queue_refuses_clearly_then_accepts_again(cells):
 
 def test_submitting_is_idempotent_with_a_request_id(cells):
     north, _ = cells
-    request = ScanRequest(target=truth_target(north.config), request_id="idempotent-1")
+    request = ScanRequest(target=target_from_config(north.config.sim), request_id="idempotent-1")
     with ThreadPoolExecutor(4) as threads:   # at the same moment, from four clients
         clients = [CellClient(north.router, "north", timeout=10.0) for _ in range(4)]
         try:
@@ -99,7 +100,7 @@ def test_submitting_is_idempotent_with_a_request_id(cells):
         assert store.find_request("idempotent-1").job_id == ids[0]
         assert sum(s.request.request_id == "idempotent-1" for s in store.list(limit=1000)) == 1
     with pytest.raises(ValueError, match="needs a request_id"):
-        north.client.submit(ScanRequest(target=truth_target(north.config)), retry_s=5.0)
+        north.client.submit(ScanRequest(target=target_from_config(north.config.sim)), retry_s=5.0)
 
 
 def test_daemon_killed_mid_burst_loses_nothing(cells):
@@ -107,7 +108,7 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
     of ends succeeded (result fetchable) or failed "interrupted", exactly once in the store."""
     north, _ = cells
     n_jobs = 10
-    requests = [ScanRequest(target=truth_target(north.config), request_id=f"burst-{k}", label=f"burst {k}")
+    requests = [ScanRequest(target=target_from_config(north.config.sim), request_id=f"burst-{k}", label=f"burst {k}")
                 for k in range(n_jobs)]
     acknowledged: dict[str, str] = {}
     errors: list[BaseException] = []

@@ -19,8 +19,9 @@ import pytest
 
 from cell.client import CellClient
 from cell.messages import JobState, ScanRequest
+from cell.sim.scene import target_from_config
 
-from .cell_fixtures import START_TIMEOUT_S, cell_config, truth_target, wait_until
+from .cell_fixtures import START_TIMEOUT_S, cell_config, wait_until
 
 PARTS = {"router", "worker robot", "sim camera", "worker camera", "worker reconstruct", "cell"}
 
@@ -89,7 +90,7 @@ def test_up_runs_the_cell_and_ctrl_c_stops_every_part(up):
     parts = _parts(config_path, parent=process.pid)
     assert set(parts) == PARTS
     with CellClient(config.zenoh.router, config.cell_id) as client:
-        result = client.scan(ScanRequest(target=truth_target(config)), timeout=60)
+        result = client.scan(ScanRequest(target=target_from_config(config.sim)), timeout=60)
         assert client.status(result.job_id).state is JobState.SUCCEEDED
 
     process.send_signal(signal.SIGINT)

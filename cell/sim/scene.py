@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from core_cy.superquadric import Superquadric
+
 from ..config import SimConfig
 from ..errors import ConfigError
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
 
-__all__ = ["scene_from_config", "truth_from_config"]
+__all__ = ["scene_from_config", "truth_from_config", "target_from_config"]
 
 
 def scene_from_config(sim: SimConfig) -> list[SimObject]:
@@ -36,3 +38,8 @@ def scene_from_config(sim: SimConfig) -> list[SimObject]:
 def truth_from_config(sim: SimConfig) -> dict[str, Any]:
     """The ground truth (``truth()``) of the ``[sim]`` section's object."""
     return scene_from_config(sim)[0].truth()
+
+
+def target_from_config(sim: SimConfig) -> list[float]:
+    """The centre of the ``[sim]`` section's object (base frame, metres): where a scan of it looks."""
+    return Superquadric.from_dict(truth_from_config(sim)).T_world_object[:3, 3].tolist()
