@@ -243,7 +243,7 @@ class AsyncCellClient:
         TimeoutError
             If the job is not finished within ``timeout`` seconds.
         """
-        self._subscribe_events()  # before submitting: every event of the job is heard
+        self.listen()  # before submitting: every event of the job is heard
         status = await self.submit(request)
         state, final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event,
                                                  poll_s=poll_s, heard_from_start=True)

@@ -13,6 +13,7 @@ import select
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,22 +27,29 @@ from .cell_fixtures import START_TIMEOUT_S, cell_config, wait_until
 PARTS = {"router", "worker robot", "sim camera", "worker camera", "worker reconstruct", "cell"}
 
 
-def _parts(config_path: Path, parent: int | None = None) -> dict[str, int]:
-    """The live processes started with ``--config config_path`` (children of ``parent`` only, if
-    given): what each runs, and its pid."""
-    found = {}
+def _live_processes() -> Iterator[tuple[int, int, int, list[str]]]:
+    """(pid, parent pid, process group, argv) of every live process on this machine."""
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:
             argv = (entry / "cmdline").read_bytes().decode(errors="replace").split("\0")
-            state, ppid = (entry / "stat").read_text().rsplit(")", 1)[1].split()[:2]
+            state, ppid, pgrp = (entry / "stat").read_text().rsplit(")", 1)[1].split()[:3]
         except (OSError, ValueError):  # gone meanwhile
             continue
-        if str(config_path) not in argv or state == "Z" or (parent is not None and int(ppid) != parent):
+        if state != "Z":
+            yield int(entry.name), int(ppid), int(pgrp), argv
+
+
+def _parts(config_path: Path, parent: int | None = None) -> dict[str, int]:
+    """The live processes started with ``--config config_path`` (children of ``parent`` only, if
+    given): what each runs, and its pid."""
+    found = {}
+    for pid, ppid, _, argv in _live_processes():
+        if str(config_path) not in argv or (parent is not None and ppid != parent):
             continue
         after = argv[argv.index(str(config_path)) + 1:]
-        found[" ".join(after[:2]) if after[0] in ("worker", "sim") else after[0]] = int(entry.name)
+        found[" ".join(after[:2]) if after[0] in ("worker", "sim") else after[0]] = pid
     return found
 
 
@@ -54,15 +62,7 @@ def _first_line(process: subprocess.Popen, timeout: float) -> str:
 
 def _in_groups(groups: set[int]) -> list[int]:
     """Live processes in any of these process groups (a part's own children: recorder, pool)."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if fields[0] != "Z" and int(fields[2]) in groups:
-            pids.append(int(entry.name))
-    return pids
+    return [pid for pid, _, pgrp, _ in _live_processes() if pgrp in groups]
 
 
 @pytest.fixture
