@@ -37,17 +37,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cell import keys  # noqa: E402
-from cell.client import AsyncCellClient  # noqa: E402
-from cell.config import CellConfig  # noqa: E402
-from cell.demo import local_config  # noqa: E402
-from cell.messages import (CaptureInfo, CaptureRequest, JobState, MoveReply, MoveRequest, ScanRequest,  # noqa: E402
+from wire import keys  # noqa: E402
+from wire.client import AsyncCellClient  # noqa: E402
+from wire.config import CellConfig  # noqa: E402
+from robocell.demo import local_config  # noqa: E402
+from wire.messages import (CaptureInfo, CaptureRequest, JobState, MoveReply, MoveRequest, ScanRequest,  # noqa: E402
                            ScanResult, parse)
-from cell.plan import plan_flange_poses  # noqa: E402
-from cell.sim.scene import target_from_config  # noqa: E402
+from core_cy.plan import plan_flange_poses  # noqa: E402
+from workers.sim.scene import target_from_config  # noqa: E402
 from cell.store import JobStore  # noqa: E402
-from cell.transport import Transport  # noqa: E402
-from cell.up import CellProcesses  # noqa: E402
+from wire.transport import Transport  # noqa: E402
+from robocell.up import CellProcesses  # noqa: E402
 
 
 def _config(run_dir: Path, **robot) -> CellConfig:

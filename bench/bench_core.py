@@ -30,8 +30,8 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cell.bundle import load_bundle  # noqa: E402
-from cell.sim.scans import standard_set  # noqa: E402
+from wire.bundle import load_bundle  # noqa: E402
+from workers.sim.scans import standard_set  # noqa: E402
 from core_cy.reconstruct import Options, reconstruct  # noqa: E402
 from core_cy.scoring import volumetric_iou  # noqa: E402
 from core_cy.superquadric import Superquadric, inside_outside  # noqa: E402

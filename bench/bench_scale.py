@@ -38,18 +38,18 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cell import keys  # noqa: E402
-from cell.client import AsyncCellClient  # noqa: E402
-from cell.config import CellConfig  # noqa: E402
-from cell.demo import local_config  # noqa: E402
-from cell.messages import (CameraModel, JobState, ReconstructReply, ReconstructRequest,  # noqa: E402
+from wire import keys  # noqa: E402
+from wire.client import AsyncCellClient  # noqa: E402
+from wire.config import CellConfig  # noqa: E402
+from robocell.demo import local_config  # noqa: E402
+from wire.messages import (CameraModel, JobState, ReconstructReply, ReconstructRequest,  # noqa: E402
                            ReconstructView, ScanRequest)
 from cell.pool import ReconstructorPool  # noqa: E402
-from cell.sim.scans import standard_set  # noqa: E402
-from cell.sim.scene import target_from_config  # noqa: E402
+from workers.sim.scans import standard_set  # noqa: E402
+from workers.sim.scene import target_from_config  # noqa: E402
 from cell.store import JobStore  # noqa: E402
-from cell.transport import Transport  # noqa: E402
-from cell.up import CellProcesses  # noqa: E402
+from wire.transport import Transport  # noqa: E402
+from robocell.up import CellProcesses  # noqa: E402
 
 
 def _config(run_dir: Path, **fields) -> CellConfig:

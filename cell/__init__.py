@@ -1,1 +1,2 @@
-"""robocell's shell: command line, scan bundles, simulation and (later) the cell daemon."""
+"""The cell daemon and what only it uses: jobs as state machines, their steps, the job store,
+the reconstruction pool, the Rerun recordings. It speaks to the workers through ``wire``."""

@@ -49,17 +49,17 @@ from pathlib import Path
 
 import numpy as np
 
-from . import keys
-from .config import CellConfig
-from .errors import CellError, NoResponder, RemoteError, TransportError
-from .messages import (CameraModel, CaptureInfo, CaptureRequest, CellStatus, FailedJob, JobEvent, JobState,
+from wire import keys
+from wire.config import CellConfig
+from wire.errors import CellError, NoResponder, RemoteError, TransportError
+from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, CellStatus, FailedJob, JobEvent, JobState,
                        JobStatus, MoveReply, MoveRequest, ReconstructReply, ReconstructRequest, ReconstructView,
                        ScanRequest, ScanResult, parse)
-from .plan import camera_poses, plan_flange_poses, workspace_violation
+from core_cy.plan import camera_poses, plan_flange_poses, workspace_violation
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
 from .recorder import Recorder
 from .store import JobStore, queued_event
-from .transport import Request, RequestError, Response, Transport
+from wire.transport import Request, RequestError, Response, Transport
 
 __all__ = ["CellDaemon", "StepFailed"]
 

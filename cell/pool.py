@@ -33,10 +33,10 @@ import logging
 import time
 from dataclasses import dataclass, field
 
-from . import keys
-from .errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
-from .messages import ReconstructorStatus, WorkerLoad, parse
-from .transport import Reply, Transport
+from wire import keys
+from wire.errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
+from wire.messages import ReconstructorStatus, WorkerLoad, parse
+from wire.transport import Reply, Transport
 
 __all__ = ["ReconstructorPool", "AttemptFailed", "NoReconstructor"]
 

@@ -176,7 +176,7 @@ class _Drawing:
         from core_cy.sphere import fibonacci_sphere
         from core_cy.superquadric import Superquadric
 
-        from .messages import ReconstructReply
+        from wire.messages import ReconstructReply
 
         answer = ReconstructReply.model_validate_json(reply_json)
         result = answer.result
@@ -195,8 +195,8 @@ class _Drawing:
 
     def _truth_meshes(self) -> list:
         if self._truth is None:
-            from .config import SimConfig
-            from .sim.scene import scene_from_config
+            from wire.config import SimConfig
+            from workers.sim.scene import scene_from_config
 
             self._truth = [obj.mesh() for obj in scene_from_config(SimConfig.model_validate(self.sim))]
         return self._truth

@@ -23,8 +23,8 @@ from typing import TypeVar
 
 from pydantic import ValidationError
 
-from .errors import StoreError
-from .messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
+from wire.errors import StoreError
+from wire.messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
 
 __all__ = ["JobStore", "SCHEMA_VERSION", "INTERRUPTED", "queued_event"]
 

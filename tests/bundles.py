@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .helpers import intrinsics, look_at, sphere_silhouette
+from tests.helpers import intrinsics, look_at, sphere_silhouette
 from core_cy.camera import Camera
 
 SPHERE_CENTRE = np.array([0.6, 0.0, 0.04])

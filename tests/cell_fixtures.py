@@ -23,18 +23,18 @@ import numpy as np
 import zenoh
 from rerun.chunk import RrdReader
 
-from cell import keys
-from cell.client import CellClient
-from cell.config import CellConfig
-from cell.demo import free_port, local_config
-from cell.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
-from cell.sim.scene import scene_from_config, target_from_config
+from wire import keys
+from wire.client import CellClient
+from wire.config import CellConfig
+from robocell.demo import free_port, local_config
+from wire.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
+from workers.sim.scene import scene_from_config, target_from_config
 from cell.store import JobStore
-from cell.transport import RequestError, Transport, session_config
-from cell.up import CellProcesses
-from workers.reconstruct import ReconstructWorker, reconstruct_request
-from workers.sim_camera import SimCameraServer
-from workers.sim_camera_worker import robot_camera_pose
+from wire.transport import RequestError, Transport, session_config
+from robocell.up import CellProcesses
+from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
+from workers.sim.axis import SimCameraServer
+from workers.sim.camera import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
            "GatedReconstructor", "wait_until", "wait_for_footer", "look_away_poses",
@@ -61,8 +61,8 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
 
 def look_away_poses(config: CellConfig) -> list[list[list[float]]]:
     """Flange poses inside the workspace whose camera sees only table: the object is out of view."""
-    from cell.messages import ViewPlan
-    from cell.plan import plan_flange_poses, workspace_violation
+    from wire.messages import ViewPlan
+    from core_cy.plan import plan_flange_poses, workspace_violation
 
     empty_spot = [config.sim.position[0], config.sim.position[1] + 0.4, 0.0]
     poses = plan_flange_poses(empty_spot, ViewPlan(standoff=0.3), config.T_flange_cam)

@@ -2,7 +2,7 @@ import shutil
 
 import pytest
 
-from .bundles import write_sphere_bundle
+from tests.bundles import write_sphere_bundle
 
 
 @pytest.fixture(scope="session")

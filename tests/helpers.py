@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cell.plan import look_at
+from core_cy.plan import look_at
 from core_cy.camera import Camera
 
 WIDTH, HEIGHT, FOCAL = 640, 480, 600.0

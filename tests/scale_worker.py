@@ -1,6 +1,6 @@
 """``robocell worker reconstruct``, but every job takes ``--delay`` seconds longer: for the scale tests.
 
-The real worker (``workers.reconstruct.main``: its own Zenoh session, process
+The real worker (``workers.reconstruct.worker.main``: its own Zenoh session, process
 pool, heartbeat and liveliness token), whose pool processes sleep before the
 real reconstruction, so that a test can catch a job in flight and kill or
 freeze the worker under it. With ``--fail`` every job raises instead.
@@ -24,8 +24,8 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cell.config import load_config  # noqa: E402
-from workers import reconstruct  # noqa: E402
+from wire.config import load_config  # noqa: E402
+from workers.reconstruct import worker as reconstruct  # noqa: E402
 
 
 def slow_reconstruct_request(delay: float, fail: bool, request_json: str, payload: bytes, worker: str) -> str:

@@ -14,13 +14,13 @@ import httpx
 import numpy as np
 import pytest
 
-from cell.config import CameraConfig, SimConfig
-from cell.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+from wire.config import CameraConfig, SimConfig
+from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
-from cell.sim.scans import default_K, look_at, object_target
-from workers.axis import AxisCamera
-from cell.sim.scene import scene_from_config
-from workers.sim_camera import SimCameraServer
+from workers.sim.scans import default_K, look_at, object_target
+from workers.camera.axis import AxisCamera
+from workers.sim.scene import scene_from_config
+from workers.sim.axis import SimCameraServer
 
 PASSWORD = "s3cret-Pa55"
 SIZE = (320, 240)  # small renders keep the tests quick

@@ -3,11 +3,11 @@ import json
 import numpy as np
 import pytest
 
-from cell.bundle import load_bundle
-from cell.errors import BundleError
+from wire.bundle import load_bundle
+from wire.errors import BundleError
 from core_cy.segment import Segmentation
 
-from .bundles import edit_scan, write_sphere_bundle
+from tests.bundles import edit_scan, write_sphere_bundle
 
 
 @pytest.fixture

@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cell import calibrate_cli
-from cell.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
+from robocell import calibrate as calibrate_cli
+from core_cy.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
                             parse_board)
-from cell.config import SimConfig, load_config
-from cell.errors import CalibrationError, ConfigError
-from cell.sim.scans import default_K, look_at
-from workers.sim_camera import SimCameraServer
+from wire.config import SimConfig, load_config
+from wire.errors import CalibrationError, ConfigError
+from workers.sim.scans import default_K, look_at
+from workers.sim.axis import SimCameraServer
 
 SIZE = (640, 480)
 K_TRUE = np.array([[820.0, 0.0, 322.5], [0.0, 818.0, 236.0], [0.0, 0.0, 1.0]])
@@ -379,11 +379,8 @@ def test_calibrate_commands(files, tmp_path, capsys):
 
 
 def test_calibrate_intrinsics_in_a_subprocess(files):
-    """The command as a program: a parser built with add_commands, run in a fresh interpreter."""
-    program = ("import argparse, sys; from cell import calibrate_cli\n"
-               "p = argparse.ArgumentParser(); calibrate_cli.add_commands(p.add_subparsers(dest='command'))\n"
-               "args = p.parse_args(sys.argv[1:]); sys.exit(args.run(args))")
-    process = subprocess.run([sys.executable, "-c", program, "calibrate", "intrinsics", "--board", "9x6",
+    """The command as a program, in a fresh interpreter."""
+    process = subprocess.run([sys.executable, "-m", "robocell", "calibrate", "intrinsics", "--board", "9x6",
                               "--square", str(SQUARE), *files["images"][:5]],
                              capture_output=True, text=True, timeout=60, cwd=Path(__file__).parents[1])
     assert process.returncode == 0, process.stderr
@@ -396,7 +393,7 @@ def test_calibrate_intrinsics_in_a_subprocess(files):
 def camera():
     size = (320, 240)
     pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])
-    from cell.sim.scene import scene_from_config
+    from workers.sim.scene import scene_from_config
 
     with SimCameraServer(scene_from_config(SimConfig()), K=default_K(size), image_size=size,
                          pose_provider=lambda: pose, username="root", password=PASSWORD, auth="digest") as server:
@@ -436,12 +433,12 @@ def test_camera_probe_failures(camera, capsys, monkeypatch):
 def test_capture_then_hand_eye(tmp_path):
     """`calibrate capture` over real Zenoh on loopback, with stand-in robot and camera workers that render the
     board from where the robot went; its files then give the hand-eye transform."""
-    from cell import keys
-    from cell.config import CellConfig
-    from cell.messages import CaptureInfo, MoveReply, MoveRequest, parse
-    from cell.transport import Response, Transport
+    from wire import keys
+    from wire.config import CellConfig
+    from wire.messages import CaptureInfo, MoveReply, MoveRequest, parse
+    from wire.transport import Response, Transport
 
-    from .cell_fixtures import free_port
+    from tests.cell_fixtures import free_port
 
     config = CellConfig.model_validate({"cell_id": "calib", "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"}})
     rng = np.random.default_rng(5)

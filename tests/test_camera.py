@@ -5,7 +5,7 @@ import pytest
 from core_cy.camera import Camera, undistort_mask
 from core_cy.errors import CameraError
 
-from .helpers import intrinsics, look_at, sphere_silhouette
+from tests.helpers import intrinsics, look_at, sphere_silhouette
 
 
 def test_target_projects_to_the_principal_point():

@@ -8,7 +8,7 @@ from core_cy.carve import carve, check_support_plane, clip_to_plane, occupancy
 from core_cy.errors import GeometryError
 from core_cy.sphere import enclosing_sphere, fibonacci_sphere
 
-from .helpers import orthogonal_cameras, sphere_silhouette
+from tests.helpers import orthogonal_cameras, sphere_silhouette
 
 CENTRE = np.array([0.6, 0.05, 0.1])
 RADIUS = 0.05

@@ -12,10 +12,10 @@ import dataclasses
 
 import pytest
 
-from cell.errors import RemoteError
-from cell.messages import JobState
+from wire.errors import RemoteError
+from wire.messages import JobState
 
-from .cell_fixtures import GatedReconstructor, InProcessSimCamera, RunningCell, cell_config, running_cell, wait_until
+from tests.cell_fixtures import GatedReconstructor, InProcessSimCamera, RunningCell, cell_config, running_cell, wait_until
 
 PASSWORD = "s3cret"
 

@@ -12,10 +12,10 @@ import time
 
 import pytest
 
-from cell.errors import RemoteError
-from cell.messages import JobEvent, JobState
+from wire.errors import RemoteError
+from wire.messages import JobEvent, JobState
 
-from .cell_fixtures import cell_config, running_cell, wait_for_footer
+from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 
 MOVE_TIME_S = 0.25
 

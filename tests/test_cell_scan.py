@@ -18,17 +18,17 @@ import numpy as np
 import pytest
 import zenoh
 
-from cell import keys
-from cell.client import AsyncCellClient
-from cell.errors import RemoteError
-from cell.messages import JobState, MoveRequest, ScanRequest
+from wire import keys
+from wire.client import AsyncCellClient
+from wire.errors import RemoteError
+from wire.messages import JobState, MoveRequest, ScanRequest
 from cell.recording import recording_summary
-from cell.sim.scene import target_from_config, truth_from_config
-from cell.transport import Transport, session_config
+from workers.sim.scene import target_from_config, truth_from_config
+from wire.transport import Transport, session_config
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, wait_for_footer,
+from tests.cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, wait_for_footer,
                             wait_until)
 
 
@@ -295,7 +295,7 @@ def test_every_query_gets_exactly_one_answer(cell, scanned):
 
 
 def test_command_line_scan_shows_progress_and_the_result(cell):
-    argv = [sys.executable, "-m", "cell.cli", "--config", str(cell.processes.config_path), "scan",
+    argv = [sys.executable, "-m", "robocell", "--config", str(cell.processes.config_path), "scan",
             "--target", *map(str, target_from_config(cell.config.sim)), "--timeout", "60"]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=90)
     assert done.returncode == 0, done.stderr

@@ -12,13 +12,13 @@ import pytest
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .bundles import edit_scan
+from tests.bundles import edit_scan
 
 BUNNY = Path(__file__).resolve().parents[2] / "shared" / "data" / "bunny"
 
 
 def robocell(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "cell.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "robocell", *map(str, args)], capture_output=True, text=True,
                           timeout=300, cwd=cwd)
 
 

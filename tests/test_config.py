@@ -6,8 +6,8 @@ import re
 
 import pytest
 
-from cell.config import CellConfig, load_config
-from cell.errors import ConfigError
+from wire.config import CellConfig, load_config
+from wire.errors import ConfigError
 
 
 def test_no_file_gives_the_defaults_and_a_file_overrides_them(tmp_path):

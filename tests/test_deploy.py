@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from cell.config import load_config
+from wire.config import load_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from cell.config import Workspace
-from cell.sim.kuka import SimKuka
-from workers.kuka import variables as v
-from workers.kuka.backend import KukaBackend, check_move, make_client
-from workers.kuka.config import KukaConfig
-from workers.kuka.errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaConnectionError,
+from wire.config import Workspace
+from workers.sim.kuka import SimKuka
+from workers.robot.kuka import variables as v
+from workers.robot.kuka.backend import KukaBackend, check_move, make_client
+from workers.robot.kuka.config import KukaConfig
+from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaConnectionError,
                                  KukaError, KukaTimeout, MoveFailed, MoveRefused, Unreachable)
 
 PROTOCOLS = ["kvp", "opc"]

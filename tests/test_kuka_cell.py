@@ -7,12 +7,12 @@ import time
 import numpy as np
 import pytest
 
-from cell.messages import JobState
-from cell.sim.scene import target_from_config, truth_from_config
+from wire.messages import JobState
+from workers.sim.scene import target_from_config, truth_from_config
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .cell_fixtures import cell_config, free_port, running_cell
+from tests.cell_fixtures import cell_config, free_port, running_cell
 
 
 @pytest.fixture(params=["kvp", "opc"])
@@ -20,7 +20,7 @@ def simulated_kuka(request, tmp_path):
     """`robocell sim kuka` as a child process, on a free port."""
     port = free_port()
     log = open(tmp_path / "sim-kuka.log", "wb")
-    process = subprocess.Popen([sys.executable, "-m", "cell.cli", "sim", "kuka", "--protocol", request.param,
+    process = subprocess.Popen([sys.executable, "-m", "robocell", "sim", "kuka", "--protocol", request.param,
                                 "--port", str(port), "--speed", "10000", "--rotation-speed", "3000"], stdout=log, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 30

@@ -8,10 +8,10 @@ import pytest
 from openopc2.exceptions import OPCError
 from openopc2.gateway_proxy import OpenOpcGatewayProxy
 
-from cell.sim.kuka import SimKuka
-from workers.kuka.config import SIM_OPC_SERVER
-from workers.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
-from workers.kuka.opc import OpcClient
+from workers.sim.kuka import SimKuka
+from workers.robot.kuka.config import SIM_OPC_SERVER
+from workers.robot.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
+from workers.robot.kuka.opc import OpcClient
 
 
 def run(coroutine, limit: float = 20.0):

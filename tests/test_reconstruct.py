@@ -6,15 +6,15 @@ import cv2
 import numpy as np
 import pytest
 
-from cell.bundle import load_bundle
-from cell.sim.objects import box, cylinder, ellipsoid, rounded_box
-from cell.sim.scans import default_K, plan_views, write_scan
+from wire.bundle import load_bundle
+from workers.sim.objects import box, cylinder, ellipsoid, rounded_box
+from workers.sim.scans import default_K, plan_views, write_scan
 from core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
 from core_cy.reconstruct import Options, View, reconstruct
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .bundles import SPHERE_CENTRE, SPHERE_RADIUS, write_sphere_bundle
+from tests.bundles import SPHERE_CENTRE, SPHERE_RADIUS, write_sphere_bundle
 
 
 def _run(bundle_dir, **kwargs):

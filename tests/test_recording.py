@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 from cell.recording import JobRecording, find_recording, recording_summary, replay_command
 from core_cy.superquadric import Superquadric
 
-from .helpers import HEIGHT, WIDTH, intrinsics, look_at
+from tests.helpers import HEIGHT, WIDTH, intrinsics, look_at
 
 CENTRE = np.array([0.6, 0.0, 0.05])
 POSITIONS = [(0.6, -0.35, 0.45), (0.95, 0.0, 0.45), (0.6, 0.35, 0.45)]

@@ -18,13 +18,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from cell.client import CellClient
-from cell.errors import RemoteError
-from cell.messages import JobState, ScanRequest
-from cell.sim.scene import target_from_config
+from wire.client import CellClient
+from wire.errors import RemoteError
+from wire.messages import JobState, ScanRequest
+from workers.sim.scene import target_from_config
 from cell.store import INTERRUPTED, JobStore
 
-from .cell_fixtures import RunningCell, cell_config, running_cell, wait_until
+from tests.cell_fixtures import RunningCell, cell_config, running_cell, wait_until
 
 WORK_S = 1.0
 
@@ -159,7 +159,7 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
 
 def test_status_command_shows_workers_load_queue_jobs_and_failures(cells):
     north, _ = cells
-    base = [sys.executable, "-m", "cell.cli", "--config", str(north.processes.config_path)]
+    base = [sys.executable, "-m", "robocell", "--config", str(north.processes.config_path)]
     began = time.monotonic()
     shown = subprocess.run([*base, "status"], capture_output=True, text=True, timeout=60)
     assert shown.returncode == 0, shown.stderr

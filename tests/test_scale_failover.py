@@ -15,10 +15,10 @@ import time
 
 import pytest
 
-from cell.messages import JobState
-from cell.transport import RequestError
+from wire.messages import JobState
+from wire.transport import RequestError
 
-from .cell_fixtures import InProcessWorker, RunningCell, cell_config, running_cell, wait_until
+from tests.cell_fixtures import InProcessWorker, RunningCell, cell_config, running_cell, wait_until
 
 HEARTBEAT_S = 1.0
 SLOW_S = 1.5

@@ -16,13 +16,13 @@ import time
 
 import pytest
 
-from cell import keys
-from cell.messages import ReconstructReply, ReconstructRequest, WorkerLoad
+from wire import keys
+from wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad
 from cell.pool import AttemptFailed, NoReconstructor, ReconstructorPool
-from cell.transport import Transport
-from workers.reconstruct import ReconstructWorker
+from wire.transport import Transport
+from workers.reconstruct.worker import ReconstructWorker
 
-from .cell_fixtures import LoopThread, free_port
+from tests.cell_fixtures import LoopThread, free_port
 
 HEARTBEAT_S = 1.0
 LIMIT_S = 30.0      # no test may take longer: a hang fails instead

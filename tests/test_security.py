@@ -14,9 +14,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
-from cell.demo import free_port
-from cell.errors import TransportError
-from cell.transport import Response, Transport
+from robocell.demo import free_port
+from wire.errors import TransportError
+from wire.transport import Response, Transport
 
 
 def _certificate(subject: str, key, issuer_name, issuer_key, *, ca: bool) -> x509.Certificate:

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy.special import beta
 
-from cell.sim import cli
-from cell.sim import objects
-from cell.sim.objects import FAMILIES, CupStack, LumpyFigure, SuperquadricObject, vertex_normals
-from cell.sim.render import TableScene, project, render
-from cell.sim.scans import (
+from robocell import sim as cli
+from workers.sim import objects
+from workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SuperquadricObject, vertex_normals
+from workers.sim.render import TableScene, project, render
+from workers.sim.scans import (
     HSV_SEGMENTATION,
     default_K,
     look_at,

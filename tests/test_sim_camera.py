@@ -13,13 +13,13 @@ import httpx
 import numpy as np
 import pytest
 
-from cell.config import CameraConfig, SimConfig
-from cell.errors import ConfigError
-from cell.sim.objects import CupStack, LumpyFigure, SuperquadricObject
-from cell.sim.render import project
-from cell.sim.scans import look_at, object_target
-from cell.sim.scene import scene_from_config, truth_from_config
-from workers.sim_camera import SimCameraServer, scaled_K
+from wire.config import CameraConfig, SimConfig
+from wire.errors import ConfigError
+from workers.sim.objects import CupStack, LumpyFigure, SuperquadricObject
+from workers.sim.render import project
+from workers.sim.scans import look_at, object_target
+from workers.sim.scene import scene_from_config, truth_from_config
+from workers.sim.axis import SimCameraServer, scaled_K
 
 SNAPSHOT = "/axis-cgi/jpg/image.cgi"
 K = np.asarray(CameraConfig().K)  # 640x480, f = 600

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from cell.errors import StoreError
-from cell.messages import JobEvent, JobState, ScanRequest, ScanResult
+from wire.errors import StoreError
+from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
 from cell.store import INTERRUPTED, JobStore, queued_event
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
@@ -234,7 +234,7 @@ def test_sqlite_failures_become_store_errors(tmp_path):
 _WRITER = """
 import sys
 from pathlib import Path
-from cell.messages import ScanRequest
+from wire.messages import ScanRequest
 from cell.store import JobStore
 
 store = JobStore(Path(sys.argv[1]))  # never closed: this process dies by SIGKILL

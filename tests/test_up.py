@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from cell.client import CellClient
-from cell.messages import JobState, ScanRequest
-from cell.sim.scene import target_from_config
+from wire.client import CellClient
+from wire.messages import JobState, ScanRequest
+from workers.sim.scene import target_from_config
 
-from .cell_fixtures import START_TIMEOUT_S, cell_config, wait_until
+from tests.cell_fixtures import START_TIMEOUT_S, cell_config, wait_until
 
 PARTS = {"router", "worker robot", "sim camera", "worker camera", "worker reconstruct", "cell"}
 
@@ -70,7 +70,7 @@ def up(tmp_path):
     config = cell_config(tmp_path / "run")
     config_path = tmp_path / "cell.json"
     config_path.write_text(config.model_dump_json())
-    process = subprocess.Popen([sys.executable, "-m", "cell.cli", "--config", str(config_path), "up"],
+    process = subprocess.Popen([sys.executable, "-m", "robocell", "--config", str(config_path), "up"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         yield config, Path(config.run_dir) / "cell-config.json", process

@@ -28,10 +28,10 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from workers.kuka import variables as v
-from workers.kuka.config import DEFAULT_PORTS, SIM_OPC_SERVER
-from workers.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
-from workers.kuka.kvp import READ, WRITE, decode_request, encode_response
+from workers.robot.kuka import variables as v
+from workers.robot.kuka.config import DEFAULT_PORTS, SIM_OPC_SERVER
+from workers.robot.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
+from workers.robot.kuka.kvp import READ, WRITE, decode_request, encode_response
 
 __all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main", "add_arguments", "run"]
 
@@ -271,7 +271,7 @@ class OpcGateway:
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
-        from ._kuka_opc import make_daemon
+        from .kuka_opc import make_daemon
         self._daemon = make_daemon(self, self.host, self.port)
         self.port = self._daemon.sock.getsockname()[1]
         self._thread = threading.Thread(target=self._daemon.requestLoop, name="sim-opc-gateway", daemon=True)
@@ -348,7 +348,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``robocell sim kuka`` until interrupted; 0 on a clean stop."""
-    from cell.process import run_until_stopped
+    from wire.process import run_until_stopped
 
     async def serve(stop: asyncio.Event) -> None:
         await main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,

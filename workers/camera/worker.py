@@ -11,14 +11,14 @@ import asyncio
 import logging
 import time
 
-from cell import keys
-from cell.config import CellConfig
-from cell.errors import CameraError
-from cell.messages import CaptureInfo
-from cell.transport import Request, RequestError, Response, Transport
+from wire import keys
+from wire.config import CellConfig
+from wire.errors import CameraError
+from wire.messages import CaptureInfo
+from wire.transport import Request, RequestError, Response, Transport
 
 from .axis import AxisCamera
-from cell.process import open_transport, run_until_stopped
+from wire.process import open_transport, run_until_stopped
 
 __all__ = ["serve_camera", "main"]
 

@@ -19,7 +19,7 @@ import Pyro5.server
 from Pyro5.api import register_class_to_dict
 from openopc2.exceptions import OPCError
 
-from workers.kuka.variables import ALL
+from workers.robot.kuka.variables import ALL
 
 if TYPE_CHECKING:
     from .kuka import OpcGateway

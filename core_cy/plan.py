@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from .config import Workspace
-from .messages import ViewPlan
+from wire.config import Workspace
+from wire.messages import ViewPlan
 
 __all__ = ["look_at", "plan_flange_poses", "workspace_violation", "camera_poses"]
 

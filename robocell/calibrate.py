@@ -32,11 +32,11 @@ import httpx
 import numpy as np
 from pydantic import ValidationError
 
-from . import keys
-from .calibrate import HAND_EYE_METHODS, calibrate_hand_eye, calibrate_intrinsics, parse_board
-from .config import CellConfig, load_config
-from .errors import CalibrationError, CameraError, ConfigError
-from .messages import CaptureRequest, MoveReply, MoveRequest, field_errors, parse
+from wire import keys
+from core_cy.calibrate import HAND_EYE_METHODS, calibrate_hand_eye, calibrate_intrinsics, parse_board
+from wire.config import CellConfig, load_config
+from wire.errors import CalibrationError, CameraError, ConfigError
+from wire.messages import CaptureRequest, MoveReply, MoveRequest, field_errors, parse
 
 __all__ = ["add_commands", "update_toml", "write_config", "capture", "parse_resolutions", "probe", "PARAM_PATH"]
 
@@ -290,7 +290,7 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
     TransportError
         If a worker is not running, refuses a move (its reason in the message) or does not answer in time.
     """
-    from .transport import Transport  # Zenoh only for the one command that needs it
+    from wire.transport import Transport  # Zenoh only for the one command that needs it
 
     moves = []
     for i, pose in enumerate(poses):
@@ -355,7 +355,7 @@ async def probe(url: str, *, username: str | None = None, password: str | None =
     "snapshot": {"ok", "resolution", "bytes", "width", "height", "time_ms", "error"}}``.
     The snapshot uses ``resolution``, else 640x480 if offered, else the first offered.
     """
-    from workers.axis import AxisCamera  # as cell/cli.py does: cell imports workers only when it runs one
+    from workers.camera.axis import AxisCamera  # as cell/cli.py does: cell imports workers only when it runs one
 
     camera_args = {"username": username, "password": password, "auth": auth, "timeout_s": timeout_s, "verify": verify}
     source = AxisCamera(url, **camera_args).source

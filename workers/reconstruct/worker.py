@@ -30,16 +30,16 @@ from concurrent.futures import ProcessPoolExecutor
 import cv2
 import numpy as np
 
-from cell import keys
-from cell.bundle import core_segmentation
-from cell.config import CellConfig
-from cell.errors import TransportError
-from cell.messages import ReconstructReply, ReconstructRequest, WorkerLoad, parse
-from cell.transport import Request, RequestError, Response, Transport
+from wire import keys
+from wire.bundle import core_segmentation
+from wire.config import CellConfig
+from wire.errors import TransportError
+from wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad, parse
+from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
 from core_cy.reconstruct import Options, View, reconstruct
-from cell.process import open_transport, run_until_stopped
+from wire.process import open_transport, run_until_stopped
 
 __all__ = ["reconstruct_request", "ReconstructWorker", "Job", "Run", "main", "default_worker_id"]
 

@@ -6,8 +6,8 @@ from typing import Any
 
 from core_cy.superquadric import Superquadric
 
-from ..config import SimConfig
-from ..errors import ConfigError
+from wire.config import SimConfig
+from wire.errors import ConfigError
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
 
 __all__ = ["scene_from_config", "truth_from_config", "target_from_config"]

@@ -19,8 +19,8 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from cell.config import Workspace
-from cell.plan import workspace_violation
+from wire.config import Workspace
+from core_cy.plan import workspace_violation
 
 from . import variables as v
 from .config import KukaConfig

@@ -17,10 +17,10 @@ import sys
 from core_cy.errors import CoreError
 from core_cy.reconstruct import Options, reconstruct
 
-from . import keys
-from .bundle import load_bundle
-from .config import CellConfig, load_config
-from .errors import BundleError, CellError
+from wire import keys
+from wire.bundle import load_bundle
+from wire.config import CellConfig, load_config
+from wire.errors import BundleError, CellError
 
 log = logging.getLogger("robocell")
 
@@ -53,14 +53,14 @@ def _config(args: argparse.Namespace) -> CellConfig:
 
 def _sim_command(args: argparse.Namespace) -> int:
     if args.what == "camera":
-        from workers import sim_camera_worker
+        from workers.sim import camera as sim_camera_worker
 
         return sim_camera_worker.main(_config(args))
     if args.what == "kuka":
-        from .sim import kuka
+        from workers.sim import kuka
 
         return kuka.run(args)
-    from .sim import cli as sim_cli
+    from . import sim as sim_cli
 
     return sim_cli.run(args)
 
@@ -75,26 +75,26 @@ def _worker_id(text: str) -> str:
 def _worker_command(args: argparse.Namespace) -> int:
     config = _config(args)
     if args.kind == "robot":
-        from workers import robot
+        from workers.robot import worker as robot
 
         return robot.main(config)
     if args.kind == "camera":
-        from workers import camera
+        from workers.camera import worker as camera
 
         return camera.main(config)
-    from workers import reconstruct as reconstructor
+    from workers.reconstruct import worker as reconstructor
 
     return reconstructor.main(config, args.id)
 
 
 def _router_command(args: argparse.Namespace) -> int:
-    from .service import run_router
+    from cell.service import run_router
 
     return run_router(_config(args), args.listen)
 
 
 def _cell_command(args: argparse.Namespace) -> int:
-    from .service import run_daemon
+    from cell.service import run_daemon
 
     return run_daemon(_config(args))
 
@@ -106,7 +106,7 @@ def _up_command(args: argparse.Namespace) -> int:
 
 
 def _client_command(args: argparse.Namespace) -> int:
-    from . import client_cli
+    from . import jobs as client_cli
 
     return client_cli.run(args, _config(args))
 
@@ -114,7 +114,7 @@ def _client_command(args: argparse.Namespace) -> int:
 def _replay_command(args: argparse.Namespace) -> int:
     import subprocess
 
-    from .recording import find_recording, replay_command
+    from cell.recording import find_recording, replay_command
 
     path = find_recording(args.job, _config(args).run_dir)
     argv = replay_command(path, web=args.web, web_port=args.web_port, grpc_port=args.grpc_port)
@@ -162,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("what", nargs="?", choices=["scans", "camera", "kuka"], default="scans",
                      help="scans (default): write bundles; camera: serve the cell's simulated camera; "
                           "kuka: a KUKA controller speaking KukaVarProxy (kvp) or the OpenOPC gateway (opc)")
-    from .sim import cli as sim_cli
-    from .sim import kuka as sim_kuka
+    from . import sim as sim_cli
+    from workers.sim import kuka as sim_kuka
 
     sim_cli.add_arguments(sim)
     sim_kuka.add_arguments(sim)
@@ -183,11 +183,11 @@ def build_parser() -> argparse.ArgumentParser:
     commands.add_parser("up", help="run router, workers, simulated camera and daemon; Ctrl-C stops all") \
         .set_defaults(run=_up_command)
 
-    from . import client_cli
+    from . import jobs as client_cli
 
     client_cli.add_commands(commands, _client_command)
 
-    from . import calibrate_cli
+    from . import calibrate as calibrate_cli
 
     calibrate_cli.add_commands(commands)
 

@@ -15,14 +15,14 @@ from typing import Protocol
 
 import numpy as np
 
-from cell import keys
-from cell.config import CellConfig, RobotConfig
-from cell.errors import CellError
-from cell.messages import MoveReply, MoveRequest, RobotState, parse
-from cell.plan import workspace_violation
-from cell.transport import Request, RequestError, Response, Transport
+from wire import keys
+from wire.config import CellConfig, RobotConfig
+from wire.errors import CellError
+from wire.messages import MoveReply, MoveRequest, RobotState, parse
+from core_cy.plan import workspace_violation
+from wire.transport import Request, RequestError, Response, Transport
 
-from cell.process import open_transport, run_until_stopped
+from wire.process import open_transport, run_until_stopped
 
 __all__ = ["RobotBackend", "SimRobot", "serve_robot", "main"]
 

@@ -8,10 +8,10 @@ import json
 import sys
 import time
 
-from .client import AsyncCellClient
-from .config import CellConfig
-from .errors import CellError
-from .messages import CellStatus, JobEvent, JobState, ScanRequest
+from wire.client import AsyncCellClient
+from wire.config import CellConfig
+from wire.errors import CellError
+from wire.messages import CellStatus, JobEvent, JobState, ScanRequest
 
 __all__ = ["add_commands", "run"]
 

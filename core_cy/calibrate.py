@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .errors import CalibrationError
+from wire.errors import CalibrationError
 
 __all__ = [
     "parse_board", "board_points", "find_corners", "calibrate_intrinsics", "calibrate_hand_eye",

@@ -22,7 +22,7 @@ Errors of the libraries underneath (``OSError`` from sockets, ``Pyro5.errors``,
 
 from __future__ import annotations
 
-from cell.errors import CellError
+from wire.errors import CellError
 
 __all__ = [
     "KukaError", "KukaConnectionError", "KukaTimeout", "KukaProtocolError", "KukaVariableError",

@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, SecretStr, ValidationError, field_serializer,
                       model_validator)
 
-from workers.kuka.config import KukaConfig
+from workers.robot.kuka.config import KukaConfig
 
 from .errors import ConfigError
 from .messages import Point, Pose, ViewPlan, field_errors

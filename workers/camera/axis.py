@@ -29,11 +29,11 @@ from typing import TYPE_CHECKING, Literal
 
 import httpx
 
-from cell.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
 
 if TYPE_CHECKING:
-    from cell.config import CameraConfig
+    from wire.config import CameraConfig
 
 __all__ = ["AxisCamera", "SNAPSHOT_PATH"]
 

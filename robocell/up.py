@@ -18,10 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from . import keys
-from .config import CellConfig
-from .errors import CellError
-from .transport import Transport
+from wire import keys
+from wire.config import CellConfig
+from wire.errors import CellError
+from wire.transport import Transport
 
 __all__ = ["CellProcesses", "up"]
 
@@ -52,7 +52,7 @@ class CellProcesses:
         self.run_dir = Path(config.run_dir)
         self.config_path = self.run_dir / "cell-config.json"
         self.log_dir = self.run_dir / "logs"
-        command = [sys.executable, "-m", "cell.cli", "--config", str(self.config_path)]
+        command = [sys.executable, "-m", "robocell", "--config", str(self.config_path)]
         if sim_camera is None:
             sim_camera = config.robot.backend == "sim"
         self.command = command

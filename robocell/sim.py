@@ -10,8 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from .objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
-from .scans import make_spec, write_standard_set
+from workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
+from workers.sim.scans import make_spec, write_standard_set
 
 __all__ = ["add_arguments", "run"]
 

@@ -19,12 +19,12 @@ import numpy as np
 from core_cy.scoring import centre_error, volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from .client import AsyncCellClient
-from .client_cli import _print_event
-from .config import CellConfig
-from .errors import CellError
-from .messages import ScanRequest
-from .sim.scene import truth_from_config
+from wire.client import AsyncCellClient
+from .jobs import _print_event
+from wire.config import CellConfig
+from wire.errors import CellError
+from wire.messages import ScanRequest
+from workers.sim.scene import truth_from_config
 from .up import CellProcesses
 
 __all__ = ["run_demo", "free_port", "local_config"]

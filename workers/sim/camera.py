@@ -15,15 +15,15 @@ from urllib.parse import urlsplit
 import numpy as np
 import zenoh
 
-from cell import keys
-from cell.config import CellConfig
-from cell.errors import ConfigError, TransportError
-from cell.messages import RobotState
-from cell.transport import session_config
+from wire import keys
+from wire.config import CellConfig
+from wire.errors import ConfigError, TransportError
+from wire.messages import RobotState
+from wire.transport import session_config
 
-from cell.sim.scene import scene_from_config
+from .scene import scene_from_config
 
-from .sim_camera import SimCameraServer
+from .axis import SimCameraServer
 
 __all__ = ["main", "robot_camera_pose"]
 

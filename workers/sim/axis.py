@@ -32,8 +32,8 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cell.sim.objects import SimObject
-from cell.sim.render import TableScene, render
+from .objects import SimObject
+from .render import TableScene, render
 
 __all__ = ["SimCameraServer", "scaled_K"]
 

@@ -1,0 +1,1 @@
+"""The ``robocell`` command: one entry point for every part of robocell (``robocell.main``)."""
