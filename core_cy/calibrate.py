@@ -1,6 +1,6 @@
 """Camera calibration with a chessboard: intrinsics (K, distortion) and hand-eye (the camera on the flange).
 
-Pure functions on images already in memory; ``cell.calibrate_cli`` reads the
+Pure functions on images already in memory; ``robocell.calibrate`` reads the
 files and writes the results into the cell's configuration.
 
 A board is given by its *inner* corners, ``(cols, rows)``, e.g. ``(9, 6)`` for a
@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from wire.errors import CalibrationError
+from .errors import CalibrationError
 
 __all__ = [
     "parse_board", "board_points", "find_corners", "calibrate_intrinsics", "calibrate_hand_eye",

@@ -10,13 +10,28 @@ pose (flange-to-base), ``T_flange_cam`` the camera's pose on the flange
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
-from wire.config import Workspace
-from wire.messages import ViewPlan
+__all__ = ["look_at", "plan_flange_poses", "workspace_violation", "camera_poses", "ViewPlan", "Workspace"]
 
-__all__ = ["look_at", "plan_flange_poses", "workspace_violation", "camera_poses"]
+
+class ViewPlan(Protocol):
+    """Where to look from (``wire.messages.ViewPlan`` is one): one view per (elevation, azimuth)."""
+
+    standoff: float
+    elevations_deg: Sequence[float]
+    azimuths_deg: Sequence[float]
+
+
+class Workspace(Protocol):
+    """Where the flange may go (``wire.backends.Workspace`` is one): a box, metres, and a tilt limit."""
+
+    min: Sequence[float]
+    max: Sequence[float]
+    max_tilt_deg: float
 
 
 def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -71,8 +86,10 @@ def workspace_violation(T_base_flange, workspace: Workspace) -> str | None:
 
     Examples
     --------
+    >>> from types import SimpleNamespace
+    >>> box = SimpleNamespace(min=[0.1, -0.7, 0.05], max=[1.0, 0.7, 1.0], max_tilt_deg=80)
     >>> pose = np.eye(4); pose[:3, 3] = [0.5, 0.0, 1.4]; pose[:3, :3] = np.diag([1, -1, -1])
-    >>> workspace_violation(pose, Workspace())
+    >>> workspace_violation(pose, box)
     'z = 1.4 m is above the workspace maximum 1 m'
     """
     pose = np.asarray(T_base_flange, dtype=np.float64)

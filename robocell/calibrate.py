@@ -35,7 +35,8 @@ from pydantic import ValidationError
 from wire import keys
 from core_cy.calibrate import HAND_EYE_METHODS, calibrate_hand_eye, calibrate_intrinsics, parse_board
 from wire.config import CellConfig, load_config
-from wire.errors import CalibrationError, CameraError, ConfigError
+from core_cy.errors import CalibrationError
+from wire.errors import CameraError, ConfigError
 from wire.messages import CaptureRequest, MoveReply, MoveRequest, field_errors, parse
 
 __all__ = ["add_commands", "update_toml", "write_config", "capture", "parse_resolutions", "probe", "PARAM_PATH"]
@@ -384,7 +385,7 @@ async def probe(url: str, *, username: str | None = None, password: str | None =
     try:
         async with AxisCamera(url, resolution=size, retries=0, **camera_args) as camera:
             began = time.perf_counter()
-            jpeg = await camera.snapshot()
+            jpeg = (await camera.snapshot()).data
             shot["time_ms"] = 1000 * (time.perf_counter() - began)
         image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_UNCHANGED)
         shot["bytes"] = len(jpeg)

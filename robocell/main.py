@@ -53,7 +53,7 @@ def _config(args: argparse.Namespace) -> CellConfig:
 
 def _sim_command(args: argparse.Namespace) -> int:
     if args.what == "camera":
-        from workers.sim import camera as sim_camera_worker
+        from workers.sim import axis_process as sim_camera_worker
 
         return sim_camera_worker.main(_config(args))
     if args.what == "kuka":
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         return args.run(args)
-    except (CellError, OSError) as exc:  # OSError: a file or directory that cannot be read or made
+    except (CellError, CoreError, OSError) as exc:  # OSError: a file or directory that cannot be read or made
         print(f"robocell {args.command}: {exc}", file=sys.stderr)
         return 1
     except ValueError as exc:  # option values the parser could not check

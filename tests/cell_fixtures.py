@@ -34,7 +34,7 @@ from wire.transport import RequestError, Transport, session_config
 from robocell.up import CellProcesses
 from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
 from workers.sim.axis import SimCameraServer
-from workers.sim.camera import robot_camera_pose
+from workers.sim.axis_process import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
            "GatedReconstructor", "wait_until", "wait_for_footer", "look_away_poses",

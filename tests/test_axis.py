@@ -14,7 +14,8 @@ import httpx
 import numpy as np
 import pytest
 
-from wire.config import CameraConfig, SimConfig
+from wire.backends import AxisCameraConfig as CameraConfig
+from wire.config import SimConfig
 from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
 from workers.sim.scans import default_K, look_at, object_target
@@ -25,13 +26,15 @@ from workers.sim.axis import SimCameraServer
 PASSWORD = "s3cret-Pa55"
 SIZE = (320, 240)  # small renders keep the tests quick
 FAST = {"backoff_s": 0.01, "timeout_s": 5.0}
+#: A real JPEG, 32x24: a camera may send any bytes, but they must be a JPEG with a frame header.
+TINY_JPEG = cv2.imencode(".jpg", np.full((24, 32, 3), 128, np.uint8))[1].tobytes()
 
 
 def grab(url: str, **kwargs) -> bytes:
     """One snapshot through a fresh AxisCamera, opened and closed around it."""
     async def go() -> bytes:
         async with AxisCamera(url, resolution=SIZE, **kwargs) as camera:
-            return await camera.snapshot()
+            return (await camera.snapshot()).data
 
     return asyncio.run(go())
 
@@ -148,7 +151,7 @@ def test_hang_then_success_within_retries(open_server):
 def test_stopped_server_does_not_answer_on_a_kept_alive_connection():
     async def go(srv: SimCameraServer) -> None:
         async with AxisCamera(srv.url, resolution=SIZE, retries=0, **FAST) as camera:
-            decodes(await camera.snapshot())
+            decodes((await camera.snapshot()).data)
             srv.stop()
             with pytest.raises(CameraConnectionError):
                 await camera.snapshot()
@@ -177,7 +180,9 @@ def test_from_config(server, monkeypatch):
         async with camera:
             return await camera.snapshot()
 
-    assert decodes(asyncio.run(go())) == (240, 320, 3)
+    picture = asyncio.run(go())
+    assert decodes(picture.data) == (240, 320, 3)
+    assert (picture.width, picture.height, picture.encoding) == (320, 240, "image/jpeg")
 
 
 def test_from_config_names_what_is_missing(tmp_path, monkeypatch):
@@ -214,7 +219,7 @@ def test_html_with_200_is_not_a_jpeg():
 
 def test_request_parameters_and_unchanged_bytes():
     seen = []
-    body = b"\xff\xd8 any bytes the camera sends \xff\xd9"
+    body = TINY_JPEG
 
     def handler(request: httpx.Request) -> httpx.Response:
         seen.append(request)
@@ -231,7 +236,7 @@ def test_truncated_jpeg_is_retried_once():
 
     def handler(request: httpx.Request) -> httpx.Response:
         calls.append(request)
-        body = b"\xff\xd8 half a frame" if len(calls) == 1 else b"\xff\xd8 whole \xff\xd9"
+        body = TINY_JPEG[:-20] if len(calls) == 1 else TINY_JPEG
         return httpx.Response(200, headers={"content-type": "image/jpeg"}, content=body)
 
     assert mock_grab(handler, retries=2).endswith(b"\xff\xd9")
@@ -262,3 +267,12 @@ def test_lifecycle_and_arguments():
     with pytest.raises(ValueError, match="http"):
         AxisCamera("ftp://camera.test")
     assert issubclass(CameraTimeout, CameraError)
+
+
+def test_a_body_without_a_frame_header_is_not_a_jpeg():
+    """The snapshot reports the picture's real size, read from its header: a body without one is refused."""
+    def handler(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, headers={"content-type": "image/jpeg"}, content=b"\xff\xd8 no frame \xff\xd9")
+
+    with pytest.raises(CameraResponseError, match="not a JPEG: the body has no JPEG frame header"):
+        mock_grab(handler, retries=0)

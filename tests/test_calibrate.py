@@ -24,7 +24,8 @@ from robocell import calibrate as calibrate_cli
 from core_cy.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
                             parse_board)
 from wire.config import SimConfig, load_config
-from wire.errors import CalibrationError, ConfigError
+from core_cy.errors import CalibrationError
+from wire.errors import ConfigError
 from workers.sim.scans import default_K, look_at
 from workers.sim.axis import SimCameraServer
 

@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from wire.config import Workspace
+from pydantic import TypeAdapter
+
+from wire.backends import KukaConfig, KukaKvpConfig, KukaOpcConfig, Workspace
 from workers.sim.kuka import SimKuka
 from workers.robot.kuka import variables as v
 from workers.robot.kuka.backend import KukaBackend, check_move, make_client
-from workers.robot.kuka.config import KukaConfig
 from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaConnectionError,
                                  KukaError, KukaTimeout, MoveFailed, MoveRefused, Unreachable)
 
@@ -42,7 +43,7 @@ async def kuka_cell(protocol, sim=None, workspace=None, **config):
     async with SimKuka(protocol, **{**FAST, **(sim or {})}) as simulated:
         settings = {"protocol": protocol, "port": simulated.port, "connect_timeout_s": 2.0, "request_timeout_s": 1.0,
                     "ack_timeout_s": 0.5, "move_timeout_s": 10.0, "poll_period_s": 0.01, **config}
-        async with KukaBackend.from_config(KukaConfig(**settings), workspace or Workspace()) as backend:
+        async with KukaBackend.from_config(TypeAdapter(KukaConfig).validate_python(settings), workspace or Workspace()) as backend:
             yield simulated.controller, backend
 
 
@@ -228,7 +229,7 @@ def test_command_ids_never_repeat_the_last_finished_one(protocol):
 
 
 def test_pose_before_open_and_a_move_that_ends_elsewhere():
-    backend = KukaBackend(make_client(KukaConfig()), Workspace())  # never opened
+    backend = KukaBackend(make_client(KukaKvpConfig()), Workspace())  # never opened
     with pytest.raises(KukaError, match="no pose read from KukaVarProxy at 127.0.0.1:7000 yet"):
         backend.pose()
     target = flange(0.6, 0.0, 0.3)
@@ -247,5 +248,5 @@ def test_check_move_gives_the_e6pos_to_command():
 
 def test_config_refuses_a_default_override_above_the_maximum():
     with pytest.raises(ValueError, match="override 40 % is above max_override 30 %"):
-        KukaConfig(override=40)
-    assert KukaConfig(protocol="opc").resolved_port == 7766 and KukaConfig().resolved_port == 7000
+        KukaKvpConfig(override=40)
+    assert KukaOpcConfig().port == 7766 and KukaKvpConfig().port == 7000

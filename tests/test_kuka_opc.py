@@ -9,7 +9,7 @@ from openopc2.exceptions import OPCError
 from openopc2.gateway_proxy import OpenOpcGatewayProxy
 
 from workers.sim.kuka import SimKuka
-from workers.robot.kuka.config import SIM_OPC_SERVER
+from wire.backends import SIM_OPC_SERVER
 from workers.robot.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
 from workers.robot.kuka.opc import OpcClient
 

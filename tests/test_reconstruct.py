@@ -1,7 +1,5 @@
 """The whole algorithm on exact scenes and on simulated scans, scored against the truth."""
 
-import shutil
-
 import cv2
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Tests of the simulated Axis camera (workers.sim_camera), over real HTTP on loopback.
+"""Tests of the simulated Axis camera (workers.sim.axis), over real HTTP on loopback.
 
 What the camera should see is worked out independently of the server: the
 object's centre projected through the test's own K and pose.
@@ -13,13 +13,15 @@ import httpx
 import numpy as np
 import pytest
 
-from wire.config import CameraConfig, SimConfig
+from wire.backends import AxisCameraConfig as CameraConfig
+from wire.config import SimConfig
 from wire.errors import ConfigError
 from workers.sim.objects import CupStack, LumpyFigure, SuperquadricObject
 from workers.sim.render import project
 from workers.sim.scans import look_at, object_target
 from workers.sim.scene import scene_from_config, truth_from_config
-from workers.sim.axis import SimCameraServer, scaled_K
+from workers.sim.axis import SimCameraServer
+from workers.sim.camera import scaled_K
 
 SNAPSHOT = "/axis-cgi/jpg/image.cgi"
 K = np.asarray(CameraConfig().K)  # 640x480, f = 600

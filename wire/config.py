@@ -11,14 +11,11 @@ import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
-from urllib.parse import urlsplit
 
 import numpy as np
-from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, SecretStr, ValidationError, field_serializer,
-                      model_validator)
+from pydantic import AfterValidator, Field, ValidationError
 
-from workers.robot.kuka.config import KukaConfig
-
+from .backends import AxisCameraConfig, CameraConfig, RobotConfig, Section, SimRobotConfig
 from .errors import ConfigError
 from .messages import Point, Pose, ViewPlan, field_errors
 
@@ -29,11 +26,7 @@ __all__ = ["CellConfig", "load_config", "DEFAULT_HAND_EYE"]
 DEFAULT_HAND_EYE = [[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.1], [0.0, 0.0, 0.0, 1.0]]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)  # TOML has nan and inf
-
-
-class ZenohConfig(_Section):
+class ZenohConfig(Section):
     #: The router's endpoint: ``robocell router`` listens on it, every other process connects to it.
     router: str = "tcp/127.0.0.1:7447"
     #: Zenoh configuration keys (JSON5 key to value) for every session, e.g. the CA to trust.
@@ -66,113 +59,13 @@ class ZenohConfig(_Section):
         return {**self.settings, **self.router_settings}
 
 
-class Workspace(_Section):
-    """The box the flange may move in (robot base frame, metres) and the tilt it may take."""
-
-    min: Point = [0.1, -0.7, 0.05]
-    max: Point = [1.0, 0.7, 1.0]
-    #: Largest angle between the flange's z axis and straight down, degrees.
-    max_tilt_deg: Annotated[float, Field(gt=0, le=180)] = 80.0
-
-    @model_validator(mode="after")
-    def _ordered(self) -> "Workspace":
-        if any(lo >= hi for lo, hi in zip(self.min, self.max)):
-            raise ValueError("workspace min must be below max on every axis")
-        return self
-
-
-class RobotConfig(_Section):
-    #: ``sim``: the simulated robot; ``kuka``: a KUKA controller through the bridge in ``[robot.kuka]``.
-    backend: Literal["sim", "kuka"] = "sim"
-    kuka: KukaConfig = KukaConfig()
-    #: Linear speed of the simulated robot, m/s; 0 moves instantly.
-    speed: Annotated[float, Field(ge=0)] = 0.5
-    #: Rotation speed of the simulated robot, degrees/s; 0 rotates instantly.
-    rotation_speed_deg: Annotated[float, Field(ge=0)] = 180.0
-    #: If set, every move of the simulated robot takes exactly this long, seconds, whatever its
-    #: length (speeds are then ignored): for benchmarks and tests of the cell's timing.
-    move_time_s: Annotated[float, Field(ge=0)] | None = None
-    home: Pose = [[1.0, 0.0, 0.0, 0.4], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.6], [0.0, 0.0, 0.0, 1.0]]
-    workspace: Workspace = Workspace()
-    #: How often the robot worker publishes its pose while moving, Hz.
-    publish_rate_hz: Annotated[float, Field(gt=0, le=200)] = 20.0
-
-
-def _camera_url(url: str) -> str:
-    # The URL is shown in logs and messages and stored in the run directory: no credentials in it.
-    parts = urlsplit(url)
-    if parts.username is not None or parts.password is not None:
-        raise ValueError("no user or password in the URL: put the user in camera.username and the password "
-                         "in ROBOCELL_CAMERA_PASSWORD")
-    try:
-        parts.port  # raises on a bad port
-    except ValueError:  # not shown: what looks like a port may be a password with a "/" in it
-        raise ValueError("its port is not a number from 0 to 65535") from None
-    if parts.scheme not in ("http", "https") or not parts.hostname:
-        shown = repr(url) if "@" not in url else "a URL with an @ in it (a password?)"
-        raise ValueError(f"must be http:// or https:// with a host, got {shown}")
-    return url
-
-
-def _distortion(dist: list[float] | None) -> list[float] | None:
-    if dist is not None and len(dist) not in (4, 5, 8, 12, 14):
-        raise ValueError(f"OpenCV takes 4, 5, 8, 12 or 14 distortion coefficients, got {len(dist)}")
-    return dist
-
-
-class CameraConfig(_Section):
-    url: Annotated[str, AfterValidator(_camera_url)] = "http://127.0.0.1:8080"
-    resolution: tuple[Annotated[int, Field(gt=0)], Annotated[int, Field(gt=0)]] = (640, 480)
-    username: str | None = None
-    #: Prefer the environment variable ROBOCELL_CAMERA_PASSWORD to writing it here. Never written
-    #: out: ``robocell config`` and the run directory's copy show null.
-    password: SecretStr | None = None
-    auth: Literal["digest", "basic"] = "digest"
-    K: Annotated[list[Annotated[list[float], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)] \
-        = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
-    dist: Annotated[list[float] | None, AfterValidator(_distortion)] = None
-    timeout_s: Annotated[float, Field(gt=0)] = 3.0
-    retries: Annotated[int, Field(ge=0, le=10)] = 2
-    #: HTTPS certificate check: true (the system's CAs), false (none: only on a closed network),
-    #: or the path of a CA bundle that signed the camera's certificate.
-    verify: bool | str = True
-    #: Axis JPEG compression 0-100 (higher: smaller files, more artefacts); None: the camera's default.
-    compression: Annotated[int, Field(ge=0, le=100)] | None = None
-
-    @field_serializer("password")
-    def _unwritten(self, password: SecretStr | None) -> None:
-        return None
-
-    def resolved_password(self) -> str | None:
-        from_env = os.environ.get("ROBOCELL_CAMERA_PASSWORD")
-        if from_env:
-            return from_env
-        return self.password.get_secret_value() if self.password else None
-
-    def credentials(self) -> tuple[str | None, str | None]:
-        """(user, password) for the camera, or (None, None) without a user.
-
-        Raises
-        ------
-        ConfigError
-            If a user is set but no password (neither ROBOCELL_CAMERA_PASSWORD nor camera.password).
-        """
-        if self.username is None:
-            return None, None
-        password = self.resolved_password()
-        if not password:
-            raise ConfigError(f"camera.username is {self.username!r}, but it has no password: set "
-                              f"ROBOCELL_CAMERA_PASSWORD (or camera.password)")
-        return self.username, password
-
-
-class ScanConfig(_Section):
+class ScanConfig(Section):
     #: The table surface's height in the robot base frame (the support plane z = height).
     table_height: float = 0.0
     plan: ViewPlan = ViewPlan()
 
 
-class ReconstructConfig(_Section):
+class ReconstructConfig(Section):
     #: Size of a reconstruction worker's process pool: its capacity, announced to the daemons.
     processes: Annotated[int, Field(ge=1, le=64)] = 1
     #: How many workers a job's reconstruction is tried on (one after another) before it fails.
@@ -182,7 +75,7 @@ class ReconstructConfig(_Section):
     cauchy_scale: Annotated[float, Field(gt=0)] | None = None
 
 
-class SimConfig(_Section):
+class SimConfig(Section):
     """The simulated scene the simulated camera renders; the camera serves at ``camera.url``."""
 
     shape: Literal["box", "cylinder", "ellipsoid", "rounded-box", "cup-stack", "lumpy"] = "box"
@@ -192,7 +85,7 @@ class SimConfig(_Section):
     seed: int = 0
 
 
-class Timeouts(_Section):
+class Timeouts(Section):
     move_s: Annotated[float, Field(gt=0)] = 60.0
     capture_s: Annotated[float, Field(gt=0)] = 15.0
     reconstruct_s: Annotated[float, Field(gt=0)] = 60.0
@@ -209,12 +102,12 @@ def _run_dir(path: Path) -> Path:
     return path
 
 
-class CellConfig(_Section):
+class CellConfig(Section):
     cell_id: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")] = "cell1"
     run_dir: Annotated[Path, AfterValidator(_run_dir)] = Path("runs")
     zenoh: ZenohConfig = ZenohConfig()
-    robot: RobotConfig = RobotConfig()
-    camera: CameraConfig = CameraConfig()
+    robot: RobotConfig = SimRobotConfig()
+    camera: CameraConfig = AxisCameraConfig()
     #: The camera's pose in the flange frame (camera-to-flange), from hand-eye calibration.
     T_flange_cam: Pose = DEFAULT_HAND_EYE
     scan: ScanConfig = ScanConfig()

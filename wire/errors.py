@@ -10,12 +10,11 @@
     │   ├── NoResponder        nobody answers on a key: the worker is not running
     │   ├── TransportTimeout   the answer did not come in time
     │   └── RemoteError        the other side answered with an error
-    ├── CameraError        a snapshot could not be grabbed from the camera
-    │   ├── CameraAuthError        the camera refused the credentials (HTTP 401/403)
-    │   ├── CameraResponseError    a bad status, no snapshot endpoint, or not a JPEG
-    │   ├── CameraTimeout          the camera did not answer in time
-    │   └── CameraConnectionError  no connection to the camera (refused, DNS, reset)
-    └── CalibrationError   calibration images or poses cannot give a calibration
+    └── CameraError        a snapshot could not be grabbed from the camera
+        ├── CameraAuthError        the camera refused the credentials (HTTP 401/403)
+        ├── CameraResponseError    a bad status, no snapshot endpoint, or not a JPEG
+        ├── CameraTimeout          the camera did not answer in time
+        └── CameraConnectionError  no connection to the camera (refused, DNS, reset)
 
 Errors of the reconstruction itself are ``core_cy.errors.CoreError``; the
 reconstruction pool's (``AttemptFailed``, ``NoReconstructor``) live in
@@ -28,7 +27,6 @@ __all__ = [
     "CellError", "BundleError", "ConfigError", "StoreError",
     "TransportError", "NoResponder", "TransportTimeout", "RemoteError",
     "CameraError", "CameraAuthError", "CameraResponseError", "CameraTimeout", "CameraConnectionError",
-    "CalibrationError",
 ]
 
 
@@ -93,7 +91,3 @@ class TransportTimeout(TransportError):
 class RemoteError(TransportError):
     """The other side received the message and answered with an error."""
 
-
-class CalibrationError(CellError):
-    """Calibration images or robot poses cannot give a calibration: too few usable
-    images, poses that do not match the images, or poses that are not rigid motions."""

@@ -65,10 +65,14 @@ class Message(BaseModel):
 def field_errors(exc: ValidationError, *, whole: str = "message") -> str:
     """One line naming each invalid field: ``target: List should have at least 3 items``.
 
+    The tag of a discriminated union (``backend=kuka``, see ``wire.backends``) is not a field,
+    and is left out of the field's name.
+
     ``whole`` names what an error about the whole input (no field) is about.
     """
     return "; ".join(
-        f"{'.'.join(str(p) for p in error['loc']) or whole}: {error['msg']}" for error in exc.errors()
+        f"{'.'.join(str(p) for p in error['loc'] if '=' not in str(p)) or whole}: {error['msg']}"
+        for error in exc.errors()
     )
 
 

@@ -24,16 +24,16 @@ import enum
 import logging
 import ssl
 from collections.abc import Iterator
-from types import TracebackType
 from typing import TYPE_CHECKING, Literal
 
 import httpx
 
+from .backend import Camera, Snapshot, jpeg_size
 from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
 
 if TYPE_CHECKING:
-    from wire.config import CameraConfig
+    from wire.backends import AxisCameraConfig
 
 __all__ = ["AxisCamera", "SNAPSHOT_PATH"]
 
@@ -77,10 +77,10 @@ def _snippet(response: httpx.Response) -> str:
     return " ".join(response.text.split())[:_SNIPPET]
 
 
-class AxisCamera:
+class AxisCamera(Camera):
     """An Axis camera's snapshot endpoint; owns one ``httpx.AsyncClient``.
 
-    Use it as ``async with AxisCamera(...) as camera: jpeg = await camera.snapshot()``.
+    Use it as ``async with AxisCamera(...) as camera: picture = await camera.snapshot()``.
 
     Parameters
     ----------
@@ -165,7 +165,7 @@ class AxisCamera:
         self._state = _State.UNOPENED
 
     @classmethod
-    def from_config(cls, camera: CameraConfig, *, transport: httpx.AsyncBaseTransport | None = None) -> AxisCamera:
+    def from_config(cls, camera: AxisCameraConfig, *, transport: httpx.AsyncBaseTransport | None = None) -> AxisCamera:
         """The camera described by the cell's ``[camera]`` section (password from the environment first).
 
         ``verify`` may name a CA bundle: the certificate check then trusts that CA.
@@ -202,7 +202,7 @@ class AxisCamera:
     def __repr__(self) -> str:
         return f"AxisCamera({self._source!r}, resolution={self.resolution!r})"
 
-    async def __aenter__(self) -> AxisCamera:
+    async def open(self) -> None:
         if self._state is not _State.UNOPENED:
             raise RuntimeError("an AxisCamera can be opened only once")
         # Per-operation httpx time-outs, plus the attempt's overall deadline in snapshot():
@@ -212,27 +212,21 @@ class AxisCamera:
             transport=self._transport, follow_redirects=False, trust_env=False,
         )
         self._state = _State.OPENED
-        return self
 
-    async def __aexit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        await self.aclose()
-
-    async def aclose(self) -> None:
+    async def close(self) -> None:
         """Close the HTTP client; idempotent."""
         self._state = _State.CLOSED
         if self._client is not None:
             client, self._client = self._client, None
             await client.aclose()
 
-    async def snapshot(self) -> bytes:
+    async def snapshot(self) -> Snapshot:
         """Grab one JPEG, retrying transient failures.
 
         Returns
         -------
-        bytes
-            The JPEG exactly as the camera sent it.
+        Snapshot
+            The JPEG exactly as the camera sent it, and its size as its header gives it.
 
         Raises
         ------
@@ -266,15 +260,15 @@ class AxisCamera:
                 await asyncio.sleep(delay)
         raise AssertionError("unreachable")  # the loop returns or raises
 
-    async def _attempt(self) -> bytes:
+    async def _attempt(self) -> Snapshot:
         assert self._client is not None
         with _map_httpx_errors(self._source, self._timeout_s):
             async with asyncio.timeout(self._timeout_s):
                 response = await self._client.get(self.endpoint, params=self._params)
         return self._check(response)
 
-    def _check(self, response: httpx.Response) -> bytes:
-        """The JPEG body of a good answer; a :class:`CameraError` for anything else."""
+    def _check(self, response: httpx.Response) -> Snapshot:
+        """The JPEG of a good answer; a :class:`CameraError` for anything else."""
         status, src = response.status_code, self._source
         if status in (401, 403):
             if self._username is None:
@@ -291,14 +285,16 @@ class AxisCamera:
             raise CameraResponseError(msg, source=src, status=status)
         body = response.content
         ctype = response.headers.get("content-type", "").split(";")[0].strip().lower()
-        problem = None
+        problem, size = None, None
         if ctype != "image/jpeg":
             problem = f"content-type is {ctype or 'missing'!r}"
         elif not body.startswith(_SOI):
             problem = "the body does not start with the JPEG marker FF D8"
         elif not body.endswith(_EOI):
             problem = "the body does not end with the JPEG marker FF D9 (truncated?)"
-        if problem is not None:
+        elif (size := jpeg_size(body)) is None:
+            problem = "the body has no JPEG frame header"
+        if problem is not None or size is None:
             raise CameraResponseError(f"camera at {src} answered, but not a JPEG: {problem}", source=src, status=200)
         logger.debug("snapshot from %s: %d bytes", src, len(body))
-        return body
+        return Snapshot(body, *size)

@@ -1,8 +1,8 @@
-"""The camera worker: grabs a JPEG from the cell's Axis camera on request.
+"""The camera worker: takes a picture with the cell's camera on request.
 
-The JPEG goes back unchanged as the reply's payload (encoding image/jpeg),
-described by a CaptureInfo in the attachment. A camera failure is answered
-as an error naming the camera and the reason.
+The picture goes back unchanged as the reply's payload, with its encoding,
+described by a CaptureInfo in the attachment (its real width and height). A
+camera failure is answered as an error naming the camera and the reason.
 """
 
 from __future__ import annotations
@@ -11,46 +11,74 @@ import asyncio
 import logging
 import time
 
+import numpy as np
+
 from wire import keys
+from wire.backends import AxisCameraConfig
 from wire.config import CellConfig
-from wire.errors import CameraError
-from wire.messages import CaptureInfo
+from wire.errors import CameraError, TransportError
+from wire.messages import CaptureInfo, RobotState, parse
+from wire.process import open_transport, run_until_stopped
 from wire.transport import Request, RequestError, Response, Transport
 
-from .axis import AxisCamera
-from wire.process import open_transport, run_until_stopped
+from .backend import Camera
 
-__all__ = ["serve_camera", "main"]
+__all__ = ["make_camera", "serve_camera", "main"]
 
 log = logging.getLogger(__name__)
+_ROBOT_STATE_TIMEOUT_S = 2.0
 
 
-def serve_camera(transport: Transport, config: CellConfig, camera: AxisCamera) -> None:
-    width, height = config.camera.resolution
+def make_camera(config: CellConfig, transport: Transport) -> Camera:
+    """The camera of the ``[camera]`` section, not yet opened.
+
+    Raises
+    ------
+    ConfigError
+        If a setting cannot be used (a CA bundle that cannot be read, a user without a password).
+    """
+    camera = config.camera
+    if isinstance(camera, AxisCameraConfig):
+        from .axis import AxisCamera
+
+        return AxisCamera.from_config(camera)
+    from workers.sim.camera import SceneCamera, SimCamera
+    from workers.sim.scene import scene_from_config
+
+    async def pose() -> np.ndarray | None:
+        try:
+            reply = await transport.query(keys.robot_state(config.cell_id), timeout=_ROBOT_STATE_TIMEOUT_S)
+        except TransportError:
+            return None
+        return np.asarray(parse(RobotState, reply.payload).T_base_flange) @ config.hand_eye
+
+    scene = SceneCamera(scene_from_config(config.sim), K=camera.K, image_size=camera.resolution, dist=camera.dist,
+                        seed=config.sim.seed, jpeg_quality=camera.jpeg_quality)
+    return SimCamera(scene, pose)
+
+
+def serve_camera(transport: Transport, config: CellConfig, camera: Camera) -> None:
     lock = asyncio.Lock()  # one camera: one snapshot at a time
 
     async def on_capture(request: Request) -> Response:
         async with lock:
             began = time.monotonic()
             try:
-                jpeg = await camera.snapshot()
+                picture = await camera.snapshot()
             except CameraError as exc:
                 raise RequestError(str(exc)) from None
-        info = CaptureInfo(width=width, height=height, source=camera.source, time=time.time(),
-                           duration_s=time.monotonic() - began)
-        return Response(jpeg, encoding="image/jpeg", attachment=info.model_dump_json())
+        info = CaptureInfo(encoding=picture.encoding, width=picture.width, height=picture.height,
+                           source=camera.source, time=time.time(), duration_s=time.monotonic() - began)
+        return Response(picture.data, encoding=picture.encoding, attachment=info.model_dump_json())
 
     transport.serve(keys.camera_capture(config.cell_id), on_capture)
 
 
 def main(config: CellConfig) -> int:
-    settings = config.camera
-
     async def run(stop: asyncio.Event) -> None:
-        camera = AxisCamera.from_config(settings)  # a bad setting is named before anything connects
         transport = await open_transport(config)
         try:
-            async with camera:
+            async with make_camera(config, transport) as camera:
                 serve_camera(transport, config, camera)
                 transport.declare_token(keys.alive(config.cell_id, "camera"))
                 log.info("camera worker of cell %s ready: %s", config.cell_id, camera.source)

@@ -28,14 +28,13 @@ from dataclasses import dataclass
 from typing import Any, Literal
 from urllib.parse import parse_qs, urlsplit
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .camera import SceneCamera
 from .objects import SimObject
-from .render import TableScene, render
 
-__all__ = ["SimCameraServer", "scaled_K"]
+__all__ = ["SimCameraServer"]
 
 logger = logging.getLogger(__name__)
 
@@ -48,22 +47,6 @@ _STOP_JOIN_S = 2.0  # how long stop() waits for request threads in total
 _AXIS_RESOLUTIONS = [(1920, 1080), (1280, 960), (1280, 720), (1024, 768), (800, 600), (800, 450),
                      (640, 480), (640, 360), (480, 360), (480, 270), (320, 240), (320, 180), (240, 180), (160, 120)]
 _DIGEST_PARAM = re.compile(r'(\w+)\s*=\s*(?:"((?:[^"\\]|\\.)*)"|([^\s,]+))')
-
-
-def scaled_K(K: ArrayLike, image_size: tuple[int, int], size: tuple[int, int]) -> NDArray[np.float64]:
-    """K for the same camera at another resolution ``size``; pixel centres on integers.
-
-    Examples
-    --------
-    >>> scaled_K([[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]], (640, 480), (320, 240))[:2].tolist()
-    [[300.0, 0.0, 159.5], [0.0, 300.0, 119.5]]
-    """
-    K2 = np.array(K, dtype=np.float64)
-    for row, (new, old) in enumerate(zip(size, image_size)):
-        s = new / old
-        K2[row, :2] *= s
-        K2[row, 2] = s * (K2[row, 2] + 0.5) - 0.5  # u' + 0.5 = s (u + 0.5): pixel edges scale, not centres
-    return K2
 
 
 @dataclass
@@ -178,21 +161,17 @@ class SimCameraServer:
             raise ValueError(f"auth must be 'digest', 'basic' or None, got {auth!r}")
         if username is not None and auth is not None and password is None:
             raise ValueError("a username needs a password")
-        self._objects = list(scene_objects)
-        self._K = np.asarray(K, dtype=np.float64).reshape(3, 3)
-        self._size = (int(image_size[0]), int(image_size[1]))
-        self._dist = None if dist is None else np.asarray(dist, dtype=np.float64)
+        self._camera = SceneCamera(scene_objects, K=K, image_size=image_size, dist=dist, seed=seed,
+                                   jpeg_quality=jpeg_quality)
+        self._size = self._camera.image_size
         self._pose_provider = pose_provider
         self._address = (host, int(port))
         self._username, self._password = username, password
         self._auth = auth if username is not None else None
-        self._seed, self._quality = int(seed), int(jpeg_quality)
-        self._table = TableScene.from_seed(self._seed)
         w, h = self._size
         sizes = {r for r in _AXIS_RESOLUTIONS if r[0] * h == r[1] * w} | {self._size}
         self.resolutions = sorted(sizes, key=lambda r: (-r[0], -r[1]))
         self._lock = threading.Lock()  # guards the counters, faults and nonces below
-        self._render_lock = threading.Lock()  # one render at a time bounds memory
         self._requests = 0
         self._faults: list[_Fault] = []
         self._nonces: OrderedDict[str, tuple[float, set[int]]] = OrderedDict()
@@ -279,7 +258,6 @@ class SimCameraServer:
     def _snapshot(self, query: dict[str, str]) -> tuple[int, bytes | str]:
         with self._lock:
             self._requests += 1
-            n = self._requests
             fault = self._faults[0] if self._faults else None
             if fault is not None:
                 fault.count -= 1
@@ -298,7 +276,7 @@ class SimCameraServer:
             if m is None or (int(m[1]), int(m[2])) not in self.resolutions:
                 return 400, f"Error: resolution {query['resolution']!r} not supported\n"
             size = (int(m[1]), int(m[2]))
-        quality = self._quality
+        quality = None
         if "compression" in query:
             if not query["compression"].isdigit() or int(query["compression"]) > 100:
                 return 400, f"Error: compression {query['compression']!r} not in 0..100\n"
@@ -310,18 +288,11 @@ class SimCameraServer:
             return 500, "Internal error: pose_provider failed\n"
         if pose is None:
             return 503, "Service Unavailable: no robot pose yet\n"
-        T = np.asarray(pose, dtype=np.float64)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            logger.error("pose_provider returned an invalid pose of shape %s", T.shape)
-            return 500, "Internal error: invalid camera pose\n"
-        K = self._K if size == self._size else scaled_K(self._K, self._size, size)
-        with self._render_lock:
-            bgr, _ = render(self._objects, T, K, self._dist, size,
-                            rng=np.random.default_rng([self._seed, n]), table=self._table)
-        ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
-        if not ok:
-            return 500, "Internal error: JPEG encoding failed\n"
-        return 200, jpg.tobytes()
+        try:
+            return 200, self._camera.jpeg(pose, size=size, quality=quality)
+        except ValueError as exc:
+            logger.error("cannot render: %s", exc)
+            return 500, f"Internal error: {exc}\n"
 
     def _params(self, query: dict[str, str]) -> tuple[int, str]:
         if query.get("action") != "list":

@@ -1,81 +1,106 @@
-"""``robocell sim camera``: the simulated Axis camera, posed by the cell's robot.
+"""The simulated camera: the ``[sim]`` scene rendered from where the camera stands.
 
-For each snapshot it asks the robot worker where the flange is (a Zenoh
-query, so the picture is taken exactly where the robot stands) and renders
-the configured scene from ``T_base_flange @ T_flange_cam``.
+:class:`SceneCamera` turns a camera pose into a JPEG of the scene (the
+simulated Axis camera's HTTP server serves these); :class:`SimCamera` is a
+``Camera`` backend that renders in the camera worker's own process, posed by
+the cell's robot, for a simulated cell with no HTTP camera at all.
 """
 
 from __future__ import annotations
 
-import logging
-import signal
+import asyncio
 import threading
-from urllib.parse import urlsplit
+from collections.abc import Awaitable, Callable, Sequence
 
+import cv2
 import numpy as np
-import zenoh
+from numpy.typing import ArrayLike, NDArray
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import ConfigError, TransportError
-from wire.messages import RobotState
-from wire.transport import session_config
+from wire.errors import CameraError
+from workers.camera.backend import Camera, Snapshot
 
-from .scene import scene_from_config
+from .objects import SimObject
+from .render import TableScene, render
 
-from .axis import SimCameraServer
-
-__all__ = ["main", "robot_camera_pose"]
-
-log = logging.getLogger(__name__)
-_STATE_TIMEOUT_S = 2.0
+__all__ = ["SceneCamera", "SimCamera", "scaled_K"]
 
 
-def robot_camera_pose(session: zenoh.Session, config: CellConfig) -> np.ndarray | None:
-    """The camera's pose now, from the robot worker's state; None if no robot answers."""
-    for reply in session.get(keys.robot_state(config.cell_id), timeout=_STATE_TIMEOUT_S):
-        if reply.ok is not None:
-            state = RobotState.model_validate_json(reply.ok.payload.to_bytes())
-            return np.asarray(state.T_base_flange) @ config.hand_eye
-    return None
+def scaled_K(K: ArrayLike, image_size: tuple[int, int], size: tuple[int, int]) -> NDArray[np.float64]:
+    """K for the same camera at another resolution ``size``; pixel centres on integers.
 
-
-def main(config: CellConfig) -> int:
-    """Serve until SIGINT/SIGTERM.
-
-    Raises
-    ------
-    CellError
-        If the router cannot be reached, the camera's address cannot be served, or a user
-        has no password (each named).
+    Examples
+    --------
+    >>> scaled_K([[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]], (640, 480), (320, 240))[:2].tolist()
+    [[300.0, 0.0, 159.5], [0.0, 300.0, 119.5]]
     """
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-    camera = config.camera
-    username, password = camera.credentials()
-    address = urlsplit(camera.url)  # the simulated camera serves where the camera worker looks
-    host, port = address.hostname or "127.0.0.1", address.port or 80
-    try:
-        session = zenoh.open(session_config(config.zenoh.router, settings=config.zenoh.client_settings(),
-                                            connect_timeout_ms=10_000))
-    except zenoh.ZError as exc:
-        raise TransportError(f"cannot reach the Zenoh router at {config.zenoh.router}: {exc}") from None
-    try:
-        server = SimCameraServer(
-            scene_from_config(config.sim), K=np.asarray(camera.K), image_size=tuple(camera.resolution),
-            dist=camera.dist, pose_provider=lambda: robot_camera_pose(session, config), host=host, port=port,
-            username=username, password=password, auth=camera.auth if username else None, seed=config.sim.seed)
-        try:
-            server.start()
-        except OSError as exc:
-            raise ConfigError(f"the simulated camera cannot serve camera.url at {host}:{port}: "
-                              f"{exc.strerror or exc}") from None
-        try:
-            log.info("simulated camera serving %s", server.url)
-            stop.wait()
-        finally:
-            server.stop()
-    finally:
-        session.close()
-    return 0
+    K2 = np.array(K, dtype=np.float64)
+    for row, (new, old) in enumerate(zip(size, image_size)):
+        s = new / old
+        K2[row, :2] *= s
+        K2[row, 2] = s * (K2[row, 2] + 0.5) - 0.5  # u' + 0.5 = s (u + 0.5): pixel edges scale, not centres
+    return K2
+
+
+class SceneCamera:
+    """Renders ``scene_objects`` on the table as a camera at a pose sees them; thread-safe.
+
+    The table's look comes from ``seed``; the sensor noise from ``seed`` and the picture's
+    number, so no two pictures are alike and a run repeats exactly.
+    """
+
+    def __init__(self, scene_objects: Sequence[SimObject], *, K: ArrayLike, image_size: tuple[int, int],
+                 dist: ArrayLike | None = None, seed: int = 0, jpeg_quality: int = 90) -> None:
+        self._objects = list(scene_objects)
+        self.K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+        self.image_size = (int(image_size[0]), int(image_size[1]))
+        self._dist = None if dist is None else np.asarray(dist, dtype=np.float64)
+        self._seed, self.jpeg_quality = int(seed), int(jpeg_quality)
+        self._table = TableScene.from_seed(self._seed)
+        self._lock = threading.Lock()  # one render at a time bounds memory
+        self._count = 0
+
+    def jpeg(self, T_world_cam: ArrayLike, *, size: tuple[int, int] | None = None,
+             quality: int | None = None) -> bytes:
+        """The JPEG the camera takes at ``T_world_cam`` (camera-to-world, OpenCV axes).
+
+        Raises
+        ------
+        ValueError
+            If the pose is not a finite 4x4 matrix.
+        """
+        T = np.asarray(T_world_cam, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ValueError(f"the camera pose must be a finite 4x4 matrix, got shape {T.shape}")
+        size = self.image_size if size is None else size
+        K = self.K if size == self.image_size else scaled_K(self.K, self.image_size, size)
+        with self._lock:
+            self._count += 1
+            bgr, _ = render(self._objects, T, K, self._dist, size,
+                            rng=np.random.default_rng([self._seed, self._count]), table=self._table)
+        ok, encoded = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality or self.jpeg_quality])
+        if not ok:
+            raise ValueError("JPEG encoding failed")
+        return encoded.tobytes()
+
+
+#: The camera's pose now (camera-to-world), or None while it is unknown.
+PoseSource = Callable[[], Awaitable["NDArray[np.float64] | None"]]
+
+
+class SimCamera(Camera):
+    """A ``Camera`` that renders the scene from ``pose_source()``, in a thread."""
+
+    def __init__(self, scene: SceneCamera, pose_source: PoseSource) -> None:
+        self._scene = scene
+        self._pose_source = pose_source
+
+    @property
+    def source(self) -> str:
+        return "simulated camera"
+
+    async def snapshot(self) -> Snapshot:
+        pose = await self._pose_source()
+        if pose is None:
+            raise CameraError("the simulated camera does not know where it is: no robot answers", source=self.source)
+        data = await asyncio.to_thread(self._scene.jpeg, pose)
+        return Snapshot(data, *self._scene.image_size)

@@ -29,13 +29,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from workers.robot.kuka import variables as v
-from workers.robot.kuka.config import DEFAULT_PORTS, SIM_OPC_SERVER
+from wire.backends import SIM_OPC_SERVER, KukaKvpConfig, KukaOpcConfig
 from workers.robot.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
 from workers.robot.kuka.kvp import READ, WRITE, decode_request, encode_response
 
 __all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main", "add_arguments", "run"]
 
 log = logging.getLogger(__name__)
+#: Each protocol's usual port, as the bridge's configuration has it.
+DEFAULT_PORTS = {"kvp": KukaKvpConfig.model_fields["port"].default, "opc": KukaOpcConfig.model_fields["port"].default}
 Fault = Literal["emergency_stop", "drives_off", "unreachable", "stall", "hang", "drop"]
 HOME = [[1.0, 0.0, 0.0, 0.4], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.6], [0.0, 0.0, 0.0, 1.0]]
 _HANG_LIMIT_S = 30.0  # a hung bridge answers after this at the latest, so nothing waits forever

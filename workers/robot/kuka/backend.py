@@ -19,11 +19,11 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from wire.config import Workspace
+from wire.backends import KukaConfig, KukaKvpConfig, Workspace
 from core_cy.plan import workspace_violation
 
+from ..backend import RobotBackend
 from . import variables as v
-from .config import KukaConfig
 from .e6pos import E6Axis, E6Pos, e6pos_from_pose, format_e6pos, parse_e6axis, parse_e6pos, pose_from_e6pos
 from .errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaError, KukaProtocolError,
                      KukaTimeout, MoveFailed, MoveRefused, Unreachable)
@@ -55,11 +55,11 @@ class KukaClient(Protocol):
 def make_client(config: KukaConfig) -> KukaClient:
     """The client of ``config.protocol``, not yet connected."""
     timeouts = {"connect_timeout": config.connect_timeout_s, "request_timeout": config.request_timeout_s}
-    if config.protocol == "kvp":
+    if isinstance(config, KukaKvpConfig):
         from .kvp import KvpClient
-        return KvpClient(config.host, config.resolved_port, **timeouts)
+        return KvpClient(config.host, config.port, **timeouts)
     from .opc import OpcClient  # imports openopc2 and Pyro5 only when OPC is used
-    return OpcClient(config.host, config.resolved_port, opc_server=config.opc_server, opc_host=config.opc_host,
+    return OpcClient(config.host, config.port, opc_server=config.opc_server, opc_host=config.opc_host,
                      item_prefix=config.opc_item_prefix, **timeouts)
 
 
@@ -100,7 +100,7 @@ def _int(values: dict[str, str], var: v.KrlVar) -> int:
     return int(_parse(values[var.name], int, var.name))
 
 
-class KukaBackend:
+class KukaBackend(RobotBackend):
     """``RobotBackend`` for a KUKA controller running ``krl/robocell.src``.
 
     ``client`` is a :class:`KukaClient`; the backend opens and closes it
@@ -124,13 +124,6 @@ class KukaBackend:
                    motion=config.motion, ack_timeout_s=config.ack_timeout_s, move_timeout_s=config.move_timeout_s,
                    poll_period_s=config.poll_period_s, reached_tolerance_mm=config.reached_tolerance_mm,
                    reached_tolerance_deg=config.reached_tolerance_deg)
-
-    async def __aenter__(self) -> "KukaBackend":
-        await self.open()
-        return self
-
-    async def __aexit__(self, *exc_info: object) -> None:
-        await self.close()
 
     async def open(self) -> None:
         """Connect and read the flange's pose (so that :meth:`pose` has one)."""

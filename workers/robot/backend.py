@@ -1,0 +1,46 @@
+"""What the robot worker needs of a robot: :class:`RobotBackend`.
+
+The KUKA bridges (``workers.robot.kuka``) and the simulated robot
+(``workers.sim.robot``) implement it, so the worker cannot tell which one it
+drives. A new robot is a new backend beside them, with its configuration model
+in ``wire.backends``, and a line in :func:`workers.robot.worker.make_backend`.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["RobotBackend", "ProgressCallback"]
+
+#: Called while a move runs: the flange's pose now (4x4, base frame), and whether it still moves.
+ProgressCallback = Callable[[np.ndarray, bool], None]
+
+
+class RobotBackend(abc.ABC):
+    """A robot arm. Errors are ``wire.errors.CellError``s that say why; use ``async with``."""
+
+    @abc.abstractmethod
+    async def open(self) -> None:
+        """Connect, and learn where the flange is."""
+
+    @abc.abstractmethod
+    async def close(self) -> None:
+        """Let go of the robot."""
+
+    @abc.abstractmethod
+    async def move(self, target: np.ndarray, on_progress: ProgressCallback) -> np.ndarray:
+        """Move the flange to ``target`` (4x4, base frame); return the pose reached."""
+
+    @abc.abstractmethod
+    def pose(self) -> np.ndarray:
+        """The flange's pose as last known (4x4, base frame)."""
+
+    async def __aenter__(self) -> RobotBackend:
+        await self.open()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
