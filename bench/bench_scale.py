@@ -119,7 +119,7 @@ async def _run_jobs(pool: ReconstructorPool, scans: list[tuple[str, bytes]], n: 
         request = ReconstructRequest.model_validate_json(request_json)
         request.ticket = keys.ticket("bench", f"{tag}-{k}", 1)
         _, reply = await pool.run(request.ticket, payload, request.model_dump_json(), timeout=120, wait_s=10)
-        return reply.payload
+        return reply.attachment
 
     return await asyncio.gather(*(one(k) for k in range(n)))
 
@@ -155,7 +155,7 @@ async def throughput(layout: tuple[int, int], scans: list[tuple[str, bytes]], n_
     errors = [a.error for a in answers if a.error]
     if errors:
         raise RuntimeError(f"{len(errors)} reconstructions failed, e.g. {errors[0]}")
-    core = [a.result["timings_ms"]["total"] for a in answers]
+    core = [a.result.timings_ms["total"] for a in answers if a.result is not None]
     return {"layout": layout, "elapsed": elapsed, "per_s": n_jobs / elapsed, "ms_per_job": 1000 * elapsed / n_jobs,
             "core_ms": statistics.median(core), "by_worker": collections.Counter(a.worker for a in answers),
             "cpu_ms": cpu}

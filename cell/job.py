@@ -27,14 +27,13 @@ from __future__ import annotations
 import asyncio
 import time
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from wire.errors import CellError
 from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
 
-__all__ = ["TRANSITIONS", "WORKING", "IllegalTransition", "Job", "Capture"]
+__all__ = ["TRANSITIONS", "WORKING", "IllegalTransition", "Job", "Picture"]
 
 S = JobState
 #: States in which a step runs.
@@ -62,7 +61,7 @@ class IllegalTransition(CellError):
 
 
 @dataclass
-class Capture:
+class Picture:
     """One picture a job took, and where from."""
 
     jpeg: bytes
@@ -84,14 +83,16 @@ class Job:
     state: JobState = JobState.QUEUED
     view: int | None = None
     started: float = field(default_factory=time.time)
-    captures: list[Capture] = field(default_factory=list)
+    captures: list[Picture] = field(default_factory=list)
+    #: Where the flange stands, as the robot last reported it.
+    flange: np.ndarray | None = None
     #: What the job waited for, seconds: see ``ScanResult.durations_s``.
     durations_s: dict[str, float] = field(default_factory=dict)
     result: ScanResult | None = None
+    #: The reconstruction worker's reply (attachment, payload), and the job time it came, for the recording.
+    reconstruction: tuple[bytes, bytes, float] | None = None
     #: The task that runs the job's steps, once it runs.
     task: asyncio.Task | None = None
-    #: Per-step scratch space (the reconstruction's reply, say), keyed by the step's name.
-    scratch: dict[str, Any] = field(default_factory=dict)
 
     @property
     def finished(self) -> bool:

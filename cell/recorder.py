@@ -17,14 +17,13 @@ Messages are tuples ``(kind, job_id, job_time_s, body)``:
 ==================  ==============================================================
 ``open``            body: the ``.rrd`` path
 ``call``            body: ``(method, args, kwargs)`` of :class:`~cell.recording.JobRecording`
-``reconstruction``  body: a ReconstructReply's JSON: silhouettes, clouds and meshes
+``reconstruction``  body: a ReconstructReply's JSON and its payload: silhouettes, clouds and meshes
 ``close``           body: None
 ==================  ==============================================================
 """
 
 from __future__ import annotations
 
-import base64
 import logging
 import multiprocessing
 import os
@@ -78,8 +77,8 @@ class Recorder:
         """``JobRecording.<method>(*args, **kwargs)`` at job time ``at`` seconds."""
         self._outbox.put(("call", job_id, at, (method, args, kwargs)))
 
-    def reconstruction(self, job_id: str, at: float, reply_json: bytes) -> None:
-        self._outbox.put(("reconstruction", job_id, at, reply_json))
+    def reconstruction(self, job_id: str, at: float, reply_json: str, payload: bytes) -> None:
+        self._outbox.put(("reconstruction", job_id, at, (reply_json, payload)))
 
     def close(self, job_id: str) -> None:
         self._outbox.put(("close", job_id, 0.0, None))
@@ -150,7 +149,7 @@ def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -
                     method, args, kwargs = body
                     getattr(recording, method)(*args, **kwargs)
                 elif kind == "reconstruction":
-                    drawing.reconstruction(recording, body)
+                    drawing.reconstruction(recording, *body)
             except Exception as exc:  # one bad message must not cost the other jobs their recordings
                 log.exception("job %s: recording %s failed", job_id, kind)
                 if job_id in recordings:
@@ -169,25 +168,29 @@ class _Drawing:
         self.sim = sim
         self._truth: list | None = None
 
-    def reconstruction(self, recording, reply_json: bytes) -> None:
+    def reconstruction(self, recording, reply_json: str, payload: bytes) -> None:
         import cv2
         import numpy as np
 
         from core_cy.sphere import fibonacci_sphere
         from core_cy.superquadric import Superquadric
-
         from wire.messages import ReconstructReply
 
         answer = ReconstructReply.model_validate_json(reply_json)
         result = answer.result
-        for view, encoded in enumerate(answer.silhouettes_png):
-            mask = cv2.imdecode(np.frombuffer(base64.b64decode(encoded), np.uint8), cv2.IMREAD_GRAYSCALE)
-            recording.log_silhouette(view, mask)
-        sphere = np.asarray(answer.centre) + answer.radius * fibonacci_sphere(self.n_points)
+        if result is None or answer.points is None:
+            return
+        at = 0
+        for view, blob in enumerate(answer.silhouettes):
+            png = np.frombuffer(payload, np.uint8, count=blob.length, offset=at)
+            recording.log_silhouette(view, cv2.imdecode(png, cv2.IMREAD_GRAYSCALE))
+            at += blob.length
+        points = np.frombuffer(payload, "<f4", count=answer.points.length // 4, offset=at).reshape(-1, 3)
+        sphere = np.asarray(result.centre) + result.radius * fibonacci_sphere(self.n_points)
         recording.log_points("sphere", sphere, colour=(150, 150, 150))
-        recording.log_points("carved", np.asarray(result["points"]))
-        recording.log_superquadric("fit", Superquadric.from_dict(result["superquadric"]))
-        timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result["timings_ms"].items())
+        recording.log_points("carved", points.astype(np.float64))
+        recording.log_superquadric("fit", Superquadric.from_dict(result.superquadric.model_dump()))
+        timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result.timings_ms.items())
         recording.log_text(f"reconstruction on {answer.worker}: {timings}")
         if self.sim is not None:
             for vertices, triangles in self._truth_meshes():

@@ -12,17 +12,27 @@ The stages (DESIGN.md §1), each in its own module:
     quality     silhouette IoU and residual of a fit
     scoring     volumetric IoU of two superquadrics, for scoring against a truth
     reconstruct the whole pipeline, with timings per stage
+    rigid       the one check of a rigid transform
+    plan        where the camera looks from: flange poses around a target, the workspace check
+    calibrate   chessboard calibration: intrinsics and hand-eye
 """
 
-from .camera import Camera
-from .errors import CameraError, CoreError, FitError, GeometryError, ImageError, SilhouetteError
-from .reconstruct import Options, Reconstruction, View, reconstruct
-from .scoring import centre_error, volumetric_iou
-from .segment import Segmentation
-from .superquadric import Superquadric, fit_superquadric
+import importlib
+from typing import Any
 
-__all__ = [
-    "Camera", "View", "Options", "Reconstruction", "reconstruct", "Segmentation", "Superquadric",
-    "fit_superquadric", "volumetric_iou", "centre_error", "CoreError", "CameraError", "ImageError",
-    "SilhouetteError", "GeometryError", "FitError",
-]
+# The public names, and the module of each: imported on first use, so that a process that
+# needs one small module (the rigid-pose check, say) does not pay for OpenCV and SciPy.
+_WHERE = {
+    "Camera": "camera", "View": "reconstruct", "Options": "reconstruct", "Reconstruction": "reconstruct",
+    "reconstruct": "reconstruct", "Segmentation": "segment", "Superquadric": "superquadric",
+    "fit_superquadric": "superquadric", "volumetric_iou": "scoring", "centre_error": "scoring",
+    "CoreError": "errors", "CameraError": "errors", "ImageError": "errors", "SilhouetteError": "errors",
+    "GeometryError": "errors", "FitError": "errors", "CalibrationError": "errors",
+}
+__all__ = list(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'core_cy' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)

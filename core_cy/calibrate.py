@@ -31,6 +31,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from .errors import CalibrationError
+from .rigid import rigid_error
 
 __all__ = [
     "parse_board", "board_points", "find_corners", "calibrate_intrinsics", "calibrate_hand_eye",
@@ -217,11 +218,10 @@ def _check_poses(flange_poses: Sequence[ArrayLike], n_images: int) -> list[NDArr
         T = np.asarray(pose, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise CalibrationError(f"flange pose {i} is not a finite 4x4 matrix (shape {T.shape})")
+        problem = rigid_error(T)
+        if problem is not None:
+            raise CalibrationError(f"flange pose {i} {problem}")
         R = T[:3, :3]
-        err = float(np.abs(R.T @ R - np.eye(3)).max())
-        if err > 1e-3 or np.linalg.det(R) < 0 or not np.allclose(T[3], [0, 0, 0, 1]):
-            raise CalibrationError(f"flange pose {i} is not a rigid motion: its rotation part is not a "
-                                   f"rotation (max |R^T R - I| = {err:.2g}) or its last row is not 0 0 0 1")
         if np.linalg.norm(T[:3, 3]) > _MAX_REACH_M:
             raise CalibrationError(f"flange pose {i} lies {np.linalg.norm(T[:3, 3]):.0f} m from the base: "
                                    "poses must be in metres (KUKA's X, Y, Z are millimetres)")

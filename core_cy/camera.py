@@ -15,12 +15,12 @@ import cv2
 import numpy as np
 
 from .errors import CameraError
+from .rigid import rigid_error
 
 __all__ = ["Camera", "undistort_mask"]
 
 # JSON round trips and real calibrations keep about 9 digits; a pose whose
 # rotation is off by more than this is not a rotation.
-_ROTATION_TOLERANCE = 1e-5
 _DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
 
 
@@ -79,15 +79,9 @@ class Camera:
                 "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", view=view
             )
         T = _matrix(self.T_world_cam, (4, 4), "T_world_cam", view)
-        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
-            raise CameraError("T_world_cam's last row must be [0, 0, 0, 1]", view=view)
-        R = T[:3, :3]
-        if np.abs(R.T @ R - np.eye(3)).max() > _ROTATION_TOLERANCE or np.linalg.det(R) < 0:
-            raise CameraError(
-                "T_world_cam's rotation is not orthonormal with determinant +1 "
-                "(a singular, scaled or mirrored pose)",
-                view=view,
-            )
+        problem = rigid_error(T)
+        if problem is not None:
+            raise CameraError(f"T_world_cam {problem} (a singular, scaled or mirrored pose?)", view=view)
         dist = self.dist
         if dist is not None:
             dist = np.asarray(dist, dtype=np.float64).ravel()

@@ -24,6 +24,7 @@ from ._superquadric_cy import inside_outside as _inside_outside_kernel
 from ._superquadric_cy import objective as _objective_kernel
 from ._superquadric_cy import support as _support_kernel
 from .errors import CoreError, FitError
+from .rigid import rigid_error
 
 __all__ = [
     "Superquadric",
@@ -34,7 +35,6 @@ __all__ = [
     "surface_points",
 ]
 
-_ROTATION_TOLERANCE = 1e-5  # as core_cy.camera: JSON round trips keep ~9 digits
 # Bounds in normalised units (points centred, RMS distance from the centroid 1).
 _SIZE_BOUNDS = (0.01, 3.0)
 _TRANSLATION_BOUND = 2.0
@@ -108,11 +108,9 @@ class Superquadric:
             raise CoreError(f"size and shape must be positive, got size {size} and shape {shape}")
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise CoreError(f"T_world_object must be a finite 4x4 matrix, got shape {T.shape}")
-        R = T[:3, :3]
-        if (np.abs(R.T @ R - np.eye(3)).max() > _ROTATION_TOLERANCE
-                or np.linalg.det(R) < 0 or np.any(T[3] != (0, 0, 0, 1))):
-            raise CoreError("T_world_object must be rigid: an orthonormal rotation with "
-                            "determinant +1 and last row [0, 0, 0, 1]")
+        problem = rigid_error(T)
+        if problem is not None:
+            raise CoreError(f"T_world_object {problem}")
         for name, array in (("size", size), ("shape", shape), ("T_world_object", T)):
             array = np.array(array, order="C")
             array.flags.writeable = False

@@ -74,7 +74,7 @@ async def _demo(run_dir: Path) -> int:
     finally:
         await cell.stop()
 
-    fit = Superquadric.from_dict(result.superquadric)
+    fit = Superquadric.from_dict(result.superquadric.model_dump())
     print(f"\nsuperquadric of job {result.job_id}:        truth                            fit")
     # Axis order is a choice of parameterisation (DESIGN.md §1): compare the sizes sorted.
     print(_row("size (m)", np.sort(truth.size), np.sort(fit.size)))

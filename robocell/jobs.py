@@ -70,7 +70,7 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
         print(f"job {final.job_id} {final.state.value}: {final.error or ''}", file=sys.stderr)
         return 1
     result = await client.result(final.job_id)
-    print(json.dumps({"job_id": result.job_id, "superquadric": result.superquadric,
+    print(json.dumps({"job_id": result.job_id, "superquadric": result.superquadric.model_dump(),
                       "silhouette_iou": result.silhouette_iou, "timings_ms": result.timings_ms,
                       "recording": result.recording}))
     return 0

@@ -54,7 +54,8 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
     """
     return local_config(
         run_dir, **{"cell_id": "test", **fields},
-        robot={"speed": 0.0, "rotation_speed_deg": 0.0, **(robot or {})},
+        robot={**({"speed": 0.0, "rotation_speed_deg": 0.0} if (robot or {}).get("backend", "sim") == "sim" else {}),
+               **(robot or {})},
         camera={"timeout_s": 1.0, "retries": 1, **(camera or {})},
         timeouts={"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0, **(timeouts or {})})
 
@@ -344,15 +345,15 @@ class GatedReconstructor:
     def release(self) -> None:
         self._open.set()
 
-    async def _run(self, request_json: str, payload: bytes) -> str:
+    async def _run(self, request_json: str, payload: bytes) -> tuple[str, bytes]:
         self.received.append(request_json)
         if not self._open.is_set():
             self.waiting.set()
             if not await asyncio.to_thread(self._open.wait, self.max_hold_s):
                 raise RequestError(f"test gate still closed after {self.max_hold_s:g} s")
-        reply_json = await asyncio.to_thread(reconstruct_request, request_json, payload, self.worker_id)
+        reply = await asyncio.to_thread(reconstruct_request, request_json, payload, self.worker_id)
         self.answered += 1
-        return reply_json
+        return reply
 
     def close(self) -> None:
         self.release()

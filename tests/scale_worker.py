@@ -28,7 +28,8 @@ from wire.config import load_config  # noqa: E402
 from workers.reconstruct import worker as reconstruct  # noqa: E402
 
 
-def slow_reconstruct_request(delay: float, fail: bool, request_json: str, payload: bytes, worker: str) -> str:
+def slow_reconstruct_request(delay: float, fail: bool, request_json: str, payload: bytes,
+                             worker: str) -> tuple[str, bytes]:
     """``reconstruct_request``, ``delay`` seconds later (in a pool process)."""
     time.sleep(delay)
     if fail:

@@ -45,7 +45,7 @@ def test_segmentation_from_scan_json(bundle):
         (lambda s: s["views"][1]["K"][0].__setitem__(0, "NaN"), r"view 1: K contains NaN"),
         (lambda s: s["views"][1].update(T_world_cam=np.diag([1, 1, 1, 1]).tolist()), None),
         (lambda s: s["views"][0].update(T_world_cam=np.diag([0.0, 0, 0, 1]).tolist()),
-         r"view 0: T_world_cam's rotation is not orthonormal"),
+         r"view 0: T_world_cam is not a rigid transform: its rotation is not orthonormal"),
         (lambda s: s["views"][2].update(image="missing.jpg"), r"view 2: image file 'missing.jpg' not found"),
         (lambda s: s.update(segmentation={"method": "hsv", "lower": [200, 0, 0], "upper": [10, 255, 255]}),
          r"segmentation lower must be"),

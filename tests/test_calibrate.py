@@ -241,7 +241,7 @@ def test_hand_eye_errors(scene):
         calibrate_hand_eye(images, flanges[:-1], *args)
     scaled = [T.copy() for T in flanges]
     scaled[4][:3, :3] *= 1.01
-    with pytest.raises(CalibrationError, match="flange pose 4 is not a rigid motion"):
+    with pytest.raises(CalibrationError, match="flange pose 4 is not a rigid transform: its rotation is not orthonormal"):
         calibrate_hand_eye(images, scaled, *args)
     millimetres = [T * [[1], [1], [1], [1]] for T in flanges]
     for T in millimetres:

@@ -52,7 +52,7 @@ def test_units_do_not_matter():
         (dict(K=[[600, 0, 320], [0, np.nan, 240], [0, 0, 1]]), "K contains NaN"),
         (dict(K=[[-600, 0, 320], [0, 600, 240], [0, 0, 1]]), "fx, fy > 0"),
         (dict(T_world_cam=np.diag([2.0, 2.0, 2.0, 1.0])), "not orthonormal"),
-        (dict(T_world_cam=np.diag([1.0, 1.0, -1.0, 1.0])), "determinant +1"),
+        (dict(T_world_cam=np.diag([1.0, 1.0, -1.0, 1.0])), "reflection (determinant < 0)"),
         (dict(T_world_cam=np.zeros((4, 4))), "last row"),
         (dict(T_world_cam=np.full((4, 4), np.nan)), "T_world_cam contains NaN"),
         (dict(dist=[0.1, 0.2, 0.3]), "dist must have one of"),

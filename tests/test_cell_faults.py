@@ -121,7 +121,7 @@ def test_cancel_while_capturing(rig):
     assert cell.client.cancel(status.job_id).state is JobState.CANCELLED
     final = cell.wait(status.job_id, timeout=10)
     assert final.state is JobState.CANCELLED
-    assert rig.events(status.job_id)[-2:] == [("capturing", 0), ("cancelled", None)]
+    assert rig.events(status.job_id)[-3:] == [("capturing", 0), ("cancelling", 0), ("cancelled", None)]
 
 
 def test_cancel_while_reconstructing(rig):
@@ -136,7 +136,7 @@ def test_cancel_while_reconstructing(rig):
     finally:
         rig.reconstructor.release()
     assert final.state is JobState.CANCELLED
-    assert rig.events(status.job_id)[-2:] == [("reconstructing", None), ("cancelled", None)]
+    assert rig.events(status.job_id)[-3:] == [("reconstructing", None), ("cancelling", None), ("cancelled", None)]
     # The reconstructor's late answer changes nothing.
     wait_until(lambda: rig.reconstructor.answered == len(rig.reconstructor.received), timeout=30,
                what="the reconstructor's answer")

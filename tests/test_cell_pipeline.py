@@ -85,7 +85,7 @@ def test_cancel_a_moving_job(cell):
     final = cell.wait(status.job_id, timeout=10)
     assert final.state is JobState.CANCELLED
     assert [(e.state, e.view) for e in cell.events(status.job_id)] == \
-        [(JobState.QUEUED, None), (JobState.MOVING, 0), (JobState.CANCELLED, None)]
+        [(JobState.QUEUED, None), (JobState.MOVING, 0), (JobState.CANCELLING, 0), (JobState.CANCELLED, None)]
     # The cell goes on with the next job.
     after = cell.submit(label="after the cancel")
     assert cell.wait(after.job_id).state is JobState.SUCCEEDED

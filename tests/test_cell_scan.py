@@ -20,7 +20,7 @@ import zenoh
 
 from wire import keys
 from wire.client import AsyncCellClient
-from wire.errors import RemoteError
+from wire.errors import MoveRefused, RemoteError
 from wire.messages import JobState, MoveRequest, ScanRequest
 from cell.recording import recording_summary
 from workers.sim.scene import target_from_config, truth_from_config
@@ -52,7 +52,7 @@ def scanned(cell):
 def test_scan_scores_well_against_the_truth(cell, scanned):
     status, result = scanned
     truth = Superquadric.from_dict(truth_from_config(cell.config.sim))
-    fit = Superquadric.from_dict(result.superquadric)
+    fit = Superquadric.from_dict(result.superquadric.model_dump())
     assert volumetric_iou(truth, fit) > 0.7
     assert len(result.silhouette_iou) == 3 and min(result.silhouette_iou) > 0.85
     assert np.linalg.norm(fit.T_world_object[:3, 3] - truth.T_world_object[:3, 3]) < 0.01
@@ -218,9 +218,11 @@ def test_pose_outside_the_workspace_is_refused_before_the_robot_moves(cell):
         cell.client.submit(ScanRequest(flange_poses=poses))
     assert len(cell.client.list(limit=1000)) == n_jobs  # no job was made
     # The robot worker checks too, for callers other than the daemon.
-    with pytest.raises(RemoteError, match="move refused before moving: z = 1.4 m"):
+    # The refusal keeps its kind across the wire, with the limit it names.
+    with pytest.raises(MoveRefused, match="move refused before moving: z = 1.4 m") as refused:
         cell.loop.run(_ask(cell.router, keys.robot_move(cell.config.cell_id),
                            MoveRequest(T_base_flange=above.tolist()).model_dump_json()))
+    assert refused.value.limit == "workspace"
     after = cell.robot_state()
     assert after.T_base_flange == before.T_base_flange and not after.moving
 

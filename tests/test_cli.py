@@ -86,7 +86,7 @@ BAD_BUNDLES = {
     "singular-pose": (lambda d: edit_scan(d, lambda s: s["views"][1].update(
         T_world_cam=[[0, 0, 0, 0.5], [0, 0, 0, 0], [0, 0, 0, 0.5], [0, 0, 0, 1]])), "view 1: T_world_cam"),
     "scaled-pose": (lambda d: edit_scan(d, lambda s: s["views"][2].update(
-        T_world_cam=(np.diag([2.0, 2.0, 2.0, 1.0])).tolist())), "view 2: T_world_cam's rotation"),
+        T_world_cam=(np.diag([2.0, 2.0, 2.0, 1.0])).tolist())), "view 2: T_world_cam is not a rigid transform"),
     "nan-in-K": (lambda d: edit_scan(d, lambda s: s["views"][0]["K"][1].__setitem__(1, float("nan"))),
                  "view 0: K contains NaN"),
     "under-the-table": (lambda d: edit_scan(d, lambda s: s.update(support_plane=[0, 0, -1, 0])), "under the table"),

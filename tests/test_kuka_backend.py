@@ -13,8 +13,9 @@ from wire.backends import KukaConfig, KukaKvpConfig, KukaOpcConfig, Workspace
 from workers.sim.kuka import SimKuka
 from workers.robot.kuka import variables as v
 from workers.robot.kuka.backend import KukaBackend, check_move, make_client
-from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaConnectionError,
-                                 KukaError, KukaTimeout, MoveFailed, MoveRefused, Unreachable)
+from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
+from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, KukaConnectionError, KukaError, KukaTimeout,
+                                       Unreachable)
 
 PROTOCOLS = ["kvp", "opc"]
 FAST = {"speed_mm_s": 20000.0, "rotation_deg_s": 20000.0}
@@ -81,7 +82,7 @@ def test_moves_reach_their_targets_and_report_progress(protocol):
     (flange(0.6, 0.0, 0.3), {"override": 50}, "override", "override 50 % is outside 1..30 %"),
     (flange(0.6, 0.0, 0.3), {"override": 0}, "override", "override 0 %"),
     (flange(0.6, 0.0, 0.3), {"motion": "circ"}, "motion", "unknown motion type 'circ'"),
-    (np.diag([1.0, 1.0, 2.0, 1.0]), {}, "pose", "not a rotation matrix"),
+    (np.diag([1.0, 1.0, 2.0, 1.0]), {}, "pose", "the pose is not a rigid transform"),
     (np.full((4, 4), np.nan), {}, "pose", "non-finite"),
 ])
 def test_a_refused_move_never_reaches_the_controller(protocol, target, options, limit, message):

@@ -51,7 +51,7 @@ def test_scan_on_the_simulated_kuka(simulated_kuka, tmp_path):
         assert final.state is JobState.SUCCEEDED, final.error
         result = cell.client.result(job.job_id)
         truth = Superquadric.from_dict(truth_from_config(config.sim))
-        assert volumetric_iou(Superquadric.from_dict(result.superquadric), truth) > 0.7
+        assert volumetric_iou(Superquadric.from_dict(result.superquadric.model_dump()), truth) > 0.7
         # The last picture was taken from where the controller says the flange is (to 1 mm).
         flange = np.asarray(cell.robot_state().T_base_flange)
         np.testing.assert_allclose(flange @ config.hand_eye, result.T_base_cam[-1], atol=1e-3)

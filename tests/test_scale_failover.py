@@ -107,7 +107,7 @@ def test_a_job_is_tried_at_most_max_attempts_times_then_fails_naming_each(cell):
     for name in ("newcomer", "frozen"):
         cell.loop.run(cell.processes.stop_child(name))
 
-    async def broken(request_json: str, payload: bytes) -> str:
+    async def broken(request_json: str, payload: bytes) -> tuple[str, bytes]:
         raise RequestError("broken on purpose")
 
     workers = [InProcessWorker(cell.loop, cell.router, f"broken-{k}", broken) for k in range(2)]

@@ -62,16 +62,19 @@ class Worker:
         for _ in range(n):
             self.gate.release()
 
-    async def run(self, request_json: str, payload: bytes) -> str:
+    async def run(self, request_json: str, payload: bytes) -> tuple[str, bytes]:
         request = ReconstructRequest.model_validate_json(request_json)
         self.tickets.append(request.ticket)
         if self.held:
             await self.gate.acquire()
         await asyncio.sleep(self.delay)
         self.answered.append(request.ticket)
-        return ReconstructReply(job_id=request.job_id, worker=self.worker_id, ticket=request.ticket).model_dump_json()
+        return ReconstructReply(job_id=request.job_id, worker=self.worker_id, ticket=request.ticket,
+                                error=STAND_IN).model_dump_json(), b""
 
 
+#: What the pool's stand-in workers answer: they schedule, they do not reconstruct.
+STAND_IN = "a stand-in worker: no reconstruction"
 _VIEWS = [{"camera": {"K": [[600, 0, 320], [0, 600, 240], [0, 0, 1]]},
            "T_world_cam": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "length": 2}] * 2
 
@@ -171,7 +174,7 @@ def test_work_goes_where_capacity_is_free_and_waits_when_none_is():
             assert not late.done() and pool.waiting == 1       # every slot taken: it waits
             small.release(1)
             worker, reply = await late
-            assert worker == "small" and ReconstructReply.model_validate_json(reply.payload).ticket == "t-late"
+            assert worker == "small" and ReconstructReply.model_validate_json(reply.attachment).ticket == "t-late"
             big.release()
             assert sorted(w for w, _ in await asyncio.gather(*first)) == ["big", "big", "big", "small"]
 
@@ -236,11 +239,11 @@ def test_a_worker_whose_loop_hangs_is_passed_over_and_its_late_answer_ignored():
             hung_loop = LoopThread()
             unblock = threading.Event()
             try:
-                async def block(request_json: str, payload: bytes) -> str:
+                async def block(request_json: str, payload: bytes) -> tuple[str, bytes]:
                     request = ReconstructRequest.model_validate_json(request_json)
                     unblock.wait(LIMIT_S)     # blocks the worker's whole event loop
-                    return ReconstructReply(job_id=request.job_id, worker="hung", ticket=request.ticket) \
-                        .model_dump_json()
+                    return ReconstructReply(job_id=request.job_id, worker="hung", ticket=request.ticket,
+                                            error=STAND_IN).model_dump_json(), b""
 
                 transport = hung_loop.run(Transport.open(net.endpoint, connect_timeout_s=10.0))
                 worker = ReconstructWorker(transport, "hung", 1, block)

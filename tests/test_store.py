@@ -1,4 +1,5 @@
 import os
+import re
 import select
 import signal
 import sqlite3
@@ -7,11 +8,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from wire.errors import StoreError
 from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
-from cell.store import INTERRUPTED, JobStore, queued_event
+from cell.store import _SCHEMA, INTERRUPTED, SCHEMA_VERSION, JobStore, queued_event
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -23,7 +25,7 @@ def request(request_id=None, label=""):
 
 
 def result(job_id, recording=None):
-    return ScanResult(job_id=job_id, superquadric={"size": [0.1, 0.1, 0.1], "shape": [1.0, 1.0]},
+    return ScanResult(job_id=job_id, superquadric={"size": [0.1, 0.1, 0.1], "shape": [1.0, 1.0], "T_world_object": np.eye(4).tolist()},
                       silhouette_iou=[0.9, 0.92, 0.95], residual=0.01, timings_ms={"carve": 12.5},
                       T_base_cam=[IDENTITY, IDENTITY], recording=recording)
 
@@ -38,7 +40,7 @@ def test_a_new_store_is_a_wal_database_with_a_schema_version(tmp_path):
     JobStore(tmp_path / "jobs.sqlite").close()
     db = sqlite3.connect(tmp_path / "jobs.sqlite")
     try:
-        assert db.execute("PRAGMA user_version").fetchone() == (1,)
+        assert db.execute("PRAGMA user_version").fetchone() == (SCHEMA_VERSION,) == (2,)
         assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     finally:
         db.close()
@@ -202,9 +204,12 @@ def test_interrupt_unfinished_fails_running_jobs_and_keeps_queued_ones(store):
             store.update(job_id, state, view=1, now=T0 + 1)
     changed = store.interrupt_unfinished(now=T0 + 2)
     running = [ids[JobState.MOVING], ids[JobState.CAPTURING], ids[JobState.RECONSTRUCTING]]
-    assert [s.job_id for s in changed] == running
-    assert all(s.state is JobState.FAILED and s.error == INTERRUPTED and s.updated == T0 + 2 for s in changed)
-    assert [store.get(i) for i in running] == changed
+    # A job that was being cancelled is cancelled: the cancel was accepted before the crash.
+    assert [s.job_id for s in changed] == sorted([*running, ids[JobState.CANCELLING]])
+    interrupted = [s for s in changed if s.job_id in running]
+    assert all(s.state is JobState.FAILED and s.error == INTERRUPTED and s.updated == T0 + 2 for s in interrupted)
+    assert [store.get(i) for i in running] == interrupted
+    assert store.get(ids[JobState.CANCELLING]).state is JobState.CANCELLED
     assert store.get(ids[JobState.QUEUED]).state is JobState.QUEUED
     assert store.get(ids[JobState.SUCCEEDED]).updated == T0 + 1  # finished jobs untouched
     assert [s.job_id for s in store.unfinished()] == [ids[JobState.QUEUED]]
@@ -283,3 +288,24 @@ def test_every_acknowledged_add_survives_kill_9(tmp_path, kill_after):
         count = store.count(set(JobState))
         assert len(printed) <= count <= len(printed) + 1  # at most one committed but not yet printed
         assert [s.request.request_id for s in store.unfinished()] == [f"r{i}" for i in range(count)]
+
+
+def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
+    """Version 2 adds the error's kind; a run directory of an older robocell opens with its jobs."""
+    path = tmp_path / "jobs.sqlite"
+    db = sqlite3.connect(path, isolation_level=None)
+    for statement in _SCHEMA:  # version 1: the same tables without jobs.error_kind
+        db.execute(re.sub(r",(\s*--[^\n]*)?\n\s*error_kind TEXT\)", ")", statement))
+    db.execute("PRAGMA user_version = 1")
+    db.execute("INSERT INTO jobs (seq, job_id, state, n_views, error, created, updated, request) VALUES "
+               "(1, '20261101-000001', 'failed', 3, 'moving to view 0: no robot', 1.0, 2.0, ?)",
+               (ScanRequest(target=[0.6, 0.0, 0.05]).model_dump_json(),))
+    db.close()
+    with JobStore(path) as store:
+        old = store.get("20261101-000001")
+        assert old.state is JobState.FAILED and old.error == "moving to view 0: no robot" and old.error_kind is None
+        status, _ = store.add(ScanRequest(target=[0.6, 0.0, 0.05]), n_views=3, now=3.0)
+        failed = store.update(status.job_id, JobState.FAILED, error="capturing view 1: camera gone",
+                              error_kind="CameraTimeout", now=4.0)
+        assert failed.error_kind == "CameraTimeout"
+    assert sqlite3.connect(path).execute("PRAGMA user_version").fetchone() == (2,)

@@ -305,7 +305,7 @@ def test_errors_are_value_errors_with_clear_messages():
         Superquadric([1, -1, 1], [1, 1], np.eye(4))
     with pytest.raises(CoreError, match=r"size must be 3 finite numbers, got shape \(2,\)"):
         Superquadric([1, 1], [1, 1], np.eye(4))
-    with pytest.raises(CoreError, match="must be rigid"):
+    with pytest.raises(CoreError, match="T_world_object is not a rigid transform"):
         Superquadric([1, 1, 1], [1, 1], np.diag([1.0, 1.0, -1.0, 1.0]))
     with pytest.raises(CoreError, match="keys 'size', 'shape' and 'T_world_object'"):
         Superquadric.from_dict({"size": [1, 1, 1]})

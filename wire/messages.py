@@ -1,44 +1,34 @@
 """Messages on the wire: pydantic models, JSON, each with a ``schema_version``.
 
 Job messages pass between clients and the cell daemon; worker messages
-between the daemon and its robot, camera and reconstruction workers. Images
-never travel inside JSON: they are the raw payload, with the JSON model that
-describes them in the Zenoh attachment (see ``cell/keys.py``).
+between the daemon and its robot, camera and reconstruction workers. Bytes
+never travel inside JSON: pictures, silhouettes and point clouds are the raw
+payload, with the JSON model that describes them (each part's encoding and
+length, a :class:`Blob`) in the Zenoh attachment (see ``wire/keys.py``).
 """
 
 from __future__ import annotations
 
 import enum
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from core_cy.rigid import rigid_error
+from pydantic import AfterValidator, BeforeValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 __all__ = [
     "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
-    "JobStatus", "JobEvent", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
-    "RobotState", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
-    "ReconstructRequest", "ReconstructReply", "WorkerLoad", "ReconstructorStatus", "FailedJob",
-    "CellStatus", "parse", "field_errors",
+    "JobStatus", "JobEvent", "Superquadric", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
+    "RobotState", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView", "Blob",
+    "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
+    "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING",
 ]
 
 SCHEMA_VERSION = 1
-_RIGID_TOLERANCE = 1e-5
-
-
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
-    # Plain Python, not NumPy: every move and every result carries poses, and on sixteen
-    # numbers NumPy's per-call overhead is ten times the arithmetic.
-    if not all(math.isfinite(v) for row in matrix for v in row):
-        raise ValueError("pose contains NaN or infinity")
-    columns = [[matrix[i][j] for i in range(3)] for j in range(3)]
-    gram_error = max(abs(sum(a * b for a, b in zip(columns[i], columns[j])) - (i == j))
-                     for i in range(3) for j in range(i, 3))
-    (a, b, c), (d, e, f), (g, h, k) = (row[:3] for row in matrix[:3])
-    determinant = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
-    last_row_ok = all(abs(v - w) <= 1e-8 + 1e-5 * abs(w) for v, w in zip(matrix[3], (0.0, 0.0, 0.0, 1.0)))
-    if not last_row_ok or gram_error > _RIGID_TOLERANCE or determinant < 0:
-        raise ValueError("pose must be a rigid 4x4 transform (orthonormal rotation, last row 0 0 0 1)")
+    problem = rigid_error(matrix)
+    if problem is not None:
+        raise ValueError(f"pose {problem}")
     return matrix
 
 
@@ -55,11 +45,18 @@ Pose = Annotated[list[Row4], Field(min_length=4, max_length=4), AfterValidator(_
 Point = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_finite)]
 
 
+def _integer(value: Any) -> Any:
+    if type(value) is not int:  # JSON's true and 1.0 would pass as 1
+        raise ValueError(f"must be the integer {SCHEMA_VERSION}, got {value!r}")
+    return value
+
+
 class Message(BaseModel):
-    """Base of every message: strict fields, and the schema version first."""
+    """Base of every message: strict fields, and the schema version first (an integer: ``true`` or
+    ``1.0`` is not a version)."""
 
     model_config = ConfigDict(extra="forbid")
-    schema_version: Literal[1] = SCHEMA_VERSION
+    schema_version: Annotated[Literal[1], BeforeValidator(_integer)] = SCHEMA_VERSION
 
 
 def field_errors(exc: ValidationError, *, whole: str = "message") -> str:
@@ -76,8 +73,11 @@ def field_errors(exc: ValidationError, *, whole: str = "message") -> str:
     )
 
 
-def parse(model: type[BaseModel], payload: bytes | str | None) -> BaseModel:
-    """Validate a JSON payload; raises ``ValueError`` whose text names the wrong fields."""
+M = TypeVar("M", bound=BaseModel)
+
+
+def parse(model: type[M], payload: bytes | str | None) -> M:
+    """Validate a JSON payload as a ``model``; raises ``ValueError`` whose text names the wrong fields."""
     if payload is None or len(payload) == 0:
         raise ValueError(f"empty payload: expected a JSON {model.__name__}")
     try:
@@ -127,10 +127,14 @@ class ScanRequest(Message):
 
 
 class JobState(str, enum.Enum):
+    """Where a job is; ``cell/job.py`` has the legal moves between states."""
+
     QUEUED = "queued"
     MOVING = "moving"
     CAPTURING = "capturing"
     RECONSTRUCTING = "reconstructing"
+    #: A cancel was accepted; the job stops at the end of what it is doing.
+    CANCELLING = "cancelling"
     SUCCEEDED = "succeeded"
     FAILED = "failed"
     CANCELLED = "cancelled"
@@ -146,15 +150,29 @@ class JobStatus(Message):
     view: int | None = None          # the view being moved to or captured, from 0
     n_views: int
     error: str | None = None         # why it failed: "<step>: <reason>"
+    error_kind: str | None = None    # the class of that error, as ErrorReply.kind
     created: float                   # unix time
     updated: float
     recording: str | None = None     # path of the job's Rerun .rrd
     request: ScanRequest
 
 
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Superquadric(BaseModel):
+    """The 11 parameters (DESIGN.md §3): half-sizes, shape exponents (e1, e2), object-to-world pose;
+    in the bundle's units (metres in a cell)."""
+
+    model_config = ConfigDict(extra="forbid")
+    size: Annotated[list[PositiveFloat], Field(min_length=3, max_length=3)]
+    shape: Annotated[list[PositiveFloat], Field(min_length=2, max_length=2)]
+    T_world_object: Pose
+
+
 class ScanResult(Message):
     job_id: str
-    superquadric: dict               # {"size", "shape", "T_world_object"} as in DESIGN.md §3
+    superquadric: Superquadric
     silhouette_iou: list[float]
     residual: float
     timings_ms: dict[str, float]
@@ -181,7 +199,13 @@ class JobEvent(Message):
 
 
 class ErrorReply(Message):
+    """An error answer: its message, its ``kind`` (the class of the error, see ``wire/errors.py``:
+    the receiver raises the same class) and the ``details`` that class carries (a refused move's
+    ``limit``, a camera's HTTP ``status``)."""
+
     error: str
+    kind: str = "RequestError"
+    details: dict[str, Any] = {}
 
 
 # --- workers -----------------------------------------------------------------------------------
@@ -224,6 +248,18 @@ class CameraModel(BaseModel):
     dist: list[float] | None = None
 
 
+class Blob(BaseModel):
+    """One part of a binary payload: how it is encoded, and how many bytes it takes."""
+
+    model_config = ConfigDict(extra="forbid")
+    encoding: str
+    length: Annotated[int, Field(ge=0)]
+
+
+#: A point cloud in a payload: x, y, z of each point as little-endian float32, point after point.
+POINTS_ENCODING = "application/vnd.robocell.points+float32"
+
+
 class ReconstructView(BaseModel):
     model_config = ConfigDict(extra="forbid")
     camera: CameraModel
@@ -244,15 +280,40 @@ class ReconstructRequest(Message):
     ticket: Annotated[str, Field(max_length=300)] | None = None
 
 
+class Reconstruction(BaseModel):
+    """What the reconstruction found (DESIGN.md §1.8), in the bundle's units."""
+
+    model_config = ConfigDict(extra="forbid")
+    superquadric: Superquadric
+    silhouette_iou: list[float]
+    residual: float
+    timings_ms: dict[str, float]
+    centre: Point                           # the enclosing sphere the points started on
+    radius: PositiveFloat
+
+
 class ReconstructReply(Message):
+    """The attachment of a reconstruction reply; the payload is each view's silhouette (PNG, for
+    the recording) and then the carved point cloud, as ``silhouettes`` and ``points`` describe them.
+
+    A ``result`` with no ``error``, or an ``error`` (the core's verdict on the pictures) with no
+    result.
+    """
+
     job_id: str
-    result: dict | None = None              # Reconstruction.to_dict(points=True)
-    centre: list[float] | None = None
-    radius: float | None = None
-    silhouettes_png: list[str] = []         # base64 PNG of each view's silhouette, for the recording
+    result: Reconstruction | None = None
+    silhouettes: list[Blob] = []
+    points: Blob | None = None
     error: str | None = None
+    error_kind: str | None = None            # the core's class of that error (SilhouetteError, ...)
     worker: str = ""
     ticket: str | None = None               # the request's ticket
+
+    @model_validator(mode="after")
+    def _result_or_error(self) -> "ReconstructReply":
+        if (self.result is None) == (self.error is None):
+            raise ValueError("give exactly one of result and error")
+        return self
 
 
 class WorkerLoad(Message):

@@ -2,27 +2,30 @@
 
 Zenoh calls back on its own threads; everything here hands those calls over
 to the event loop (``call_soon_threadsafe``), so the rest of robocell is plain
-asyncio. Zenoh errors are translated into ``cell.errors.TransportError`` here
-and nowhere else.
+asyncio. Zenoh errors are translated into ``wire.errors.TransportError`` here
+and nowhere else. An error a handler raises goes back as an ``ErrorReply`` with
+its kind, and the querier raises the same class (``wire.errors.from_reply``).
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import re
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
 import zenoh
 
-from .errors import NoResponder, RemoteError, TransportError, TransportTimeout
+from .errors import CellError, NoResponder, TransportError, TransportTimeout, from_reply, wire_kind
 from .messages import ErrorReply
 
 __all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session_config"]
 
 log = logging.getLogger(__name__)
 JSON = "application/json"
+_WILDCARDS = re.compile(r"\*|\$\*")
 # Zenoh answers a query that ran out of time with one error reply carrying this payload.
 _ZENOH_TIMEOUT = b"Timeout"
 
@@ -177,8 +180,9 @@ class Transport:
             If nobody serves ``key``.
         TransportTimeout
             If no reply came within ``timeout`` seconds.
-        RemoteError
-            If the responder answered with an error (its message is the error's text).
+        CellError
+            If the responder answered with an error: the class it raised where this side knows
+            it (``MoveRefused``, say), else ``RemoteError``; its message is the error's text.
         """
         loop = self._loop
         done = loop.create_future()
@@ -219,19 +223,27 @@ class Transport:
         error = replies[0][1]
         if error.payload == _ZENOH_TIMEOUT:
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s")
-        raise RemoteError(_error_text(error.payload))
+        raise _remote_error(error.payload)
 
     def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
         """Answer queries on ``key`` with ``handler``, on the event loop, concurrently.
 
-        A ``RequestError`` from the handler goes back as an error reply with its
-        message; any other exception as "internal error", and is logged.
+        Only a query on a key without wildcards is answered (``*``, ``**`` and ``$*`` would
+        reach handlers it was not meant for); others are dropped unanswered. A ``RequestError``
+        from the handler goes back as an error reply with its message, a
+        ``CellError`` with its message, kind and details; any other exception as "internal
+        error", and is logged.
         """
         loop = self._loop
 
         def on_query(query: zenoh.Query) -> None:
-            request = Request(str(query.key_expr), dict(query.parameters), _bytes(query.payload),
-                              _bytes(query.attachment))
+            asked = str(query.key_expr)
+            if _WILDCARDS.search(asked):
+                # A query such as robocell/cell1/** reaches every queryable under it: none of
+                # them may act on a request that was not addressed to it.
+                query.drop()
+                return
+            request = Request(asked, dict(query.parameters), _bytes(query.payload), _bytes(query.attachment))
             try:
                 asyncio.run_coroutine_threadsafe(self._answer(query, request, handler), loop)
             except RuntimeError:  # the loop is gone: we are shutting down
@@ -245,17 +257,20 @@ class Transport:
             try:
                 response = await handler(request)
             except RequestError as exc:
-                query.reply_err(ErrorReply(error=str(exc)).model_dump_json(), encoding=zenoh.Encoding(JSON))
-                return
+                error = ErrorReply(error=str(exc))
+            except CellError as exc:
+                kind, details = wire_kind(exc)
+                error = ErrorReply(error=str(exc), kind=kind, details=details)
             except Exception as exc:
                 log.exception("handler for %s failed", request.key)
-                query.reply_err(ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}")
-                                .model_dump_json(), encoding=zenoh.Encoding(JSON))
+                error = ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}", kind="InternalError")
+            else:
+                kwargs = {"encoding": zenoh.Encoding(response.encoding)}
+                if response.attachment is not None:
+                    kwargs["attachment"] = response.attachment
+                query.reply(query.key_expr, response.payload, **kwargs)
                 return
-            kwargs = {"encoding": zenoh.Encoding(response.encoding)}
-            if response.attachment is not None:
-                kwargs["attachment"] = response.attachment
-            query.reply(query.key_expr, response.payload, **kwargs)
+            query.reply_err(error.model_dump_json(), encoding=zenoh.Encoding(JSON))
         except zenoh.ZError as exc:  # the querier went away
             log.warning("could not answer on %s: %s", request.key, exc)
         finally:
@@ -328,8 +343,9 @@ class Transport:
         return sorted(keys)
 
 
-def _error_text(payload: bytes) -> str:
+def _remote_error(payload: bytes) -> CellError:
     try:
-        return ErrorReply.model_validate_json(payload).error
+        reply = ErrorReply.model_validate_json(payload)
     except ValueError:
-        return payload.decode("utf-8", errors="replace") or "error without a message"
+        return from_reply(payload.decode("utf-8", errors="replace") or "error without a message", "RemoteError", {})
+    return from_reply(reply.error, reply.kind, reply.details)

@@ -16,10 +16,10 @@ import numpy as np
 from wire import keys
 from wire.backends import AxisCameraConfig
 from wire.config import CellConfig
-from wire.errors import CameraError, TransportError
+from wire.errors import TransportError
 from wire.messages import CaptureInfo, RobotState, parse
 from wire.process import open_transport, run_until_stopped
-from wire.transport import Request, RequestError, Response, Transport
+from wire.transport import Request, Response, Transport
 
 from .backend import Camera
 
@@ -63,10 +63,7 @@ def serve_camera(transport: Transport, config: CellConfig, camera: Camera) -> No
     async def on_capture(request: Request) -> Response:
         async with lock:
             began = time.monotonic()
-            try:
-                picture = await camera.snapshot()
-            except CameraError as exc:
-                raise RequestError(str(exc)) from None
+            picture = await camera.snapshot()  # a CameraError goes back with its kind
         info = CaptureInfo(encoding=picture.encoding, width=picture.width, height=picture.height,
                            source=camera.source, time=time.time(), duration_s=time.monotonic() - began)
         return Response(picture.data, encoding=picture.encoding, attachment=info.model_dump_json())

@@ -1,10 +1,12 @@
 """The reconstruction worker: a process pool around core_cy, serving the shared pool keys.
 
 A request's attachment is a ReconstructRequest; its payload the views' JPEGs,
-concatenated in order (each view says its length). Errors of the core (an
-empty silhouette, say) are answered as a ReconstructReply with ``error``, so
-the job fails with the core's own message; a malformed request gets an error
-reply naming the field.
+concatenated in order (each view says its length). The reply's attachment is a
+ReconstructReply; its payload the silhouettes (PNG) and the carved points
+(float32), as the reply describes them. Errors of the core (an empty
+silhouette, say) are answered as a ReconstructReply with ``error``, so the job
+fails with the core's own message; a malformed request gets an error reply
+naming the field.
 
 The worker tells every cell what it can take: its capacity (the pool's size)
 and its load (requests in flight, with their tickets), in a heartbeat and on
@@ -14,7 +16,6 @@ its info key; see ``cell/keys.py`` for the pool's contract.
 from __future__ import annotations
 
 import asyncio
-import base64
 import ctypes
 import gc
 import itertools
@@ -34,7 +35,8 @@ from wire import keys
 from wire.bundle import core_segmentation
 from wire.config import CellConfig
 from wire.errors import TransportError
-from wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad, parse
+from wire.messages import (POINTS_ENCODING, Blob, Reconstruction, ReconstructReply, ReconstructRequest, Superquadric,
+                           WorkerLoad, parse)
 from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
@@ -53,8 +55,8 @@ def default_worker_id() -> str:
     return keys.safe_worker_id(f"{socket.gethostname()}-{os.getpid()}")
 
 
-def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> str:
-    """Run one reconstruction (in a pool process); returns the ReconstructReply as JSON.
+def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> tuple[str, bytes]:
+    """Run one reconstruction (in a pool process): the ReconstructReply as JSON, and its payload.
 
     The reply names ``worker`` and echoes the request's ticket.
     """
@@ -68,21 +70,29 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         result = reconstruct(views, segmentation=core_segmentation(request.segmentation),
                              support_plane=request.support_plane, options=Options(**request.options))
     except (CoreError, ValueError) as exc:
-        return ReconstructReply(job_id=request.job_id, error=str(exc), worker=worker,
-                                ticket=request.ticket).model_dump_json()
-    silhouettes = [base64.b64encode(cv2.imencode(".png", s)[1].tobytes()).decode("ascii")
-                   for s in result.silhouettes]
-    return ReconstructReply(job_id=request.job_id, result=result.to_dict(points=True),
-                            centre=np.asarray(result.centre).tolist(), radius=float(result.radius),
-                            silhouettes_png=silhouettes, worker=worker, ticket=request.ticket).model_dump_json()
+        return ReconstructReply(job_id=request.job_id, error=str(exc), error_kind=type(exc).__name__, worker=worker,
+                                ticket=request.ticket).model_dump_json(), b""
+    silhouettes = [cv2.imencode(".png", s)[1].tobytes() for s in result.silhouettes]
+    points = np.ascontiguousarray(result.points, dtype="<f4").tobytes()
+    summary = result.to_dict()
+    reply = ReconstructReply(
+        job_id=request.job_id, worker=worker, ticket=request.ticket,
+        result=Reconstruction(superquadric=Superquadric.model_validate(summary["superquadric"]),
+                              silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
+                              timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
+                              radius=float(result.radius)),
+        silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
+        points=Blob(encoding=POINTS_ENCODING, length=len(points)))
+    return reply.model_dump_json(), b"".join(silhouettes) + points
 
 
 #: What a worker runs for each request, in a pool process: (ReconstructRequest JSON, payload,
-#: worker id) -> ReconstructReply JSON. A module-level function, so that the pool can pickle it.
-Job = Callable[[str, bytes, str], str]
+#: worker id) -> (ReconstructReply JSON, its payload). A module-level function, so that the pool
+#: can pickle it.
+Job = Callable[[str, bytes, str], tuple[str, bytes]]
 #: What :class:`ReconstructWorker` awaits for each request: (ReconstructRequest JSON, payload) ->
-#: ReconstructReply JSON.
-Run = Callable[[str, bytes], Awaitable[str]]
+#: (ReconstructReply JSON, its payload).
+Run = Callable[[str, bytes], Awaitable[tuple[str, bytes]]]
 
 
 class ReconstructWorker:
@@ -199,14 +209,14 @@ class ReconstructWorker:
         self._load_changed()
         began = time.perf_counter()
         try:
-            reply_json = await self._run(request.attachment.decode(), request.payload or b"")
+            reply_json, reply_payload = await self._run(request.attachment.decode(), request.payload or b"")
         finally:
             del self._in_flight[number]
             self._answered += 1
             self._load_changed()
         log.info("job %s (%s) answered in %.1f ms", parsed.job_id, parsed.ticket or "no ticket",
                  1000 * (time.perf_counter() - began))
-        return Response(reply_json)
+        return Response(reply_payload, encoding="application/octet-stream", attachment=reply_json)
 
 
 def _pool_process() -> None:
@@ -246,7 +256,7 @@ def main(config: CellConfig, worker_id: str | None = None, *, job: Job = reconst
             await asyncio.gather(*(loop.run_in_executor(pool, _ready) for _ in range(processes)))
             transport = await open_transport(config)
             try:
-                async def reconstruct_in_pool(request_json: str, payload: bytes) -> str:
+                async def reconstruct_in_pool(request_json: str, payload: bytes) -> tuple[str, bytes]:
                     return await loop.run_in_executor(pool, job, request_json, payload, worker_id)
 
                 async with ReconstructWorker(transport, worker_id, processes, reconstruct_in_pool):

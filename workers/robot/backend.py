@@ -13,10 +13,22 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["RobotBackend", "ProgressCallback"]
+from core_cy.plan import Workspace, workspace_violation
+from wire.errors import MoveRefused
+
+__all__ = ["RobotBackend", "ProgressCallback", "refuse_outside"]
 
 #: Called while a move runs: the flange's pose now (4x4, base frame), and whether it still moves.
 ProgressCallback = Callable[[np.ndarray, bool], None]
+
+
+def refuse_outside(target: np.ndarray, workspace: Workspace, *, prefix: str = "move refused") -> None:
+    """Raise :class:`~wire.errors.MoveRefused` if ``target`` (flange-to-base) leaves the
+    workspace: ``limit`` is ``"workspace"`` outside the box, ``"orientation"`` for the tilt."""
+    violation = workspace_violation(target, workspace)
+    if violation:
+        inside_box = all(lo <= x <= hi for lo, x, hi in zip(workspace.min, target[:3, 3], workspace.max))
+        raise MoveRefused(f"{prefix}: {violation}", limit="orientation" if inside_box else "workspace")
 
 
 class RobotBackend(abc.ABC):

@@ -13,16 +13,14 @@ import time
 
 import numpy as np
 
-from core_cy.plan import workspace_violation
 from wire import keys
 from wire.backends import KukaRobotConfig, RobotConfig
 from wire.config import CellConfig
-from wire.errors import CellError
 from wire.messages import MoveReply, MoveRequest, RobotState, parse
 from wire.process import open_transport, run_until_stopped
 from wire.transport import Request, RequestError, Response, Transport
 
-from .backend import RobotBackend
+from .backend import RobotBackend, refuse_outside
 
 __all__ = ["make_backend", "serve_robot", "main"]
 
@@ -57,16 +55,12 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
         except ValueError as exc:
             raise RequestError(str(exc)) from None
         target = np.asarray(move.T_base_flange, dtype=np.float64)
-        violation = workspace_violation(target, config.robot.workspace)
-        if violation:
-            raise RequestError(f"move refused before moving: {violation}")
+        refuse_outside(target, config.robot.workspace, prefix="move refused before moving")
         async with motion:
             began = time.monotonic()
             moving = True
-            try:
+            try:  # a CellError (the robot refused or failed) goes back to the caller with its kind
                 reached = await backend.move(target, publish)
-            except CellError as exc:  # the robot refused or failed: the caller hears why
-                raise RequestError(str(exc)) from None
             finally:
                 moving = False
             publish(reached, False)

@@ -20,13 +20,13 @@ from typing import Literal, Protocol
 import numpy as np
 
 from wire.backends import KukaConfig, KukaKvpConfig, Workspace
-from core_cy.plan import workspace_violation
 
-from ..backend import RobotBackend
+from ..backend import RobotBackend, refuse_outside
 from . import variables as v
 from .e6pos import E6Axis, E6Pos, e6pos_from_pose, format_e6pos, parse_e6axis, parse_e6pos, pose_from_e6pos
-from .errors import (ControllerBusy, ControllerRefused, DrivesOff, EmergencyStop, KukaError, KukaProtocolError,
-                     KukaTimeout, MoveFailed, MoveRefused, Unreachable)
+from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
+
+from .errors import ControllerBusy, ControllerRefused, KukaError, KukaProtocolError, KukaTimeout, Unreachable
 
 __all__ = ["KukaClient", "KukaBackend", "check_move", "make_client"]
 
@@ -77,11 +77,7 @@ def check_move(target, workspace: Workspace, *, override: int, max_override: int
         position = e6pos_from_pose(target)
     except ValueError as exc:
         raise MoveRefused(f"move refused: {exc}", limit="pose") from None
-    pose = np.asarray(target, dtype=np.float64)
-    violation = workspace_violation(pose, workspace)
-    if violation:
-        inside_box = all(lo <= x <= hi for lo, x, hi in zip(workspace.min, pose[:3, 3], workspace.max))
-        raise MoveRefused(f"move refused: {violation}", limit="orientation" if inside_box else "workspace")
+    refuse_outside(np.asarray(target, dtype=np.float64), workspace)
     return position
 
 

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core_cy.rigid import rigid_error
+
 __all__ = [
     "E6Pos", "E6Axis", "rotation_from_abc", "abc_from_rotation", "e6pos_from_pose", "pose_from_e6pos",
     "format_e6pos", "parse_krl_struct", "parse_e6pos", "parse_e6axis",
@@ -37,7 +39,6 @@ __all__ = [
 # Below this, cos(B) is taken as zero: the pose is in gimbal lock.
 _GIMBAL_EPS = 1e-12
 # How far from a rotation matrix a caller's matrix may be (rounding of several products).
-_RIGID_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -112,11 +113,9 @@ def _check_pose(pose) -> np.ndarray:
         raise ValueError(f"a pose must be a 4x4 matrix, got shape {pose.shape}")
     if not np.all(np.isfinite(pose)):
         raise ValueError("the pose has a non-finite entry")
-    if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], atol=_RIGID_TOL):
-        raise ValueError(f"the pose's last row must be [0, 0, 0, 1], got {pose[3].tolist()}")
-    rotation = pose[:3, :3]
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=_RIGID_TOL) or np.linalg.det(rotation) <= 0:
-        raise ValueError("the pose's upper-left 3x3 block is not a rotation matrix")
+    problem = rigid_error(pose)
+    if problem is not None:
+        raise ValueError(f"the pose {problem}")
     return pose
 
 

@@ -2,31 +2,37 @@
 
 ::
 
-    KukaError (cell.errors.CellError)
+    KukaError (wire.errors.CellError)
     ├── KukaConnectionError   no connection to KukaVarProxy or the OPC gateway, or it was lost
     ├── KukaTimeout           an answer, the program's acknowledgment or the end of a move came too late
     ├── KukaProtocolError     a malformed or unexpected message on the wire
     ├── KukaVariableError     the controller would not read or write a variable (unknown name, bad value)
-    ├── MoveRefused           the bridge refused a move before writing anything: ``limit`` names the limit
-    ├── ControllerBusy        the controller still holds a command (RC_CMD is not 0): nothing was written
-    └── MoveFailed            the controller took the move but did not finish it
-        ├── ControllerRefused     the KRL program refused the command: ``code`` is its error code
-        │   └── Unreachable           ... because the pose is outside the arm's reach or axis limits
-        ├── EmergencyStop         a stop message is active on the controller ($STOPMESS)
-        └── DrivesOff             the drives are not ready ($PERI_RDY is FALSE)
+    └── ControllerBusy        the controller still holds a command (RC_CMD is not 0): nothing was written
 
-Errors of the libraries underneath (``OSError`` from sockets, ``Pyro5.errors``,
-``openopc2.exceptions.OPCError``) are translated in one place per client:
-``kvp._translate`` and ``opc._translate``.
+    wire.errors.MoveRefused   the bridge refused a move before writing anything: ``limit`` names the limit
+    wire.errors.MoveFailed    the controller took the move but did not finish it
+    ├── ControllerRefused         the KRL program refused the command: ``code`` is its error code
+    │   └── Unreachable               ... because the pose is outside the arm's reach or axis limits
+    │                                 (also a ``wire.errors.Unreachable``)
+    ├── wire.errors.EmergencyStop a stop message is active on the controller ($STOPMESS)
+    └── wire.errors.DrivesOff     the drives are not ready ($PERI_RDY is FALSE)
+
+The robot errors every robot shares are ``wire.errors``' own, so that they keep their
+class across the wire; the rest are the bridge's. Errors of the libraries underneath
+(``OSError`` from sockets, ``Pyro5.errors``, ``openopc2.exceptions.OPCError``) are
+translated in one place per client: ``kvp._translate`` and ``opc._translate``.
 """
 
 from __future__ import annotations
 
-from wire.errors import CellError
+from typing import Any
+
+from wire import errors
+from wire.errors import CellError, MoveFailed
 
 __all__ = [
-    "KukaError", "KukaConnectionError", "KukaTimeout", "KukaProtocolError", "KukaVariableError",
-    "MoveRefused", "ControllerBusy", "MoveFailed", "ControllerRefused", "Unreachable", "EmergencyStop", "DrivesOff",
+    "KukaError", "KukaConnectionError", "KukaTimeout", "KukaProtocolError", "KukaVariableError", "ControllerBusy",
+    "ControllerRefused", "Unreachable",
 ]
 
 
@@ -54,24 +60,8 @@ class KukaVariableError(KukaError):
         self.name = name
 
 
-class MoveRefused(KukaError):
-    """The bridge refused the move before anything was written to the controller.
-
-    ``limit`` is one of ``"workspace"``, ``"orientation"``, ``"override"``, ``"pose"``
-    (the matrix is not a rigid transform) or ``"motion"`` (unknown motion type).
-    """
-
-    def __init__(self, message: str, *, limit: str) -> None:
-        super().__init__(message)
-        self.limit = limit
-
-
 class ControllerBusy(KukaError):
     """The controller still holds a command: a move in progress, or a program stopped in the middle of one."""
-
-
-class MoveFailed(KukaError):
-    """The controller took the move but did not finish it."""
 
 
 class ControllerRefused(MoveFailed):
@@ -81,14 +71,9 @@ class ControllerRefused(MoveFailed):
         super().__init__(message)
         self.code = code
 
+    def details(self) -> dict[str, Any]:
+        return {"code": self.code}
 
-class Unreachable(ControllerRefused):
+
+class Unreachable(ControllerRefused, errors.Unreachable):
     """The KRL program found no axis solution for the pose (reach, singularity or axis limits)."""
-
-
-class EmergencyStop(MoveFailed):
-    """A stop message is active on the controller: emergency stop or a safety stop."""
-
-
-class DrivesOff(MoveFailed):
-    """The drives are not ready: switched off, or not yet switched on."""

@@ -1,0 +1,72 @@
+"""Work handed out of the event loop in order: :func:`later` and :class:`Serial`.
+
+The daemon's event loop only decides, asks and publishes. What a step records
+(store, event, recording) is done after the step's query is on its way, so the
+worker starts at once and the bookkeeping overlaps its work; the job store runs
+in a thread of its own (an SQLite connection belongs to one thread), in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import logging
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any, TypeVar
+
+__all__ = ["later", "Serial"]
+
+log = logging.getLogger(__name__)
+_T = TypeVar("_T")
+
+
+def later(function: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    """Call ``function`` when the event loop next looks round, in the order of these calls."""
+    asyncio.get_running_loop().call_soon(functools.partial(function, *args, **kwargs))
+
+
+class Serial:
+    """One thread that runs the calls given to it, in order.
+
+    A call is handed to the thread when the event loop next looks round (see
+    :func:`later`), so calls and posts keep the order they were made in.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix=name)
+
+    async def call(self, function: Callable[..., _T], *args: Any, **kwargs: Any) -> _T:
+        """Run ``function`` in the thread after everything posted before; its result."""
+        handed: asyncio.Future[Future[_T]] = asyncio.get_running_loop().create_future()
+        later(self._hand, functools.partial(function, *args, **kwargs), handed)
+        return await asyncio.wrap_future(await handed)
+
+    def _hand(self, call: Callable[[], _T], handed: asyncio.Future[Future[_T]]) -> None:
+        if not handed.cancelled():  # the caller gave up before the call was handed over: skip it
+            handed.set_result(self._executor.submit(call))
+
+    def post(self, function: Callable[..., Any], *args: Any, then: Callable[[], None] | None = None,
+             **kwargs: Any) -> None:
+        """Run ``function`` in the thread after everything posted before; a failure is logged.
+
+        ``then`` is called on the event loop once ``function`` has returned (or failed).
+        """
+        later(self._post, functools.partial(function, *args, **kwargs), then)
+
+    def _post(self, call: Callable[[], Any], then: Callable[[], None] | None = None) -> None:
+        future = self._executor.submit(call)
+        future.add_done_callback(self._log_failure)
+        if then is not None:
+            loop = asyncio.get_running_loop()
+            future.add_done_callback(lambda _: loop.call_soon_threadsafe(then))
+
+    def _log_failure(self, future: Future[Any]) -> None:
+        exc = future.exception()
+        if exc is not None:
+            log.error("%s: %s: %s", self.name, type(exc).__name__, exc, exc_info=exc)
+
+    def close(self) -> None:
+        """Run what is posted, then end the thread."""
+        self._executor.shutdown(wait=True)
