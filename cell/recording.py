@@ -11,7 +11,6 @@ base, z up, metres. Entities::
     world/camera{i}/silhouette       SegmentationImage (0 background, 1 object)
     world/points/{name}              Points3D ("sphere", "carved")
     world/{name}                     Mesh3D ("fit", "truth")
-    metrics/{name}                   Scalars
     log                              TextLog
 """
 
@@ -175,10 +174,6 @@ class JobRecording:
         self._log(f"world/{name}", rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles,
                                               vertex_normals=_vertex_normals(vertices, triangles),
                                               albedo_factor=colour))
-
-    def log_scalar(self, name: str, value: float) -> None:
-        """A number plotted over the job, e.g. a timing or a quality figure."""
-        self._log(f"metrics/{name}", rr.Scalars(float(value)))
 
     def close(self) -> None:
         """Flush and write the file's footer; the file is then complete. Idempotent."""

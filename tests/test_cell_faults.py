@@ -61,19 +61,21 @@ def test_scan_through_digest_authentication(rig):
     assert len(rig.reconstructor.received) == 1
 
 
-@pytest.mark.parametrize("fault, reason", [
-    ({"status": 500}, "answered HTTP 500 Internal Server Error: Simulated fault: HTTP 500; gave up after 2 attempts"),
+@pytest.mark.parametrize("fault, reason, kind", [
+    ({"status": 500}, "answered HTTP 500 Internal Server Error: Simulated fault: HTTP 500; gave up after 2 attempts",
+     "CameraResponseError"),
     ({"garbage": True}, "answered, but not a JPEG: the body does not start with the JPEG marker FF D8; "
-                        "gave up after 2 attempts"),
-    ({"hang_s": 4.0}, "did not answer within 1 s; gave up after 2 attempts"),
+                        "gave up after 2 attempts", "CameraResponseError"),
+    ({"hang_s": 4.0}, "did not answer within 1 s; gave up after 2 attempts", "CameraTimeout"),
 ], ids=["500", "garbage", "nothing"])
-def test_camera_fault_fails_the_job_after_bounded_retries(rig, fault, reason):
+def test_camera_fault_fails_the_job_after_bounded_retries(rig, fault, reason, kind):
     server = rig.camera.server
     attempts = rig.cell.config.camera.retries + 1
     server.fail_next(**fault, count=attempts)
     before = server.request_count
     job_id, error = rig.failed_job()
     assert error == f"capturing view 0: camera at {rig.camera.config.camera.url} {reason}"
+    assert rig.cell.client.status(job_id).error_kind == kind  # the camera's error keeps its class
     assert server.request_count - before == attempts  # retried, and only so often
     assert rig.events(job_id)[-1] == ("failed", None)
 

@@ -73,7 +73,6 @@ def _log_job(path: Path, job_id: str) -> dict[str, object]:
         rec.log_points("carved", CENTRE + 0.05 * directions, colour=(255, 128, 0))
         rec.log_superquadric("fit", fit)
         rec.log_mesh("truth", truth_vertices, truth_faces)
-        rec.log_scalar("total_ms", 4.2)
         rec.set_time(STEPS[7][1])
         rec.log_text(STEPS[7][0], "WARNING")
 
@@ -107,7 +106,6 @@ EXPECTED = {
     "/world/points/carved": ["Points3D"],
     "/world/fit": ["Mesh3D"],
     "/world/truth": ["Mesh3D"],
-    "/metrics/total_ms": ["Scalars"],
     **{f"/world/camera{i}": ["Pinhole", "Transform3D"] for i in range(3)},
     **{f"/world/camera{i}/image": ["EncodedImage"] for i in range(3)},
     **{f"/world/camera{i}/silhouette": ["SegmentationImage"] for i in range(3)},
@@ -186,9 +184,9 @@ def test_close_is_idempotent_and_later_logging_is_dropped(tmp_path):
 def test_summary_of_a_recording_still_being_written(tmp_path):
     rec = JobRecording(tmp_path / "open.rrd", "open")
     try:
-        rec.log_scalar("x", 1.0)
+        rec.log_points("x", np.zeros((3, 3)))
         rec._rec.flush()  # what the daemon's batcher does on its own after a moment
-        assert recording_summary(tmp_path / "open.rrd")["/metrics/x"] == ["Scalars"]
+        assert "Points3D" in recording_summary(tmp_path / "open.rrd")["/world/points/x"]
     finally:
         rec.close()
 

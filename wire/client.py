@@ -32,7 +32,13 @@ _ALL_JOBS = "*"
 
 
 class JobFailed(CellError):
-    """The job ended failed or cancelled; the message says why."""
+    """The job ended failed or cancelled; the message says why, ``status`` is the job's last
+    status and ``kind`` the class of the error that failed it (``EmergencyStop``, say), if any."""
+
+    def __init__(self, message: str, *, status: JobStatus) -> None:
+        super().__init__(message)
+        self.status = status
+        self.kind = status.error_kind
 
 
 class AsyncCellClient:
@@ -252,7 +258,7 @@ class AsyncCellClient:
                 return final.result
             return await self.result(status.job_id)  # the end was learnt by polling
         ended = await self.status(status.job_id)
-        raise JobFailed(f"job {ended.job_id} {ended.state.value}: {ended.error or 'no reason given'}")
+        raise JobFailed(f"job {ended.job_id} {ended.state.value}: {ended.error or 'no reason given'}", status=ended)
 
 
 class CellClient:

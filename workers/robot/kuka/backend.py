@@ -23,7 +23,7 @@ from wire.backends import KukaConfig, KukaKvpConfig, Workspace
 
 from ..backend import RobotBackend, refuse_outside
 from . import variables as v
-from .e6pos import E6Axis, E6Pos, e6pos_from_pose, format_e6pos, parse_e6axis, parse_e6pos, pose_from_e6pos
+from .e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
 from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
 
 from .errors import ControllerBusy, ControllerRefused, KukaError, KukaProtocolError, KukaTimeout, Unreachable
@@ -140,11 +140,6 @@ class KukaBackend(RobotBackend):
         text = (await self.client.read([v.POS_ACT.name]))[v.POS_ACT.name]
         self._pose = pose_from_e6pos(_parse(text, parse_e6pos, v.POS_ACT.name))
         return self._pose.copy()
-
-    async def read_axes(self) -> E6Axis:
-        """Read $AXIS_ACT now: the axis angles in degrees."""
-        text = (await self.client.read([v.AXIS_ACT.name]))[v.AXIS_ACT.name]
-        return _parse(text, parse_e6axis, v.AXIS_ACT.name)
 
     async def move(self, target: np.ndarray, on_progress, *, motion: Motion | None = None,
                    override: int | None = None) -> np.ndarray:
