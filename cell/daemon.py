@@ -88,7 +88,13 @@ class CellDaemon:
         self._submitting = 0                        # submits between the queue check and the queue
         self._started = clock()
 
-    # --- lifecycle -----------------------------------------------------------------------------
+    @property
+    def _jobs(self) -> JobStore:
+        """The job store, to be called in its own thread (``self._db``)."""
+        assert self._store is not None, "run() opens the store"
+        return self._store
+
+    # --- lifecycle -------------------------------------------------------------------------------
 
     async def run(self, stop: asyncio.Event) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -100,7 +106,7 @@ class CellDaemon:
         finally:
             await asyncio.sleep(0)  # what is handed over later goes out first
             await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
-            await self._db.call(self._store.close)
+            await self._db.call(self._jobs.close)
             await asyncio.to_thread(self._db.close)
 
     async def _serve(self, stop: asyncio.Event) -> None:
@@ -138,11 +144,11 @@ class CellDaemon:
         def recover(store: JobStore, now: float) -> tuple[list[JobStatus], list[JobStatus]]:
             return store.interrupt_unfinished(now=now), store.unfinished()
 
-        ended, waiting = await self._db.call(recover, self._store, self.clock())
+        ended, waiting = await self._db.call(recover, self._jobs, self.clock())
         for status in ended:
             message = status.error or "cancelled by request"
             event = JobEvent(job_id=status.job_id, state=status.state, message=message, time=status.updated)
-            self._db.post(self._store.add_event, event, then=functools.partial(self._publish, event))
+            self._db.post(self._jobs.add_event, event, then=functools.partial(self._publish, event))
             log.warning("job %s was %s by a restart", status.job_id,
                         "interrupted" if status.state is JobState.FAILED else "cancelled")
         for status in waiting:
@@ -191,7 +197,7 @@ class CellDaemon:
     def _keep(self, job: Job, event: JobEvent) -> None:
         """An event that changes no state: recorded, stored (not waited for), published."""
         self._write_down(job, event)
-        self._db.post(self._store.add_event, event, durable=False, then=functools.partial(self._publish, event))
+        self._db.post(self._jobs.add_event, event, durable=False, then=functools.partial(self._publish, event))
 
     def _transition(self, job: Job, to: JobState, message: str, *, view: int | None = None,
                     error: StepFailed | None = None) -> JobEvent:
@@ -205,7 +211,7 @@ class CellDaemon:
         self._write_down(job, event)
         published = functools.partial(self._publish, event)
         recording = str(self._recording_path(job.job_id)) if first and not to.finished else None
-        self._db.post(self._store.update, job.job_id, to, view=view, now=event.time, event=event,
+        self._db.post(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
                       error=None if error is None else message, error_kind=None if error is None else error.kind,
                       recording=recording, durable=to.finished, then=published if to.finished else None)
         if not to.finished:
@@ -315,7 +321,7 @@ class CellDaemon:
         event = job.transition(JobState.SUCCEEDED, f"reconstructed by {result.worker} in {total:.1f} ms{attempt}",
                                now=self.clock(), result=result)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
-        await asyncio.shield(self._db.call(self._store.save_result, result, now=event.time, event=event))
+        await asyncio.shield(self._db.call(self._jobs.save_result, result, now=event.time, event=event))
         self._publish(event)
         # The client has its result: now the recording's share, whose hand-off would delay it.
         if job.reconstruction is not None and job.job_id in self._journals:
@@ -336,7 +342,7 @@ class CellDaemon:
             if violation:
                 raise RequestError(f"view {view} is outside the workspace: {violation}")
         if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
-            known = await self._db.call(self._store.find_request, scan.request_id)
+            known = await self._db.call(self._jobs.find_request, scan.request_id)
             if known is not None:
                 return Response(known.model_dump_json())
         # Submits on their way to the store count: a burst cannot slip past the bound.
@@ -345,7 +351,7 @@ class CellDaemon:
         self._submitting += 1
         try:
             # Stored for good before the answer: a submitted job survives a crash.
-            status, created = await self._db.call(self._store.add, scan, n_views=len(poses), now=self.clock())
+            status, created = await self._db.call(self._jobs.add, scan, n_views=len(poses), now=self.clock())
         finally:
             self._submitting -= 1
         if created:  # the store added the job's "queued" event with it
@@ -364,7 +370,7 @@ class CellDaemon:
             failed = store.list(states={JobState.FAILED}, limit=n_failures) if n_failures else []
             return store.counts(), failed
 
-        counts, failed = await self._db.call(read, self._store)
+        counts, failed = await self._db.call(read, self._jobs)
         status = CellStatus(
             cell=self.cell, time=self.clock(), started=self._started,
             workers={part: part in self._presence for part in ("robot", "camera")},
@@ -381,7 +387,7 @@ class CellDaemon:
             limit = int(request.parameters.get("limit", 50))
         except ValueError as exc:
             raise RequestError(f"bad parameters: {exc}") from None
-        statuses = await self._db.call(self._store.list, states=states, limit=max(1, min(limit, 1000)))
+        statuses = await self._db.call(self._jobs.list, states=states, limit=max(1, min(limit, 1000)))
         return Response("[" + ",".join(s.model_dump_json() for s in statuses) + "]")
 
     async def _on_job_query(self, request: Request) -> Response:
@@ -394,14 +400,14 @@ class CellDaemon:
         status = await self._status(job_id)
         if what == "status":
             return Response(status.model_dump_json())
-        result = await self._db.call(self._store.result, job_id)
+        result = await self._db.call(self._jobs.result, job_id)
         if result is None:
             raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
                                + (f" ({status.error})" if status.error else ""))
         return Response(result.model_dump_json())
 
     async def _status(self, job_id: str) -> JobStatus:
-        status = await self._db.call(self._store.get, job_id)
+        status = await self._db.call(self._jobs.get, job_id)
         if status is None:
             raise RequestError(f"no job {job_id!r} in cell {self.cell}")
         return status
@@ -420,11 +426,11 @@ class CellDaemon:
             pass
         else:
             if event.state.finished:  # it was waiting: that is all
-                self._db.post(self._store.update, job_id, event.state, now=event.time, event=event,
+                self._db.post(self._jobs.update, job_id, event.state, now=event.time, event=event,
                               then=functools.partial(self._publish, event))
             else:
                 self._write_down(job, event)
-                self._db.post(self._store.update, job_id, event.state, view=event.view, now=event.time,
+                self._db.post(self._jobs.update, job_id, event.state, view=event.view, now=event.time,
                               event=event, durable=False)
                 later(self._publish, event)
                 if job.task is not None:

@@ -31,6 +31,7 @@ import collections
 import contextlib
 import logging
 import time
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 from wire import keys
@@ -252,7 +253,7 @@ class ReconstructorPool:
     # --- sending work -----------------------------------------------------------------------
 
     async def run(self, ticket: str, payload: bytes, attachment: str, *, timeout: float, wait_s: float,
-                  avoid: set[str] = frozenset()) -> tuple[str, Reply]:
+                  avoid: Collection[str] = frozenset()) -> tuple[str, Reply]:
         """One attempt: the worker that answered and its reply.
 
         Waits for a live, healthy worker with a free slot (preferring those not in
@@ -299,7 +300,7 @@ class ReconstructorPool:
                 reason = record.lost_reason
         raise AttemptFailed(record.worker, reason)
 
-    async def _acquire(self, ticket: str, avoid: set[str], wait_s: float) -> _Worker:
+    async def _acquire(self, ticket: str, avoid: Collection[str], wait_s: float) -> _Worker:
         """The worker to send ``ticket`` to, its slot taken; once there is one with a free slot."""
         if not self._waiters:  # nobody waits before this caller
             record = self._choose([r for r in self._workers.values() if not r.hung], avoid)
@@ -339,7 +340,7 @@ class ReconstructorPool:
             if waiter in self._waiters:
                 self._waiters.remove(waiter)
 
-    def _choose(self, healthy: list[_Worker], avoid: set[str]) -> _Worker | None:
+    def _choose(self, healthy: list[_Worker], avoid: Collection[str]) -> _Worker | None:
         """The least loaded worker with a free slot, not one to avoid if another will do; None: wait."""
         preferred = [r for r in healthy if r.worker not in avoid] or healthy
         free = [r for r in preferred if r.load < r.capacity]

@@ -17,12 +17,13 @@ long as the clock does not step back over midnight.
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import sqlite3
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from pydantic import ValidationError
 
@@ -208,7 +209,7 @@ class JobStore:
                 self._insert_event(db, event)
             return self._get(db, result.job_id)
 
-    def interrupt_unfinished(self, *, now: float, reason: str = INTERRUPTED) -> list[JobStatus]:
+    def interrupt_unfinished(self, *, now: float, reason: str = INTERRUPTED) -> builtins.list[JobStatus]:
         """Fail every moving, capturing or reconstructing job with ``reason``, and cancel every
         cancelling one; returns them, oldest first.
 
@@ -235,12 +236,12 @@ class JobStore:
                           lambda row: ScanResult.model_validate_json(row[0]))
         return rows[0] if rows else None
 
-    def events(self, job_id: str) -> list[JobEvent]:
+    def events(self, job_id: str) -> builtins.list[JobEvent]:
         """The job's events in the order they were added (none for an unknown job)."""
         return self._read("SELECT event FROM events WHERE job_id = ? ORDER BY seq", [job_id],
                           lambda row: JobEvent.model_validate_json(row[0]))
 
-    def list(self, *, states: set[JobState] | None = None, limit: int = 100) -> list[JobStatus]:
+    def list(self, *, states: set[JobState] | None = None, limit: int = 100) -> builtins.list[JobStatus]:
         """Up to ``limit`` jobs, newest first, only those in ``states`` if given.
 
         Raises
@@ -254,7 +255,7 @@ class JobStore:
         return self._read(f"SELECT {_COLUMNS} FROM jobs {where} ORDER BY seq DESC LIMIT ?",
                           [*params, limit], _status)
 
-    def unfinished(self) -> list[JobStatus]:
+    def unfinished(self) -> builtins.list[JobStatus]:
         """Every job not yet succeeded, failed or cancelled, oldest first: a restarted daemon's to-do."""
         where, params = _in_states({s for s in JobState if not s.finished})
         return self._read(f"SELECT {_COLUMNS} FROM jobs {where} ORDER BY seq", params, _status)
@@ -266,7 +267,7 @@ class JobStore:
 
     def counts(self) -> dict[JobState, int]:
         """How many jobs are in each state (every state, zero included)."""
-        found = dict(self._read("SELECT state, COUNT(*) FROM jobs GROUP BY state", [],
+        found: dict[JobState, int] = dict(self._read("SELECT state, COUNT(*) FROM jobs GROUP BY state", [],
                                 lambda row: (JobState(row[0]), row[1])))
         return {state: found.get(state, 0) for state in JobState}
 
@@ -287,7 +288,7 @@ class JobStore:
         except ValidationError as exc:
             raise StoreError(f"job store {self.path} holds an invalid row: {exc}") from exc
 
-    def _read(self, sql: str, params: list, convert: Callable[[tuple], _T]) -> list[_T]:
+    def _read(self, sql: str, params: builtins.list[Any], convert: Callable[[tuple], _T]) -> builtins.list[_T]:
         """One query, every row converted; a single statement needs no explicit transaction."""
         with self._errors():
             return [convert(row) for row in self._db.execute(sql, params)]
@@ -340,7 +341,7 @@ def _status(row: tuple) -> JobStatus:
                      request=ScanRequest.model_validate_json(request))
 
 
-def _in_states(states: set[JobState] | None) -> tuple[str, list[str]]:
+def _in_states(states: set[JobState] | None) -> tuple[str, builtins.list[str]]:
     """A WHERE clause for ``states`` (None: every job; empty: none) and its parameters."""
     if states is None:
         return "", []

@@ -82,7 +82,8 @@ def _grey(image: ArrayLike, name: Any) -> NDArray[np.uint8]:
     if img.dtype != np.uint8 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
         raise ValueError(f"image {name}: expected an (H, W) or (H, W, 3) uint8 array, "
                          f"got {img.dtype} of shape {img.shape}")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 and img.shape[2] == 3 else img.reshape(img.shape[:2])
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 and img.shape[2] == 3 else img.reshape(img.shape[:2])
+    return np.asarray(grey, dtype=np.uint8)
 
 
 def find_corners(image: ArrayLike, board: Sequence[int]) -> NDArray[np.float32] | None:
@@ -113,7 +114,7 @@ def find_corners(image: ArrayLike, board: Sequence[int]) -> NDArray[np.float32] 
     # The search window must stay within the four squares meeting at a corner, or a neighbour pulls it.
     half = int(np.clip(0.4 * spacing, 2, 11))
     corners = cv2.cornerSubPix(grey, np.ascontiguousarray(grid.reshape(-1, 1, 2)), (half, half), (-1, -1), _SUBPIX)
-    grid = corners.reshape(rows, cols, 2)
+    grid = np.asarray(corners, dtype=np.float32).reshape(rows, cols, 2)
     # Projection keeps handedness, so a mirrored order (x cross y pointing at the camera) is
     # the detector's choice, not the board's: reverse the rows to undo it.
     dx, dy = grid[0, 1] - grid[0, 0], grid[1, 0] - grid[0, 0]

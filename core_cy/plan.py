@@ -21,17 +21,23 @@ __all__ = ["look_at", "plan_flange_poses", "workspace_violation", "camera_poses"
 class ViewPlan(Protocol):
     """Where to look from (``wire.messages.ViewPlan`` is one): one view per (elevation, azimuth)."""
 
-    standoff: float
-    elevations_deg: Sequence[float]
-    azimuths_deg: Sequence[float]
+    @property
+    def standoff(self) -> float: ...
+    @property
+    def elevations_deg(self) -> Sequence[float]: ...
+    @property
+    def azimuths_deg(self) -> Sequence[float]: ...
 
 
 class Workspace(Protocol):
     """Where the flange may go (``wire.backends.Workspace`` is one): a box, metres, and a tilt limit."""
 
-    min: Sequence[float]
-    max: Sequence[float]
-    max_tilt_deg: float
+    @property
+    def min(self) -> Sequence[float]: ...
+    @property
+    def max(self) -> Sequence[float]: ...
+    @property
+    def max_tilt_deg(self) -> float: ...
 
 
 def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:

@@ -37,10 +37,10 @@ class Section(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-def _union(tag: str, *models: type[BaseModel]) -> Any:
-    """The discriminated union of ``models`` on the field ``tag``; the first model where the
-    file leaves the tag out. An error's location names the tag as ``backend=kuka``, which
-    ``messages.field_errors`` leaves out of the field's name."""
+def _tagged(tag: str, models: tuple[type[BaseModel], ...]) -> Discriminator:
+    """The discriminator of a union of ``models`` on the field ``tag``: the first model where the
+    file leaves the tag out. Each member is tagged ``backend=kuka`` (say): an error's location
+    names the tag so, and ``messages.field_errors`` leaves it out of the field's name."""
     values = [model.model_fields[tag].default for model in models]
 
     def discriminator(value: Any) -> str:
@@ -48,9 +48,8 @@ def _union(tag: str, *models: type[BaseModel]) -> Any:
         return f"{tag}={chosen}"
 
     expected = " or ".join(repr(v) for v in values)
-    return Annotated[Union[tuple(Annotated[model, Tag(f"{tag}={value}")] for model, value in zip(models, values))],
-                     Discriminator(discriminator, custom_error_type="backend_unknown",
-                                   custom_error_message=f"{tag} must be {expected}")]
+    return Discriminator(discriminator, custom_error_type="backend_unknown",
+                         custom_error_message=f"{tag} must be {expected}")
 
 
 # --- robots ------------------------------------------------------------------------------------
@@ -144,7 +143,9 @@ class KukaOpcConfig(_Kuka):
     opc_item_prefix: str = ""
 
 
-KukaConfig = _union("protocol", KukaKvpConfig, KukaOpcConfig)
+KukaConfig = Annotated[Union[Annotated[KukaKvpConfig, Tag("protocol=kvp")],
+                             Annotated[KukaOpcConfig, Tag("protocol=opc")]],
+                       _tagged("protocol", (KukaKvpConfig, KukaOpcConfig))]
 
 
 class KukaRobotConfig(_Robot):
@@ -154,7 +155,9 @@ class KukaRobotConfig(_Robot):
     kuka: KukaConfig = KukaKvpConfig()
 
 
-RobotConfig = _union("backend", SimRobotConfig, KukaRobotConfig)
+RobotConfig = Annotated[Union[Annotated[SimRobotConfig, Tag("backend=sim")],
+                              Annotated[KukaRobotConfig, Tag("backend=kuka")]],
+                        _tagged("backend", (SimRobotConfig, KukaRobotConfig))]
 
 
 # --- cameras -----------------------------------------------------------------------------------
@@ -246,4 +249,6 @@ class SimCameraConfig(_Camera):
     jpeg_quality: Annotated[int, Field(ge=1, le=100)] = 90
 
 
-CameraConfig = _union("backend", AxisCameraConfig, SimCameraConfig)
+CameraConfig = Annotated[Union[Annotated[AxisCameraConfig, Tag("backend=axis")],
+                               Annotated[SimCameraConfig, Tag("backend=sim")]],
+                         _tagged("backend", (AxisCameraConfig, SimCameraConfig))]

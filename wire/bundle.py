@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+
+import numpy as np
 from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
@@ -81,7 +83,8 @@ def core_segmentation(spec: dict | HsvSegmentation | ThresholdSegmentation | Non
     if spec is None:
         return RED_HSV
     if isinstance(spec, HsvSegmentation):
-        return Segmentation("hsv", lower=tuple(spec.lower), upper=tuple(spec.upper))
+        (h0, s0, v0), (h1, s1, v1) = spec.lower, spec.upper
+        return Segmentation("hsv", lower=(h0, s0, v0), upper=(h1, s1, v1))
     return Segmentation("threshold", value=spec.value, invert=spec.invert)
 
 
@@ -141,13 +144,15 @@ def load_bundle(directory: str | Path) -> Bundle:
     views = []
     for index, view in enumerate(spec.views):
         try:
-            camera = Camera(K=view.K, T_world_cam=view.T_world_cam, dist=view.dist, view=index)
+            camera = Camera(K=np.asarray(view.K), T_world_cam=np.asarray(view.T_world_cam),
+                            dist=None if view.dist is None else np.asarray(view.dist), view=index)
         except CoreError as exc:
             raise BundleError(str(exc)) from exc
         # The mask wins over the image, so the image is not even read.
         if view.mask is not None:
             views.append(View(camera, mask=_read(directory / view.mask, "mask", index)))
         else:
+            assert view.image is not None  # a view names a mask or an image (ViewSpec checks)
             views.append(View(camera, image=_read(directory / view.image, "image", index)))
     try:
         segmentation = core_segmentation(spec.segmentation)

@@ -63,6 +63,7 @@ class AsyncCellClient:
         if self._dispatcher is not None:
             self._dispatcher.cancel()
             await asyncio.gather(self._dispatcher, return_exceptions=True)
+        if self._events is not None:
             self._events.close()
         await self._transport.close()
 

@@ -24,7 +24,7 @@ __all__ = [
     "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING",
 ]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Literal[1] = 1
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
     problem = rigid_error(matrix)
     if problem is not None:

@@ -14,6 +14,7 @@ import json
 import re
 import logging
 from collections.abc import Awaitable, Callable
+from typing import Any, cast
 from dataclasses import dataclass, field
 
 import zenoh
@@ -194,13 +195,15 @@ class Transport:
                 replies.append((True, Reply(str(sample.key_expr), sample.payload.to_bytes(),
                                             str(sample.encoding), _bytes(sample.attachment))))
             else:
-                replies.append((False, Reply(key, reply.err.payload.to_bytes(), str(reply.err.encoding))))
+                error = reply.err
+                assert error is not None  # a reply is either ok or an error
+                replies.append((False, Reply(key, error.payload.to_bytes(), str(error.encoding))))
 
         def on_finished() -> None:
-            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
+            loop.call_soon_threadsafe(_settle, done)
 
         selector = f"{key}?{parameters}" if parameters else key
-        kwargs = {"timeout": timeout, "encoding": zenoh.Encoding(encoding)}
+        kwargs: dict[str, Any] = {"timeout": timeout, "encoding": zenoh.Encoding(encoding)}
         if payload is not None:
             kwargs["payload"] = payload
         if attachment is not None:
@@ -243,7 +246,8 @@ class Transport:
                 # them may act on a request that was not addressed to it.
                 query.drop()
                 return
-            request = Request(asked, dict(query.parameters), _bytes(query.payload), _bytes(query.attachment))
+            parameters = dict(cast(Any, query.parameters))  # its pairs; the stubs do not say it iterates
+            request = Request(asked, parameters, _bytes(query.payload), _bytes(query.attachment))
             try:
                 asyncio.run_coroutine_threadsafe(self._answer(query, request, handler), loop)
             except RuntimeError:  # the loop is gone: we are shutting down
@@ -265,7 +269,7 @@ class Transport:
                 log.exception("handler for %s failed", request.key)
                 error = ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}", kind="InternalError")
             else:
-                kwargs = {"encoding": zenoh.Encoding(response.encoding)}
+                kwargs: dict[str, Any] = {"encoding": zenoh.Encoding(response.encoding)}
                 if response.attachment is not None:
                     kwargs["attachment"] = response.attachment
                 query.reply(query.key_expr, response.payload, **kwargs)
@@ -281,7 +285,7 @@ class Transport:
 
     def put(self, key: str, payload: bytes | str, *, encoding: str = JSON,
             attachment: bytes | str | None = None) -> None:
-        kwargs = {"encoding": zenoh.Encoding(encoding)}
+        kwargs: dict[str, Any] = {"encoding": zenoh.Encoding(encoding)}
         if attachment is not None:
             kwargs["attachment"] = attachment
         try:
@@ -335,12 +339,17 @@ class Transport:
                 keys.append(str(reply.ok.key_expr))
 
         def on_finished() -> None:
-            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(None))
+            loop.call_soon_threadsafe(_settle, done)
 
         self._session.liveliness().get(key_expr, _direct(on_reply, on_finished), timeout=timeout)
         async with asyncio.timeout(timeout + 5.0):
             await done
         return sorted(keys)
+
+
+def _settle(done: asyncio.Future[None]) -> None:
+    if not done.done():
+        done.set_result(None)
 
 
 def _remote_error(payload: bytes) -> CellError:
