@@ -19,7 +19,8 @@ the end of a job (succeeded, failed, cancelled) before its event is published. A
 step's bookkeeping is done once its query to the worker is on its way; what the
 event loop remembers of the jobs (the queue, the jobs in flight) is what its
 decisions need, so no decision waits for the store. After a crash, the restarted
-daemon fails the jobs caught mid-step ("interrupted") and runs the queued ones.
+daemon carries every accepted job on to its end: a job whose pictures were all taken resumes its
+reconstruction from them (``cell.pictures``), a job caught during its views takes them again.
 """
 
 from __future__ import annotations
@@ -37,24 +38,27 @@ import numpy as np
 from core_cy.plan import plan_flange_poses, workspace_violation
 from wire import keys
 from wire.config import CellConfig
-from wire.errors import CellError, NoResponder, RemoteError, TransportError, wire_kind
+from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, LinkDown, NoResponder,
+                         RemoteError, TransportError, TransportTimeout, wire_kind)
 from wire.messages import CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, parse
 from wire.transport import Reply, Request, RequestError, Response, Transport
 
 from .executor import Serial, later
-from .job import IllegalTransition, Job
+from .job import WORKING, IllegalTransition, Job
 from .journal import Journal
 from .lane import MotionLane
 from .pool import ReconstructorPool
 from .presence import Absent, Presence
 from .recorder import Recorder
-from .steps import Step, StepFailed, scan_steps
+from .pictures import Pictures
+from .steps import Reconstruct, Step, StepFailed, scan_steps
 from .store import JobStore, queued_event
 
 __all__ = ["CellDaemon"]
 
 log = logging.getLogger(__name__)
 _CANCEL_WAIT_S = 2.0
+_RETRY_S = 0.5              # between two tries of a step whose part is away
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 
 
@@ -81,6 +85,7 @@ class CellDaemon:
         self._queued: dict[str, Job] = {}           # waiting jobs, in order
         self._active: dict[str, Job] = {}           # jobs whose steps run
         self._journals: dict[str, Journal] = {}     # the recordings of the active jobs
+        self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)
         self._lane = MotionLane()
         self.pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
@@ -140,25 +145,34 @@ class CellDaemon:
         return task
 
     async def _recover(self) -> None:
-        """After a restart: jobs caught mid-step failed; queued jobs run again, in order."""
-        def recover(store: JobStore, now: float) -> tuple[list[JobStatus], list[JobStatus]]:
-            return store.interrupt_unfinished(now=now), store.unfinished()
-
-        ended, waiting = await self._db.call(recover, self._jobs, self.clock())
-        for status in ended:
-            message = status.error or "cancelled by request"
-            event = JobEvent(job_id=status.job_id, state=status.state, message=message, time=status.updated)
-            self._db.post(self._jobs.add_event, event, then=functools.partial(self._publish, event))
-            log.warning("job %s was %s by a restart", status.job_id,
-                        "interrupted" if status.state is JobState.FAILED else "cancelled")
-        for status in waiting:
-            job = Job(status.job_id, status.request, [])
+        """After a restart every accepted job is carried on to its end: a job whose pictures were all
+        taken resumes its reconstruction from them; a job caught before takes its views again, in
+        its turn; a job being cancelled is cancelled; queued jobs run, in order."""
+        unfinished = await self._db.call(self._jobs.unfinished)
+        for status in unfinished:
+            job = Job(status.job_id, status.request, [], state=status.state, view=status.view)
+            pictures = None
+            if status.state is JobState.RECONSTRUCTING:
+                pictures = await self._db.call(self._pictures.load, job.job_id, status.n_views)
             try:
                 job.poses = self._flange_poses(status.request)
             except ValueError as exc:  # the configuration changed under it
-                self._transition(job, JobState.FAILED, f"planning: {exc}", error=StepFailed(str(exc)))
+                if job.state is JobState.CANCELLING:
+                    self._transition(job, JobState.CANCELLED, "cancelled by request (before the daemon restarted)")
+                else:
+                    self._transition(job, JobState.FAILED, f"planning: {exc}", error=StepFailed(str(exc)))
                 continue
-            self._enqueue(job)
+            if job.state is JobState.CANCELLING:
+                self._transition(job, JobState.CANCELLED, "cancelled by request (before the daemon restarted)")
+            elif pictures is not None:
+                log.warning("job %s: the daemon restarted during its reconstruction: resuming it", job.job_id)
+                job.captures = pictures
+                self._start(job, [Reconstruct(len(pictures))], resumed=True)
+            else:
+                if job.state is not JobState.QUEUED:
+                    log.warning("job %s: the daemon restarted during its views: taking them again", job.job_id)
+                    self._transition(job, JobState.QUEUED, "the daemon restarted: its views are taken again")
+                self._enqueue(job)
 
     def _enqueue(self, job: Job) -> None:
         self._queued[job.job_id] = job
@@ -166,21 +180,49 @@ class CellDaemon:
 
     # --- what steps use (cell.steps.Cell) -------------------------------------------------------
 
-    async def ask(self, part: str, key: str, message: Message, timeout: float) -> Reply:
+    async def ask(self, job: Job, part: str, key: str, message: Message, timeout: float) -> Reply:
+        loop = asyncio.get_running_loop()
+        allowance = self.config.timeouts.outage_s
+        deadline = loop.time() + allowance
+        away: str | None = None     # why the last try did not get through
+        while True:
+            remaining = max(0.0, deadline - loop.time())
+            kind: str | None = None
+            try:
+                await self._transport.wait_link(remaining)
+                await self._presence.wait_for(part, remaining)
+                return await self._transport.query(key, message.model_dump_json(), timeout=timeout)
+            except LinkDown:
+                reason, kind = "the link to the Zenoh router is down", "LinkDown"
+            except Absent:
+                raise StepFailed(f"no {part} worker is running (waited {allowance:g} s)") from None
+            except NoResponder:
+                reason, kind = f"the {part} worker is gone", "NoResponder"
+            except TransportTimeout as exc:
+                raise StepFailed(f"{part}: no answer: {exc}", kind="TransportTimeout") from None
+            except RemoteError as exc:  # the worker's own message names the part and the reason
+                raise StepFailed(str(exc), kind=exc.kind) from None
+            except TransportError as exc:
+                raise StepFailed(f"{part}: {exc}") from None
+            except CellError as exc:  # an error of a kind both sides know: a refused move, say
+                if not _briefly_away(exc):
+                    raise StepFailed(str(exc), kind=wire_kind(exc)[0]) from None
+                reason, kind = str(exc), wire_kind(exc)[0]
+            if loop.time() >= deadline:
+                raise StepFailed(f"{reason} (waited {allowance:g} s for it)", kind=kind)
+            if reason != away:  # once for each reason, not at every try
+                away = reason
+                self.note(job, f"{reason}: waiting up to {allowance:g} s, then trying again")
+            await asyncio.sleep(min(_RETRY_S, max(0.0, deadline - loop.time())))
+
+    async def wait_link(self, job: Job) -> None:
+        allowance = self.config.timeouts.outage_s
+        if not self._transport.link_up:
+            self.note(job, f"the link to the Zenoh router is down: waiting up to {allowance:g} s")
         try:
-            await self._presence.wait_for(part, self.config.timeouts.worker_wait_s)
-        except Absent as exc:
-            raise StepFailed(str(exc)) from None
-        try:
-            return await self._transport.query(key, message.model_dump_json(), timeout=timeout)
-        except NoResponder:
-            raise StepFailed(f"no {part} worker is running") from None
-        except RemoteError as exc:  # the worker's own message names the part and the reason
-            raise StepFailed(str(exc), kind=exc.kind) from None
-        except TransportError as exc:
-            raise StepFailed(f"{part}: {exc}") from None
-        except CellError as exc:  # an error of a kind both sides know: a refused move, say
-            raise StepFailed(str(exc), kind=wire_kind(exc)[0]) from None
+            await self._transport.wait_link(allowance)
+        except LinkDown as exc:
+            raise StepFailed(str(exc), kind="LinkDown") from None
 
     def record(self, job: Job, method: str, *args: object) -> None:
         self._journals[job.job_id].record(method, *args)
@@ -210,10 +252,16 @@ class CellDaemon:
         event = job.transition(to, message, view=view, now=self.clock())
         self._write_down(job, event)
         published = functools.partial(self._publish, event)
-        recording = str(self._recording_path(job.job_id)) if first and not to.finished else None
+        recording = str(self._recording_path(job.job_id)) if first and to in WORKING else None
+        if to is JobState.RECONSTRUCTING and job.captures:
+            # Kept before the job is stored as reconstructing: a restarted daemon resumes from them.
+            self._db.post(self._pictures.save, job.job_id, list(job.captures))
+        elif to.finished:
+            self._db.post(self._pictures.drop, job.job_id)
+        durable = to.finished or to is JobState.RECONSTRUCTING
         self._db.post(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
                       error=None if error is None else message, error_kind=None if error is None else error.kind,
-                      recording=recording, durable=to.finished, then=published if to.finished else None)
+                      recording=recording, durable=durable, then=published if to.finished else None)
         if not to.finished:
             later(self._publish, event)
         return event
@@ -251,16 +299,27 @@ class CellDaemon:
             job = self._queued.pop(job_id, None)
             if job is None:
                 continue  # cancelled while it waited
-            job.started = self.clock()
-            self._active[job_id] = job
-            self._journals[job_id] = Journal(self._recorder, job_id, self._recording_path(job_id),
-                                             started=job.started, clock=self.clock)
-            left_lane = asyncio.Event()
-            job.task = self._spawn(self._run(job, scan_steps(len(job.poses)), left_lane))  # a stop cancels it
+            left_lane = self._start(job, scan_steps(len(job.poses)))
             waiting = asyncio.ensure_future(left_lane.wait())
             # asyncio.wait, unlike await, does not raise when the job (not the lane) is cancelled.
             await asyncio.wait({job.task, waiting}, return_when=asyncio.FIRST_COMPLETED)
             waiting.cancel()
+
+    def _start(self, job: Job, steps: list[Step], *, resumed: bool = False) -> asyncio.Event:
+        """Run the job's steps in a task of its own (a stopping daemon cancels it); the event is
+        set once the job has no more use for the lane until further notice."""
+        job.started = self.clock()
+        self._active[job.job_id] = job
+        journal = Journal(self._recorder, job.job_id, self._recording_path(job.job_id), started=job.started,
+                          clock=self.clock)
+        self._journals[job.job_id] = journal
+        if resumed:  # the recording starts again: the pictures first
+            for view, picture in enumerate(job.captures):
+                journal.record("log_view", view, picture.jpeg, self.config.camera.K, picture.T_base_cam,
+                               self.config.camera.resolution)
+        left_lane = asyncio.Event()
+        job.task = self._spawn(self._run(job, steps, left_lane))
+        return left_lane
 
     async def _run(self, job: Job, steps: list[Step], left_lane: asyncio.Event) -> None:
         """Run the job's steps: those that need the robot in the lane, in runs of consecutive ones."""
@@ -322,6 +381,7 @@ class CellDaemon:
                                now=self.clock(), result=result)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
         await asyncio.shield(self._db.call(self._jobs.save_result, result, now=event.time, event=event))
+        self._db.post(self._pictures.drop, job.job_id)
         self._publish(event)
         # The client has its result: now the recording's share, whose hand-off would delay it.
         if job.reconstruction is not None and job.job_id in self._journals:
@@ -439,3 +499,11 @@ class CellDaemon:
             # A step may be ending right now: let it notice (bounded: the caller waits).
             await asyncio.wait({job.task}, timeout=_CANCEL_WAIT_S)
         return await self._status(job_id)
+
+
+def _briefly_away(exc: CellError) -> bool:
+    """Whether ``exc`` says a part is away for now (a camera that does not answer, or answers a
+    server error), rather than that the request was wrong."""
+    if isinstance(exc, (CameraConnectionError, CameraTimeout)):
+        return True
+    return isinstance(exc, CameraError) and exc.status is not None and exc.status >= 500

@@ -35,7 +35,7 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 
 from wire import keys
-from wire.errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
+from wire.errors import CellError, LinkDown, NoResponder, RemoteError, TransportError, TransportTimeout
 from wire.messages import ReconstructorStatus, WorkerLoad, parse
 from wire.transport import Reply, Transport
 
@@ -266,8 +266,11 @@ class ReconstructorPool:
             No live, healthy worker within ``wait_s``.
         AttemptFailed
             The worker died, hung, did not answer within ``timeout``, or answered an error.
+        LinkDown
+            The link to the router went down during the attempt: not the worker's failure.
         """
         record = await self._acquire(ticket, avoid, wait_s)
+        losses = self._transport.link_losses
         lost = record.lost
         query = asyncio.ensure_future(self._transport.query(
             keys.reconstructor(record.worker), payload, attachment=attachment, timeout=timeout))
@@ -283,6 +286,8 @@ class ReconstructorPool:
             if not abandoned:
                 record.answered[ticket] = self._clock()
             self._notify()
+        if self._transport.link_losses != losses or isinstance(_exception(query), LinkDown):
+            raise LinkDown(f"the link to the Zenoh router went down while {record.worker} worked on {ticket}")
         if abandoned:
             record.failed += 1
             raise AttemptFailed(record.worker, record.lost_reason)
@@ -374,3 +379,8 @@ def _attempt_error(exc: TransportError, timeout: float) -> str:
     if isinstance(exc, RemoteError):
         return f"answered with an error: {exc}"
     return str(exc)
+
+
+def _exception(task: asyncio.Future[Reply]) -> BaseException | None:
+    """The task's exception, if it ended with one (None if it is not done or was cancelled)."""
+    return task.exception() if task.done() and not task.cancelled() else None

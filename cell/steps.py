@@ -22,7 +22,7 @@ import numpy as np
 from core_cy.plan import camera_poses
 from wire import keys
 from wire.config import CellConfig
-from wire.errors import CellError
+from wire.errors import CellError, LinkDown
 from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message, MoveReply, MoveRequest,
                            ReconstructReply, ReconstructRequest, ReconstructView, ScanResult, parse)
 from wire.transport import Reply
@@ -49,8 +49,14 @@ class Cell(Protocol):
 
     def clock(self) -> float: ...
 
-    async def ask(self, part: str, key: str, message: Message, timeout: float) -> Reply:
-        """Query the cell's ``part`` worker, once it is up; :class:`StepFailed` says why not."""
+    async def ask(self, job: Job, part: str, key: str, message: Message, timeout: float) -> Reply:
+        """Query the cell's ``part`` worker, and repeat the query while the part is away (the link
+        down, the worker gone, its camera not answering), within the outage allowance;
+        :class:`StepFailed` says why not."""
+
+    async def wait_link(self, job: Job) -> None:
+        """Return once the link to the router is up, within the outage allowance; else
+        :class:`StepFailed`."""
 
     def record(self, job: Job, method: str, *args: object) -> None:
         """Add to the job's recording (handed over while the job waits, see ``cell.journal``)."""
@@ -100,7 +106,7 @@ class Move(Step):
     async def run(self, job: Job, cell: Cell) -> None:
         assert self.view is not None
         pose = job.poses[self.view]
-        reply = await cell.ask("robot", keys.robot_move(cell.config.cell_id),
+        reply = await cell.ask(job, "robot", keys.robot_move(cell.config.cell_id),
                                MoveRequest(T_base_flange=pose.tolist(), job_id=job.job_id), cell.config.timeouts.move_s)
         moved = _parse(MoveReply, reply.payload, "the robot worker")
         job.durations_s[f"move{self.view}"] = moved.duration_s
@@ -123,7 +129,7 @@ class Capture(Step):
     async def run(self, job: Job, cell: Cell) -> None:
         cell.hand_over(job)  # during the snapshot, which takes tens of milliseconds
         config = cell.config
-        reply = await cell.ask("camera", keys.camera_capture(config.cell_id),
+        reply = await cell.ask(job, "camera", keys.camera_capture(config.cell_id),
                                CaptureRequest(job_id=job.job_id, view=self.view), config.timeouts.capture_s)
         info = _parse(CaptureInfo, reply.attachment, "the camera worker")
         job.durations_s[f"capture{self.view}"] = info.duration_s
@@ -156,18 +162,25 @@ class Reconstruct(Step):
         cell.hand_over(job)
         failures: list[str] = []      # "attempt <k> on <worker>: <why>"
         tried: set[str] = set()
-        for attempt in range(1, attempts + 1):
-            request.ticket = keys.ticket(config.cell_id, job.job_id, attempt)
+        sent = 0
+        attempt = 1
+        while attempt <= attempts:
+            sent += 1
+            request.ticket = keys.ticket(config.cell_id, job.job_id, sent)
             began = time.perf_counter()
             try:
                 worker, reply = await cell.pool.run(
                     request.ticket, payload, request.model_dump_json(), timeout=config.timeouts.reconstruct_s,
-                    wait_s=config.timeouts.worker_wait_s, avoid=tried)
+                    wait_s=config.timeouts.outage_s, avoid=tried)
+            except LinkDown:  # not the worker's failure: send it again once the link is back
+                await cell.wait_link(job)
+                continue
             except AttemptFailed as exc:
                 tried.add(exc.worker)
                 failures.append(f"attempt {attempt} on {exc.worker}: {exc.reason}")
                 if attempt < attempts:
                     cell.note(job, f"{failures[-1]}; trying again")
+                attempt += 1
                 continue
             except NoReconstructor as exc:
                 earlier = f" (after {'; '.join(failures)})" if failures else ""

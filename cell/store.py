@@ -30,13 +30,11 @@ from pydantic import ValidationError
 from wire.errors import StoreError
 from wire.messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
 
-__all__ = ["JobStore", "SCHEMA_VERSION", "INTERRUPTED", "queued_event"]
+__all__ = ["JobStore", "SCHEMA_VERSION", "queued_event"]
 
 #: Kept in ``PRAGMA user_version``; a file of an older version is upgraded, a newer one refused.
 SCHEMA_VERSION = 2
-INTERRUPTED = "interrupted: the daemon stopped during this job"
 _T = TypeVar("_T")
-_RUNNING = (JobState.MOVING, JobState.CAPTURING, JobState.RECONSTRUCTING)
 # What each version adds to the one before it.
 _UPGRADES = {2: ("ALTER TABLE jobs ADD COLUMN error_kind TEXT",)}
 
@@ -208,20 +206,6 @@ class JobStore:
             if event is not None:
                 self._insert_event(db, event)
             return self._get(db, result.job_id)
-
-    def interrupt_unfinished(self, *, now: float, reason: str = INTERRUPTED) -> builtins.list[JobStatus]:
-        """Fail every moving, capturing or reconstructing job with ``reason``, and cancel every
-        cancelling one; returns them, oldest first.
-
-        Queued jobs stay queued: the daemon resumes them.
-        """
-        where, params = _in_states({*_RUNNING, JobState.CANCELLING})
-        with self._write() as db:
-            rows = list(db.execute(f"SELECT job_id, state FROM jobs {where} ORDER BY seq", params))
-            db.executemany("UPDATE jobs SET state = ?, error = ?, updated = ? WHERE job_id = ?",
-                           [(JobState.CANCELLED.value, None, now, job_id) if state == JobState.CANCELLING.value
-                            else (JobState.FAILED.value, reason, now, job_id) for job_id, state in rows])
-            return [self._get(db, job_id) for job_id, _ in rows]
 
     # --- reading ----------------------------------------------------------------------------
 

@@ -23,7 +23,7 @@ MOVE_TIME_S = 0.25
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("cell-pipeline"), cell_id="pipeline",
-                         robot={"move_time_s": MOVE_TIME_S}, timeouts={"worker_wait_s": 5.0})
+                         robot={"move_time_s": MOVE_TIME_S}, timeouts={"outage_s": 5.0})
     with running_cell(config) as running:
         yield running
 

@@ -22,7 +22,7 @@ from wire.client import CellClient
 from wire.errors import RemoteError
 from wire.messages import JobState, ScanRequest
 from workers.sim.scene import target_from_config
-from cell.store import INTERRUPTED, JobStore
+from cell.store import JobStore
 
 from tests.cell_fixtures import RunningCell, cell_config, running_cell, wait_until
 
@@ -32,9 +32,9 @@ WORK_S = 1.0
 @pytest.fixture(scope="module")
 def cells(tmp_path_factory):
     root = tmp_path_factory.mktemp("scale-cells")
-    north = cell_config(root / "north", cell_id="north", timeouts={"worker_wait_s": 5.0})
+    north = cell_config(root / "north", cell_id="north", timeouts={"outage_s": 5.0})
     south = cell_config(root / "south", cell_id="south", zenoh={"router": north.zenoh.router}, max_queued=2,
-                        timeouts={"worker_wait_s": 5.0})
+                        timeouts={"outage_s": 5.0})
     with running_cell(north, reconstructors=0, workers={"shared-a": WORK_S, "shared-b": WORK_S}) as n:
         with running_cell(south, with_router=False, reconstructors=0) as s:
             yield n, s
@@ -105,7 +105,8 @@ def test_submitting_is_idempotent_with_a_request_id(cells):
 
 def test_daemon_killed_mid_burst_loses_nothing(cells):
     """A client submits a burst with request ids, retrying through the crash; every job it was told
-    of ends succeeded (result fetchable) or failed "interrupted", exactly once in the store."""
+    of ends succeeded (result fetchable), exactly once in the store: the restarted daemon carries
+    on the job it was working on (its views again, or its reconstruction from the kept pictures)."""
     north, _ = cells
     n_jobs = 10
     requests = [ScanRequest(target=target_from_config(north.config.sim), request_id=f"burst-{k}", label=f"burst {k}")
@@ -136,15 +137,9 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
     assert killed_after < n_jobs and set(acknowledged) == {r.request_id for r in requests}
 
     finals = {request_id: north.wait(job_id) for request_id, job_id in acknowledged.items()}
-    interrupted = 0
     for final in finals.values():
-        if final.state is JobState.SUCCEEDED:
-            assert north.client.result(final.job_id).job_id == final.job_id
-        else:
-            assert (final.state, final.error) == (JobState.FAILED, INTERRUPTED), final
-            interrupted += 1
-    # Only a job running when the daemon died can have been interrupted; the queued ones were resumed.
-    assert interrupted <= killed_after + 1
+        assert final.state is JobState.SUCCEEDED, final
+        assert north.client.result(final.job_id).job_id == final.job_id
     # Sent again, every request id gives back its job, as it ended: nothing is made twice.
     for request in requests:
         again = north.client.submit(request)
@@ -153,7 +148,7 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
         burst = [s for s in store.list(limit=1000) if (s.request.request_id or "").startswith("burst-")]
     assert sorted(s.job_id for s in burst) == sorted(acknowledged.values())
     status = north.status()
-    assert status.jobs["failed"] >= interrupted and status.queued == 0
+    assert status.queued == 0
     assert north.tracebacks() == {}
 
 

@@ -27,7 +27,7 @@ SLOW_S = 1.5
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover",
-                         timeouts={"heartbeat_s": HEARTBEAT_S, "reconstruct_s": 20.0, "worker_wait_s": 5.0},
+                         timeouts={"heartbeat_s": HEARTBEAT_S, "reconstruct_s": 20.0, "outage_s": 5.0},
                          reconstruct={"max_attempts": 3})
     with running_cell(config, reconstructors=0, workers={"fast": 0.0, "victim": SLOW_S, "frozen": SLOW_S}) as running:
         try:

@@ -13,7 +13,7 @@ import pytest
 
 from wire.errors import StoreError
 from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
-from cell.store import _SCHEMA, INTERRUPTED, SCHEMA_VERSION, JobStore, queued_event
+from cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, queued_event
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -195,25 +195,6 @@ def test_a_reopened_store_keeps_everything(tmp_path):
         assert store.add(request("r1"), n_views=3, now=T0 + 4) == (done, False)
         # The counter carries on from where it was.
         assert store.add(request(), n_views=3, now=T0 + 5)[0].job_id == "20261118-000003"
-
-
-def test_interrupt_unfinished_fails_running_jobs_and_keeps_queued_ones(store):
-    ids = {state: store.add(request(), n_views=3, now=T0)[0].job_id for state in JobState}
-    for state, job_id in ids.items():
-        if state is not JobState.QUEUED:
-            store.update(job_id, state, view=1, now=T0 + 1)
-    changed = store.interrupt_unfinished(now=T0 + 2)
-    running = [ids[JobState.MOVING], ids[JobState.CAPTURING], ids[JobState.RECONSTRUCTING]]
-    # A job that was being cancelled is cancelled: the cancel was accepted before the crash.
-    assert [s.job_id for s in changed] == sorted([*running, ids[JobState.CANCELLING]])
-    interrupted = [s for s in changed if s.job_id in running]
-    assert all(s.state is JobState.FAILED and s.error == INTERRUPTED and s.updated == T0 + 2 for s in interrupted)
-    assert [store.get(i) for i in running] == interrupted
-    assert store.get(ids[JobState.CANCELLING]).state is JobState.CANCELLED
-    assert store.get(ids[JobState.QUEUED]).state is JobState.QUEUED
-    assert store.get(ids[JobState.SUCCEEDED]).updated == T0 + 1  # finished jobs untouched
-    assert [s.job_id for s in store.unfinished()] == [ids[JobState.QUEUED]]
-    assert store.interrupt_unfinished(now=T0 + 3, reason="again") == []
 
 
 def test_sqlite_failures_become_store_errors(tmp_path):

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, Field, ValidationError
+from pydantic import AfterValidator, AliasChoices, Field, ValidationError
 
 from .backends import AxisCameraConfig, CameraConfig, RobotConfig, Section, SimRobotConfig
 from .errors import ConfigError
@@ -89,8 +89,11 @@ class Timeouts(Section):
     move_s: Annotated[float, Field(gt=0)] = 60.0
     capture_s: Annotated[float, Field(gt=0)] = 15.0
     reconstruct_s: Annotated[float, Field(gt=0)] = 60.0
-    #: How long a job waits for a missing worker before failing.
-    worker_wait_s: Annotated[float, Field(gt=0)] = 10.0
+    #: The outage allowance: how long a job waits for a part that is away before it fails, naming
+    #: it. A worker not running (or not answering, for the reconstruction pool), the link to the
+    #: router down, a camera that does not answer: the step waits, then repeats its query (a move
+    #: to an absolute pose and a snapshot are safe to repeat). ``worker_wait_s`` is its old name.
+    outage_s: Annotated[float, Field(gt=0, validation_alias=AliasChoices("outage_s", "worker_wait_s"))] = 30.0
     #: A reconstruction worker whose heartbeat is silent this long is taken for hung: its jobs
     #: go to another worker (a hung Python process can keep its Zenoh liveliness alive).
     heartbeat_s: Annotated[float, Field(gt=0)] = 5.0

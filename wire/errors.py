@@ -7,6 +7,7 @@
     ├── ConfigError        the configuration file is missing or invalid
     ├── StoreError         the job store's database cannot be opened, read or written
     ├── TransportError     Zenoh could not carry a message
+    │   ├── LinkDown           the link to the router is down: nothing can be asked or answered
     │   ├── NoResponder        nobody answers on a key: the worker is not running
     │   ├── TransportTimeout   the answer did not come in time
     │   └── RemoteError        the other side answered with an error
@@ -41,7 +42,7 @@ from typing import Any
 
 __all__ = [
     "CellError", "BundleError", "ConfigError", "StoreError",
-    "TransportError", "NoResponder", "TransportTimeout", "RemoteError",
+    "TransportError", "LinkDown", "NoResponder", "TransportTimeout", "RemoteError",
     "CameraError", "CameraAuthError", "CameraResponseError", "CameraTimeout", "CameraConnectionError",
     "RobotError", "MoveRefused", "MoveFailed", "Unreachable", "EmergencyStop", "DrivesOff",
     "wire_kind", "from_reply",
@@ -103,6 +104,11 @@ class CameraConnectionError(CameraError):
 
 class TransportError(CellError):
     """Zenoh could not open a session, or carry a message."""
+
+
+class LinkDown(TransportError):
+    """The link to the Zenoh router is down (the router stopped, or the network): a query was not
+    sent, or its answer cannot come. Zenoh reconnects by itself when the router is back."""
 
 
 class NoResponder(TransportError):

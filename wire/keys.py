@@ -149,9 +149,10 @@ def reconstructor_heartbeat(worker_id: str = "*") -> str:
     return f"{POOL}/heartbeat/{worker_id}"
 
 
-def ticket(cell: str, job_id: str, attempt: int) -> str:
-    """The id of one attempt at a job's reconstruction, unique on the network."""
-    return f"{cell}/{job_id}/{attempt}"
+def ticket(cell: str, job_id: str, sending: int) -> str:
+    """The id of one sending of a job's reconstruction (the first, or one after a failed attempt
+    or a lost link), unique on the network."""
+    return f"{cell}/{job_id}/{sending}"
 
 
 RECONSTRUCTORS_ALIVE = f"{POOL}/alive/*"

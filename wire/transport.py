@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from .errors import CellError, NoResponder, TransportError, TransportTimeout, from_reply, wire_kind
+from .errors import CellError, LinkDown, NoResponder, TransportError, TransportTimeout, from_reply, wire_kind
 from .messages import ErrorReply
 
 __all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session_config"]
@@ -27,6 +27,8 @@ __all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session
 log = logging.getLogger(__name__)
 JSON = "application/json"
 _WILDCARDS = re.compile(r"\*|\$\*")
+#: How long a query that ended with no reply waits to hear that the link went down meanwhile.
+_LINK_GRACE_S = 0.1
 # Zenoh answers a query that ran out of time with one error reply carrying this payload.
 _ZENOH_TIMEOUT = b"Timeout"
 
@@ -123,14 +125,75 @@ class Subscription:
 
 
 class Transport:
-    """One Zenoh session, used from one asyncio event loop."""
+    """One Zenoh session, used from one asyncio event loop.
 
-    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop, endpoint: str) -> None:
+    A client session follows its link to the router: :attr:`link_up`, :meth:`wait_link`, and
+    :attr:`link_losses` (how many times the link went down so far). A query whose link drops
+    before its answer comes raises :class:`~wire.errors.LinkDown` at once: no query outlives
+    its link. Zenoh reconnects by itself; what the caller makes of an outage (wait for the
+    link, repeat the query) is its business.
+    """
+
+    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop, endpoint: str, *,
+                 follow_link: bool = False) -> None:
         self._session = session
         self._loop = loop
         self.endpoint = endpoint
         self._declared: list = []
         self._closed = False
+        self._routers: set[str] = set()
+        self._link = asyncio.Event()
+        self._link_lost = asyncio.Event()   # set when the link goes, replaced when it comes back
+        self.link_losses = 0
+        self._follows_link = follow_link
+        if follow_link:
+            # Known now, not only when the listener's first events reach the loop.
+            self._routers.update(str(zid) for zid in session.info.routers_zid())
+            listener = session.info.declare_transport_events_listener(_direct(self._on_transport), history=True)
+            self._declared.append(listener)
+        if self._routers or not follow_link:
+            self._link.set()
+
+    @property
+    def link_up(self) -> bool:
+        """Whether the session is connected to its router (a router's own session: always)."""
+        return self._link.is_set()
+
+    async def wait_link(self, timeout: float) -> None:
+        """Return once the link to the router is up.
+
+        Raises
+        ------
+        LinkDown
+            If it is not up within ``timeout`` seconds.
+        """
+        if self._link.is_set():
+            return
+        try:
+            async with asyncio.timeout(timeout):
+                await self._link.wait()
+        except TimeoutError:
+            raise LinkDown(f"the link to the Zenoh router at {self.endpoint} is down "
+                           f"(waited {timeout:g} s for it)") from None
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        if event.transport.whatami != zenoh.WhatAmI.ROUTER:
+            return
+        zid, up = str(event.transport.zid), event.kind == zenoh.SampleKind.PUT
+        self._loop.call_soon_threadsafe(self._link_changed, zid, up)
+
+    def _link_changed(self, zid: str, up: bool) -> None:
+        was_up = bool(self._routers)
+        (self._routers.add if up else self._routers.discard)(zid)
+        if self._routers and not was_up:
+            self._link.set()
+            log.info("link to the Zenoh router at %s is up", self.endpoint)
+        elif was_up and not self._routers:
+            self._link.clear()
+            self.link_losses += 1
+            self._link_lost.set()
+            self._link_lost = asyncio.Event()
+            log.warning("link to the Zenoh router at %s is down", self.endpoint)
 
     @classmethod
     async def open(cls, endpoint: str, *, mode: str = "client", settings: dict | None = None,
@@ -149,7 +212,7 @@ class Transport:
         except zenoh.ZError as exc:
             what = "listen on" if mode == "router" else "reach the Zenoh router at"
             raise TransportError(f"cannot {what} {endpoint}: {exc}") from exc
-        return cls(session, asyncio.get_running_loop(), endpoint)
+        return cls(session, asyncio.get_running_loop(), endpoint, follow_link=mode == "client")
 
     async def close(self) -> None:
         if self._closed:
@@ -177,6 +240,8 @@ class Transport:
 
         Raises
         ------
+        LinkDown
+            If the link to the router is down, or goes down before the answer comes.
         NoResponder
             If nobody serves ``key``.
         TransportTimeout
@@ -202,6 +267,9 @@ class Transport:
         def on_finished() -> None:
             loop.call_soon_threadsafe(_settle, done)
 
+        if not self._link.is_set():
+            raise LinkDown(f"the link to the Zenoh router at {self.endpoint} is down: nothing sent on {key}")
+        lost = asyncio.ensure_future(self._link_lost.wait())
         selector = f"{key}?{parameters}" if parameters else key
         kwargs: dict[str, Any] = {"timeout": timeout, "encoding": zenoh.Encoding(encoding)}
         if payload is not None:
@@ -213,16 +281,28 @@ class Transport:
             # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
             # Not asyncio.wait_for: on Python 3.11 it swallows a cancel that comes with the answer.
             async with asyncio.timeout(timeout + 5.0):
-                await done
+                await asyncio.wait({done, lost}, return_when=asyncio.FIRST_COMPLETED)
         except zenoh.ZError as exc:
             raise TransportError(f"query on {key} failed: {exc}") from exc
         except asyncio.TimeoutError:
+            lost.cancel()
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s") from None
-        for ok, reply in replies:
-            if ok:
-                return reply
-        if not replies:
-            raise NoResponder(f"nobody answers on {key}")
+        try:
+            if not done.done():  # its answer, should it come, is dropped with the query
+                raise LinkDown(f"the link to the Zenoh router at {self.endpoint} went down before the answer "
+                               f"on {key}")
+            for ok, reply in replies:
+                if ok:
+                    return reply
+            if not replies:
+                # Zenoh ends the queries of a link that closes a moment before it says the link is gone.
+                await asyncio.wait({lost}, timeout=_LINK_GRACE_S if self._follows_link else 0)
+                if lost.done():
+                    raise LinkDown(f"the link to the Zenoh router at {self.endpoint} went down before the "
+                                   f"answer on {key}")
+                raise NoResponder(f"nobody answers on {key}")
+        finally:
+            lost.cancel()
         error = replies[0][1]
         if error.payload == _ZENOH_TIMEOUT:
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s")

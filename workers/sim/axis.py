@@ -253,6 +253,12 @@ class SimCameraServer:
         with self._lock:
             self._faults.append(_Fault(status, garbage, float(hang_s), int(count)))
 
+    def clear_faults(self) -> None:
+        """Forget the faults :meth:`fail_next` queued that have not happened yet (a hang under way
+        goes on)."""
+        with self._lock:
+            self._faults.clear()
+
     # -- request handling (called from request threads) ------------------------------------
 
     def _snapshot(self, query: dict[str, str]) -> tuple[int, bytes | str]:
