@@ -38,15 +38,17 @@ import numpy as np
 from core_cy.plan import plan_flange_poses, workspace_violation
 from wire import keys
 from wire.config import CellConfig
-from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, LinkDown, NoResponder,
-                         RemoteError, TransportError, TransportTimeout, wire_kind)
-from wire.messages import CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, parse
+from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, ConfigError, LinkDown,
+                         NoResponder, RemoteError, TransportError, TransportTimeout, wire_kind)
+from wire.messages import (CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, ScanResult,
+                           parse)
 from wire.transport import Reply, Request, RequestError, Response, Transport
 
 from .executor import Serial, later
-from .job import WORKING, IllegalTransition, Job
+from .job import IllegalTransition, Job
 from .journal import Journal
 from .lane import MotionLane
+from .lock import RunDirLock
 from .pool import ReconstructorPool
 from .presence import Absent, Presence
 from .recorder import Recorder
@@ -59,6 +61,7 @@ __all__ = ["CellDaemon"]
 log = logging.getLogger(__name__)
 _CANCEL_WAIT_S = 2.0
 _RETRY_S = 0.5              # between two tries of a step whose part is away
+_ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 
 
@@ -102,17 +105,41 @@ class CellDaemon:
     # --- lifecycle -------------------------------------------------------------------------------
 
     async def run(self, stop: asyncio.Event) -> None:
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        self._store = await self._db.call(JobStore, self._store_path)
-        self._recorder.start()
+        """Serve until ``stop`` is set.
+
+        Raises
+        ------
+        CellError
+            Before it touches anything, if the run directory cannot be made, another daemon holds
+            it (``RunDirBusy``), another daemon of this cell id is on the router, or the job
+            store cannot be opened (``StoreError``: missing, damaged, of a newer version).
+        """
         try:
-            await self._recover()
-            await self._serve(stop)
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"cannot make the run directory {self.run_dir}: {exc.strerror or exc}") from None
+        lock = RunDirLock(self.run_dir)
+        lock.acquire()
+        try:
+            await self._refuse_a_second_daemon()
+            self._store = await self._db.call(JobStore, self._store_path)
+            self._recorder.start()
+            try:
+                await self._recover()
+                await self._serve(stop)
+            finally:
+                await asyncio.sleep(0)  # what is handed over later goes out first
+                await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
+                await self._db.call(self._jobs.close)
         finally:
-            await asyncio.sleep(0)  # what is handed over later goes out first
-            await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
-            await self._db.call(self._jobs.close)
             await asyncio.to_thread(self._db.close)
+            lock.release()
+
+    async def _refuse_a_second_daemon(self) -> None:
+        found = await self._transport.alive(keys.alive(self.cell, "daemon"), timeout=_ALIVE_QUERY_S)
+        if found:
+            raise CellError(f"a daemon of cell {self.cell} is already running on the router at "
+                            f"{self._transport.endpoint}: stop it, or give this cell another cell_id")
 
     async def _serve(self, stop: asyncio.Event) -> None:
         transport, cell = self._transport, self.cell
@@ -248,11 +275,9 @@ class CellDaemon:
         The store is written in its thread, in order, without waiting. A step's event is
         published at once; the end of a job only once the store has it.
         """
-        first = job.state is JobState.QUEUED
         event = job.transition(to, message, view=view, now=self.clock())
         self._write_down(job, event)
         published = functools.partial(self._publish, event)
-        recording = str(self._recording_path(job.job_id)) if first and to in WORKING else None
         if to is JobState.RECONSTRUCTING and job.captures:
             # Kept before the job is stored as reconstructing: a restarted daemon resumes from them.
             self._db.post(self._pictures.save, job.job_id, list(job.captures))
@@ -261,7 +286,7 @@ class CellDaemon:
         durable = to.finished or to is JobState.RECONSTRUCTING
         self._db.post(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
                       error=None if error is None else message, error_kind=None if error is None else error.kind,
-                      recording=recording, durable=durable, then=published if to.finished else None)
+                      durable=durable, then=published if to.finished else None)
         if not to.finished:
             later(self._publish, event)
         return event
@@ -283,6 +308,27 @@ class CellDaemon:
 
     def _recording_path(self, job_id: str) -> Path:
         return self.run_dir / f"{job_id}.rrd"
+
+    def _check_recording(self, job: Job, path: Path) -> None:
+        """In the store's thread: can the job's recording be written? The job's status names the
+        file only if it can (the recorder, a process of its own, cannot say so in time)."""
+        try:
+            with open(path, "ab"):
+                pass
+        except OSError as exc:
+            job.recording_error = f"the recording {path} cannot be written: {exc.strerror or exc}"
+            log.warning("job %s: %s", job.job_id, job.recording_error)
+            return
+        self._jobs.set_recording(job.job_id, str(path))
+
+    def _save_result(self, job: Job, result: ScanResult, event: JobEvent) -> None:
+        """In the store's thread, after :meth:`_check_recording`: the result, saying where its
+        recording is, or why there is none."""
+        if job.recording_error is None:
+            result.recording = str(self._recording_path(job.job_id))
+        else:
+            result.recording_error = job.recording_error
+        self._jobs.save_result(result, now=event.time, event=event)
 
     def _flange_poses(self, request: ScanRequest) -> list[np.ndarray]:
         if request.flange_poses is not None:
@@ -310,8 +356,9 @@ class CellDaemon:
         set once the job has no more use for the lane until further notice."""
         job.started = self.clock()
         self._active[job.job_id] = job
-        journal = Journal(self._recorder, job.job_id, self._recording_path(job.job_id), started=job.started,
-                          clock=self.clock)
+        path = self._recording_path(job.job_id)
+        self._db.post(self._check_recording, job, path)
+        journal = Journal(self._recorder, job.job_id, path, started=job.started, clock=self.clock)
         self._journals[job.job_id] = journal
         if resumed:  # the recording starts again: the pictures first
             for view, picture in enumerate(job.captures):
@@ -374,13 +421,12 @@ class CellDaemon:
     async def _succeed(self, job: Job) -> None:
         result = job.result
         assert result is not None, "the last step leaves the result"
-        result.recording = str(self._recording_path(job.job_id))
         total = result.timings_ms.get("total", float("nan"))
         attempt = f" (attempt {result.attempts})" if result.attempts > 1 else ""
         event = job.transition(JobState.SUCCEEDED, f"reconstructed by {result.worker} in {total:.1f} ms{attempt}",
                                now=self.clock(), result=result)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
-        await asyncio.shield(self._db.call(self._jobs.save_result, result, now=event.time, event=event))
+        await asyncio.shield(self._db.call(self._save_result, job, result, event))
         self._db.post(self._pictures.drop, job.job_id)
         self._publish(event)
         # The client has its result: now the recording's share, whose hand-off would delay it.

@@ -91,6 +91,8 @@ class Job:
     result: ScanResult | None = None
     #: The reconstruction worker's reply (attachment, payload), and the job time it came, for the recording.
     reconstruction: tuple[bytes, bytes, float] | None = None
+    #: Why the job's recording cannot be written, if it cannot.
+    recording_error: str | None = None
     #: The task that runs the job's steps, once it runs.
     task: asyncio.Task | None = None
 

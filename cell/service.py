@@ -33,7 +33,6 @@ def run_router(config: CellConfig, endpoint: str | None = None) -> int:
 def run_daemon(config: CellConfig) -> int:
     """The cell daemon, with its job store in the run directory."""
     async def run(stop: asyncio.Event) -> None:
-        config.run_dir.mkdir(parents=True, exist_ok=True)
         transport = await open_transport(config)
         try:
             await CellDaemon(config, transport).run(stop)

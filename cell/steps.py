@@ -24,7 +24,7 @@ from wire import keys
 from wire.config import CellConfig
 from wire.errors import CellError, LinkDown
 from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message, MoveReply, MoveRequest,
-                           ReconstructReply, ReconstructRequest, ReconstructView, ScanResult, parse)
+                           ReconstructReply, ReconstructRequest, ReconstructView, ScanResult, Superquadric, parse)
 from wire.transport import Reply
 
 from .job import Job, Picture
@@ -189,6 +189,10 @@ class Reconstruct(Step):
             answer = _parse(ReconstructReply, reply.attachment, "the reconstruction worker")
             if answer.result is None:  # the core's verdict on these pictures: no use retrying
                 raise StepFailed(answer.error or "no result", kind=answer.error_kind)
+            implausible = _implausible(answer.result.superquadric, job.captures, config)
+            if implausible:
+                raise StepFailed(f"the answer of {answer.worker or worker} is refused: {implausible}",
+                                 kind="ImplausibleResult")
             job.reconstruction = (reply.attachment or b"", reply.payload, cell.clock() - job.started)
             job.result = ScanResult(
                 job_id=job.job_id, superquadric=answer.result.superquadric,
@@ -215,6 +219,27 @@ def _reconstruct_request(job: Job, config: CellConfig) -> ReconstructRequest:
     views = [ReconstructView(camera=camera, T_world_cam=c.T_base_cam.tolist(), length=len(c.jpeg))
              for c in job.captures]
     return ReconstructRequest(job_id=job.job_id, views=views, support_plane=config.support_plane, options=options)
+
+
+def _implausible(fit: Superquadric, pictures: list[Picture], config: CellConfig) -> str | None:
+    """Why a reconstruction cannot be of what the cameras saw, or None: its centre must be in
+    every picture and above the workspace's floor plan, and no camera inside it."""
+    T = np.asarray(fit.T_world_object)
+    centre, half = T[:3, 3], np.asarray(fit.size)
+    low, high = config.robot.workspace.min, config.robot.workspace.max
+    if not all(lo <= x <= hi for lo, x, hi in zip(low[:2], centre[:2], high[:2])):
+        return f"its centre {np.round(centre, 3).tolist()} m is not over the workspace"
+    K = np.asarray(config.camera.K)
+    width, height = config.camera.resolution
+    for view, picture in enumerate(pictures):
+        R, c = picture.T_base_cam[:3, :3], picture.T_base_cam[:3, 3]
+        in_object = T[:3, :3].T @ (c - centre)
+        if np.all(np.abs(in_object) <= half):
+            return f"camera {view} would be inside it (size {np.round(half, 3).tolist()} m)"
+        x = K @ (R.T @ (centre - c))
+        if x[2] <= 0 or not (0 <= x[0] / x[2] < width and 0 <= x[1] / x[2] < height):
+            return f"its centre is outside the picture of view {view}"
+    return None
 
 
 def _parse(model, payload, who: str):

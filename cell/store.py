@@ -67,8 +67,8 @@ class JobStore:
     Raises
     ------
     StoreError
-        The file cannot be opened or created, is not a database, or has another
-        schema version. Every method raises it when SQLite fails or a stored
+        The file cannot be opened or created, is not a database, is damaged
+        (SQLite's ``quick_check``), or has a newer schema version. Every method raises it when SQLite fails or a stored
         row no longer validates.
     """
 
@@ -79,6 +79,11 @@ class JobStore:
             # method is exactly one transaction and nothing is left open.
             self._db = sqlite3.connect(self.path, timeout=timeout, isolation_level=None)
             try:
+                damage = [line for row in self._db.execute("PRAGMA quick_check(3)") for line in row[0].splitlines()
+                          if not line.startswith("***")]
+                if damage != ["ok"]:
+                    raise StoreError(f"job store {self.path} is damaged ({'; '.join(damage[:3])}): move it aside "
+                                     f"(a new one is made) or restore it from a backup")
                 self._db.execute("PRAGMA journal_mode = WAL")      # readers don't block the writer
                 self._db.execute("PRAGMA synchronous = FULL")      # fsync every commit
                 self._db.execute("PRAGMA foreign_keys = ON")
@@ -170,6 +175,11 @@ class JobStore:
             if event is not None:
                 self._insert_event(db, event)
             return self._get(db, job_id)
+
+    def set_recording(self, job_id: str, recording: str) -> None:
+        """Name the job's Rerun recording (not waited for on disk)."""
+        with self._write(durable=False) as db:
+            db.execute("UPDATE jobs SET recording = ? WHERE job_id = ?", (recording, job_id))
 
     def add_event(self, event: JobEvent, *, durable: bool = True) -> None:
         """Append a progress event to its job's history (without its ``result``: that is stored once).

@@ -56,7 +56,7 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
         run_dir, **{"cell_id": "test", **fields},
         robot={**({"speed": 0.0, "rotation_speed_deg": 0.0} if (robot or {}).get("backend", "sim") == "sim" else {}),
                **(robot or {})},
-        camera={"timeout_s": 1.0, "retries": 1, **(camera or {})},
+        camera={"timeout_s": 3.0, "retries": 1, **(camera or {})},
         timeouts={"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "outage_s": 1.0, **(timeouts or {})})
 
 

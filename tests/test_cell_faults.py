@@ -9,13 +9,18 @@ worker, which can be held at a gate to keep a job reconstructing.
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import pytest
 
-from wire.errors import RemoteError
-from wire.messages import JobState
+from wire.errors import NoResponder, RemoteError
+from wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
+                           Superquadric)
+from wire.transport import Transport
 
-from tests.cell_fixtures import GatedReconstructor, InProcessSimCamera, RunningCell, cell_config, running_cell, wait_until
+from tests.cell_fixtures import (GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell, cell_config,
+                                 running_cell, wait_until)
 
 PASSWORD = "s3cret"
 
@@ -40,7 +45,7 @@ class Rig:
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("cell-faults"), cell_id="faults",
-                         camera={"username": "root", "password": PASSWORD})
+                         camera={"username": "root", "password": PASSWORD, "timeout_s": 2.0})
     with running_cell(config, reconstructors=0, sim_camera=False) as cell:
         camera = InProcessSimCamera(config)
         try:
@@ -66,7 +71,7 @@ def test_scan_through_digest_authentication(rig):
                       " (waited 1 s for it)", "CameraResponseError"),
     ({"garbage": True}, "answered, but not a JPEG: the body does not start with the JPEG marker FF D8; "
                         "gave up after 2 attempts", "CameraResponseError"),
-    ({"hang_s": 4.0}, "did not answer within 1 s; gave up after 2 attempts (waited 1 s for it)", "CameraTimeout"),
+    ({"hang_s": 5.0}, "did not answer within 2 s; gave up after 2 attempts (waited 1 s for it)", "CameraTimeout"),
 ], ids=["500", "garbage", "nothing"])
 def test_a_camera_fault_fails_the_job_once_the_outage_allowance_is_spent(rig, fault, reason, kind):
     """A camera that does not answer, or answers a server error, is waited for (1 s in this cell),
@@ -136,7 +141,7 @@ def test_missing_reconstruction_worker_makes_the_job_wait_then_fail(rig):
 
 def test_cancel_while_capturing(rig):
     cell = rig.cell
-    rig.camera.server.fail_next(hang_s=3.0)  # the first attempt hangs (the camera worker gives up after 1 s)
+    rig.camera.server.fail_next(hang_s=5.0)  # the first attempt hangs (the camera worker gives up after 2 s)
     status = cell.submit()
     cell.wait_state(status.job_id, {JobState.CAPTURING})
     assert cell.client.cancel(status.job_id).state is JobState.CANCELLED
@@ -216,3 +221,94 @@ def test_a_daemon_killed_during_the_views_takes_them_again(rig):
     after = events[events.index(again[0]):]
     assert [(e.state.value, e.view) for e in after if e.state in (JobState.MOVING, JobState.CAPTURING)] == \
         [(s, v) for v in range(3) for s in ("moving", "capturing")]
+
+
+def _cell_command(rig, config_path, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "robocell", "--config", str(config_path), "cell"],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_a_second_daemon_on_the_same_run_directory_or_cell_is_refused_and_touches_nothing(rig, tmp_path):
+    cell = rig.cell
+    rig.reconstructor.hold()
+    try:
+        status = cell.submit()
+        cell.wait_state(status.job_id, {JobState.RECONSTRUCTING})
+        before = cell.events(status.job_id)
+        same_dir = _cell_command(rig, cell.processes.config_path)
+        assert same_dir.returncode == 1
+        assert f"the run directory {cell.config.run_dir} is in use by another cell daemon" in same_dir.stderr
+        assert "Traceback" not in same_dir.stderr
+        elsewhere = tmp_path / "other.json"
+        elsewhere.write_text(cell.config.model_copy(update={"run_dir": tmp_path / "other-run"}).model_dump_json())
+        same_cell = _cell_command(rig, elsewhere)
+        assert same_cell.returncode == 1
+        assert f"a daemon of cell {cell.config.cell_id} is already running on the router" in same_cell.stderr
+        assert not (tmp_path / "other-run" / "jobs.sqlite").exists()
+        assert cell.events(status.job_id) == before  # the running job was not touched
+    finally:
+        rig.reconstructor.release()
+    assert cell.wait(status.job_id).state is JobState.SUCCEEDED
+
+
+def test_a_query_through_a_wildcard_reaches_no_handler(rig):
+    """One query on robocell/<cell>/** must not submit, move or capture: handlers answer only
+    queries addressed to their own key."""
+    cell = rig.cell
+    jobs_before = len(cell.client.list(limit=1000))
+    pose_before = cell.robot_state().T_base_flange
+    shots_before = rig.camera.server.request_count
+    body = cell.scan_request().model_dump_json()
+
+    async def ask() -> None:
+        async with await Transport.open(cell.router) as transport:
+            await transport.query(f"robocell/{cell.config.cell_id}/**", body, timeout=5.0)
+
+    with pytest.raises(NoResponder):
+        cell.loop.run(ask())
+    assert len(cell.client.list(limit=1000)) == jobs_before
+    assert cell.robot_state().T_base_flange == pose_before
+    assert rig.camera.server.request_count == shots_before
+
+
+def test_a_recording_that_cannot_be_written_is_named_nowhere(rig):
+    cell = rig.cell
+    last = cell.client.list(limit=1)[0].job_id
+    day, number = last.split("-")
+    upcoming = f"{day}-{int(number) + 1:06d}"
+    (cell.config.run_dir / f"{upcoming}.rrd").mkdir()  # where the next job's recording would go
+    status = cell.submit()
+    assert status.job_id == upcoming
+    final = cell.wait(status.job_id)
+    assert final.state is JobState.SUCCEEDED and final.recording is None
+    result = cell.client.result(status.job_id)
+    assert result.recording is None
+    assert result.recording_error == (f"the recording {cell.config.run_dir / upcoming}.rrd cannot be written: "
+                                      "Is a directory")
+
+
+def test_a_made_up_reconstruction_is_refused(rig):
+    """A worker that answers a superquadric no camera could have seen ([9.9, 9.9, 9.9] m around the
+    cameras) does not make a job succeed."""
+    cell = rig.cell
+
+    async def liar(request_json: str, payload: bytes) -> tuple[str, bytes]:
+        request = ReconstructRequest.model_validate_json(request_json)
+        made_up = Reconstruction(
+            superquadric=Superquadric(size=[9.9, 9.9, 9.9], shape=[1.0, 1.0],
+                                      T_world_object=[[1, 0, 0, 0.6], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+            silhouette_iou=[1.0, 1.0, 1.0], residual=0.0, timings_ms={"total": 1.0}, centre=[0.6, 0, 0], radius=1.0)
+        return ReconstructReply(job_id=request.job_id, result=made_up, worker="liar", ticket=request.ticket,
+                                points=Blob(encoding=POINTS_ENCODING, length=0)).model_dump_json(), b""
+
+    rig.reconstructor.withdraw()
+    fake = InProcessWorker(cell.loop, cell.router, "liar", liar)
+    try:
+        wait_until(lambda: [r.worker for r in cell.status().reconstructors] == ["liar"], timeout=10,
+                   what="only the liar in the pool")
+        job_id, error = rig.failed_job()
+    finally:
+        fake.close()
+        rig.reconstructor.announce()
+    assert error.startswith("reconstructing: the answer of liar is refused: camera 0 would be inside it")
+    assert cell.client.status(job_id).error_kind == "ImplausibleResult"

@@ -290,3 +290,18 @@ def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
                               error_kind="CameraTimeout", now=4.0)
         assert failed.error_kind == "CameraTimeout"
     assert sqlite3.connect(path).execute("PRAGMA user_version").fetchone() == (2,)
+
+
+def test_a_damaged_store_is_refused_at_open(tmp_path):
+    """64 KB of garbage inside the file: refused at once with what to do, not opened to fail later."""
+    path = tmp_path / "jobs.sqlite"
+    with JobStore(path) as store:
+        for k in range(300):
+            store.add(ScanRequest(target=[0.6, 0.0, 0.05], label="x" * 200), n_views=3, now=T0 + k)
+    size = path.stat().st_size
+    assert size > 4096 + 65536
+    with open(path, "r+b") as file:
+        file.seek(4096)
+        file.write(os.urandom(65536))
+    with pytest.raises(StoreError, match=r"jobs.sqlite is damaged \(.*\): move it aside"):
+        JobStore(path)

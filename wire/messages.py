@@ -25,6 +25,8 @@ __all__ = [
 ]
 
 SCHEMA_VERSION: Literal[1] = 1
+#: The most views a scan may ask for, as poses or as a plan.
+MAX_VIEWS = 16
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
     problem = rigid_error(matrix)
     if problem is not None:
@@ -94,8 +96,9 @@ class ViewPlan(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     standoff: Annotated[float, Field(gt=0.05, le=3.0)] = 0.5
     # Below 90: looking straight down, the camera's image "up" is undefined.
-    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, lt=90)]], Field(min_length=2)] = [55.0, 40.0, 35.0]
-    azimuths_deg: Annotated[list[float], Field(min_length=2)] = [0.0, 120.0, 240.0]
+    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, lt=90)]], Field(min_length=2, max_length=MAX_VIEWS)] \
+        = [55.0, 40.0, 35.0]
+    azimuths_deg: Annotated[list[float], Field(min_length=2, max_length=MAX_VIEWS)] = [0.0, 120.0, 240.0]
 
     @model_validator(mode="after")
     def _same_length(self) -> "ViewPlan":
@@ -112,7 +115,7 @@ class ScanRequest(Message):
     """
 
     request_id: Annotated[str, Field(min_length=1, max_length=128)] | None = None
-    flange_poses: Annotated[list[Pose], Field(min_length=2, max_length=16)] | None = None
+    flange_poses: Annotated[list[Pose], Field(min_length=2, max_length=MAX_VIEWS)] | None = None
     target: Point | None = None
     plan: ViewPlan | None = None
     label: Annotated[str, Field(max_length=200)] = ""
@@ -181,7 +184,8 @@ class ScanResult(Message):
     #: workers reported them, ``reconstruct`` the round trip to the reconstruction worker (of the
     #: attempt that succeeded, with its wait for a free worker).
     durations_s: dict[str, float] = {}
-    recording: str | None = None
+    recording: str | None = None             # the job's Rerun .rrd; None: see recording_error
+    recording_error: str | None = None       # why the job has no recording, if it has none
     #: The reconstruction worker that made this result, and on which attempt (see ``cell/keys.py``).
     worker: str | None = None
     attempts: Annotated[int, Field(ge=1)] = 1
