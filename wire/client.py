@@ -18,7 +18,7 @@ from collections import OrderedDict
 from collections.abc import AsyncIterator, Callable
 
 from . import keys
-from .errors import CellError, RemoteError, TransportError
+from .errors import CellError, LinkDown, RemoteError, TransportError
 from .messages import CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
 from .transport import Subscription, Transport
 
@@ -228,7 +228,10 @@ class AsyncCellClient:
                     async with asyncio.timeout(min(poll_s, remaining)):
                         event = await queue.get()
                 except TimeoutError:
-                    state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
+                    try:
+                        state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
+                    except LinkDown:
+                        pass  # the router is away: the job goes on, and so does the wait
                     continue
                 if on_event is not None:
                     on_event(event)

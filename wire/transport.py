@@ -27,6 +27,7 @@ __all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session
 log = logging.getLogger(__name__)
 JSON = "application/json"
 _WILDCARDS = re.compile(r"\*|\$\*")
+_RECONNECT = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
 #: How long a query that ended with no reply waits to hear that the link went down meanwhile.
 _LINK_GRACE_S = 0.1
 # Zenoh answers a query that ran out of time with one error reply carrying this payload.
@@ -46,8 +47,12 @@ def session_config(endpoint: str, *, mode: str = "client", settings: dict | None
     config.insert_json5("listen/endpoints" if mode == "router" else "connect/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/multicast/enabled", "false")
     config.insert_json5("scouting/gossip/enabled", "false")
-    if mode != "router" and connect_timeout_ms:
-        config.insert_json5("connect/timeout_ms", str(connect_timeout_ms))
+    if mode != "router":
+        # After an outage, a client tries the router again every second at most (Zenoh's default
+        # backs off to 4 s): the cell goes on within a second of the router's return.
+        config.insert_json5("connect/retry", json.dumps(_RECONNECT))
+        if connect_timeout_ms:
+            config.insert_json5("connect/timeout_ms", str(connect_timeout_ms))
     if lease_ms:
         config.insert_json5("transport/link/tx/lease", str(lease_ms))
     for key, value in (settings or {}).items():

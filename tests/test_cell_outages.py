@@ -1,0 +1,48 @@
+"""Outages of a whole cell's parts, end to end: the router restarts, a worker is away for a while.
+
+Every part is a child process; the router too, so that it can be killed and started again.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from wire.messages import JobState
+
+from tests.cell_fixtures import cell_config, running_cell, wait_until
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    config = cell_config(tmp_path_factory.mktemp("outages"), cell_id="outages",
+                         robot={"move_time_s": 0.2}, timeouts={"outage_s": 30.0})
+    with running_cell(config) as running:
+        yield running
+
+
+def test_jobs_queued_across_a_router_restart_all_succeed(cell):
+    """The router is killed for 3 s while jobs wait and move: a step whose link drops waits for it
+    and repeats its query; none fails, none is stuck."""
+    ids = [cell.submit(label=f"across the outage {k}").job_id for k in range(4)]
+    cell.wait_state(ids[0], {JobState.MOVING, JobState.CAPTURING})
+    assert cell.loop.run(cell.processes.stop_child("router", kill=True)) == -9
+    time.sleep(3.0)
+    began = time.monotonic()
+    cell.loop.run(cell.processes.start_child("router"), timeout=60)
+    finals = [cell.wait(job_id) for job_id in ids]
+    assert [f.state for f in finals] == [JobState.SUCCEEDED] * 4, [f.error for f in finals]
+    notes = [e.message for job_id in ids for e in cell.events(job_id)]
+    assert any("the link to the Zenoh router is down" in m for m in notes), notes
+    assert time.monotonic() - began < 60
+    assert cell.tracebacks() == {}
+
+
+def test_a_robot_worker_away_for_a_while_costs_no_job(cell):
+    ids = [cell.submit(label=f"robot away {k}").job_id for k in range(2)]
+    assert cell.loop.run(cell.processes.stop_child("robot")) == 0
+    time.sleep(2.0)
+    cell.loop.run(cell.processes.start_child("robot"), timeout=60)
+    finals = [cell.wait(job_id) for job_id in ids]
+    assert [f.state for f in finals] == [JobState.SUCCEEDED] * 2, [f.error for f in finals]
