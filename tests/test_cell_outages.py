@@ -11,7 +11,7 @@ import pytest
 
 from wire.messages import JobState
 
-from tests.cell_fixtures import cell_config, running_cell, wait_until
+from tests.cell_fixtures import cell_config, running_cell
 
 
 @pytest.fixture(scope="module")
