@@ -35,7 +35,9 @@ from pathlib import Path
 __all__ = ["Recorder"]
 
 log = logging.getLogger(__name__)
-_STOP_WAIT_S = 10.0
+# Within what a stopping cell allows its daemon (robocell up waits 5 s, then kills): the recorder
+# is secondary, and one still importing Rerun on a busy machine must not hold the daemon up.
+_STOP_WAIT_S = 3.0
 _NICENESS = 10
 _LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 

@@ -4,4 +4,7 @@ import sys
 
 from .main import main
 
-sys.exit(main())
+# Guarded: a process started with multiprocessing's "spawn" (the daemon's recorder) imports the
+# parent's main module again, and must not run the command a second time.
+if __name__ == "__main__":
+    sys.exit(main())
