@@ -2,8 +2,10 @@
 
 The simulated Axis camera (``robocell sim camera``) is started when the
 camera is an Axis camera (``[camera] backend = "axis"``) whose ``url`` is on
-this machine's loopback: in a cell on one machine nothing else could be
-serving a camera there. The children share one configuration, written as JSON into the run directory
+this machine's loopback, whatever the robot: nothing else could be serving a
+camera there.
+
+The children share one configuration, written as JSON into the run directory
 (every ``--config`` option reads TOML or JSON). Their logs go to
 ``<run dir>/logs/<name>.log``. Stopping sends SIGTERM in reverse start
 order, waits, and kills what is left. Each child leads a process group of
