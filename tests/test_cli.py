@@ -179,7 +179,7 @@ def test_the_printed_configuration_reads_back_as_the_same(tmp_path, capsys):
     assert load_config(printed) == load_config(path) != CellConfig()
 
 
-def test_a_wrong_poses_file_is_one_line(tmp_path):
+def test_a_wrong_poses_file_is_one_line(tmp_path, capsys):
     """Checked before anything is sent: no router, no cell needed."""
     wrong = {"one-pose.json": ([[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.3], [0, 0, 0, 1]],
                                "expected a JSON list of 2 to 16 4x4 flange poses (flange-to-base, metres), "
@@ -189,21 +189,21 @@ def test_a_wrong_poses_file_is_one_line(tmp_path):
                  "not-json.json": ("[[1, 0", "not JSON")}
     for name, (poses, message) in wrong.items():
         (tmp_path / name).write_text(poses if isinstance(poses, str) else json.dumps(poses))
-        done = robocell("scan", "--poses", tmp_path / name)
-        assert done.returncode == 2 and done.stdout == "", name
-        assert done.stderr.count("\n") == 1 and done.stderr.startswith(f"robocell scan: {tmp_path / name}: "), \
-            done.stderr
-        assert message in done.stderr, (name, done.stderr)
-    assert "(and 15 more)" in robocell("scan", "--poses", tmp_path / "not-rigid.json").stderr
+        assert main(["scan", "--poses", str(tmp_path / name)]) == 2, name
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and err.startswith(f"robocell scan: {tmp_path / name}: "), err
+        assert message in err, (name, err)
+    main(["scan", "--poses", str(tmp_path / "not-rigid.json")])
+    assert "(and 15 more)" in capsys.readouterr().err
 
 
-def test_an_unreachable_router_is_one_line_without_zenoh_source_paths(tmp_path):
+def test_an_unreachable_router_is_one_line_without_zenoh_source_paths(tmp_path, capsys):
     path, port = tmp_path / "cell.toml", free_port()
     path.write_text(f'[zenoh]\nrouter = "tcp/127.0.0.1:{port}"\n')
-    done = robocell("jobs", "--config", path)
-    assert done.returncode == 1
-    assert done.stderr.startswith(f"robocell jobs: cannot reach the Zenoh router at tcp/127.0.0.1:{port}: ")
-    assert done.stderr.count("\n") == 1 and ".rs" not in done.stderr and "cargo" not in done.stderr
+    assert main(["jobs", "--config", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"robocell jobs: cannot reach the Zenoh router at tcp/127.0.0.1:{port}: ")
+    assert err.count("\n") == 1 and ".rs" not in err and "cargo" not in err
 
 
 def test_status_columns_line_up_with_their_headers():
