@@ -240,14 +240,15 @@ def _rerun_executable() -> str:
     return found
 
 
-def replay_command(path: Path, *, web: bool = False, web_port: int = 9090, grpc_port: int = 9876) -> list[str]:
+def replay_command(path: Path, *, web: bool = False, bind: str = "127.0.0.1", web_port: int = 9090,
+                   grpc_port: int = 9876) -> list[str]:
     """The argv that opens a recording in the native viewer, or serves it to a browser.
 
-    With ``web`` the viewer is served on http://127.0.0.1:<web_port> (bound to
-    loopback: rerun binds 0.0.0.0 by default) and no browser is opened.
+    The viewer's servers listen on ``bind``, loopback by default (rerun's own default is
+    0.0.0.0). With ``web`` the recording is served over gRPC on ``grpc_port`` and the web
+    viewer on ``web_port``, and no browser is opened.
     """
-    argv = [_rerun_executable(), str(path)]
+    argv = [_rerun_executable(), str(path), "--bind", bind]
     if web:
-        argv += ["--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
-                 "--web-viewer-port", str(web_port)]
+        argv += ["--serve-web", "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
     return argv

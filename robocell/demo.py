@@ -13,21 +13,19 @@ import asyncio
 import socket
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from .command import Commands
 
-from core_cy.scoring import centre_error, volumetric_iou
-from core_cy.superquadric import Superquadric
+if TYPE_CHECKING:
+    from wire.config import CellConfig
 
-from wire.client import AsyncCellClient
-from .jobs import _print_event
-from wire.config import CellConfig
-from wire.errors import CellError
-from wire.messages import ScanRequest
-from workers.sim.scene import truth_from_config
-from .up import CellProcesses
+__all__ = ["register", "free_port", "local_config"]
 
-__all__ = ["run_demo", "free_port", "local_config"]
+
+def register(commands: Commands) -> None:
+    demo = commands.add("demo", _run, help="run a simulated cell, scan an object, compare with the truth")
+    demo.add_argument("--run-dir", default="runs/demo", help="where the cell keeps its files (default %(default)s)")
 
 
 def free_port() -> int:
@@ -43,6 +41,8 @@ def local_config(run_dir: str | Path, **fields) -> CellConfig:
     ``fields`` are the configuration's other top-level fields; a section given as a dict
     is merged into the one made here (``camera={"timeout_s": 1.0}`` keeps the free port).
     """
+    from wire.config import CellConfig
+
     data: dict = {"run_dir": str(run_dir), "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
                   "camera": {"url": f"http://127.0.0.1:{free_port()}"}}
     for key, value in fields.items():
@@ -57,6 +57,18 @@ def _row(name: str, truth, fit) -> str:
 
 
 async def _demo(run_dir: Path) -> int:
+    import numpy as np
+
+    from core_cy.scoring import centre_error, volumetric_iou
+    from core_cy.superquadric import Superquadric
+    from wire.client import AsyncCellClient
+    from wire.errors import CellError
+    from wire.messages import ScanRequest
+    from workers.sim.scene import truth_from_config
+
+    from .jobs import print_event
+    from .up import CellProcesses
+
     config = local_config(run_dir)
     truth = Superquadric.from_dict(truth_from_config(config.sim))
     target = truth.T_world_object[:3, 3]
@@ -67,7 +79,7 @@ async def _demo(run_dir: Path) -> int:
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
             result = await client.scan(ScanRequest(target=target.tolist(), label="demo"), timeout=120,
-                                       on_event=_print_event)
+                                       on_event=print_event)
     except CellError as exc:
         print(f"robocell demo: {exc}", file=sys.stderr)
         return 1
@@ -90,5 +102,5 @@ async def _demo(run_dir: Path) -> int:
     return 0
 
 
-def run_demo(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace) -> int:
     return asyncio.run(_demo(Path(args.run_dir)))

@@ -7,65 +7,130 @@ import asyncio
 import json
 import sys
 import time
+from collections.abc import Awaitable, Callable
+from typing import TYPE_CHECKING
 
-from wire.client import AsyncCellClient
-from wire.config import CellConfig
-from wire.errors import CellError
-from wire.messages import CellStatus, JobEvent, JobState, ScanRequest
+from .command import Commands
 
-__all__ = ["add_commands", "run"]
+if TYPE_CHECKING:
+    from wire.client import AsyncCellClient
+    from wire.messages import CellStatus, JobEvent, ScanRequest
+
+__all__ = ["register", "format_status", "print_event"]
+
+_POSES_SHAPE = "a JSON list of 2 to 16 4x4 flange poses (flange-to-base, metres)"
+
+Action = Callable[["AsyncCellClient", argparse.Namespace], Awaitable[int]]
 
 
-def add_commands(commands, handler) -> None:
-    scan = commands.add_parser("scan", help="submit a scan job, show its progress, print the result")
+def register(commands: Commands) -> None:
+    scan = commands.add("scan", _command(_scan, _scan_request),
+                        help="submit a scan job, show its progress, print the result")
     views = scan.add_mutually_exclusive_group(required=True)
     views.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="point to look at, robot base frame, metres (views from the configured plan)")
-    views.add_argument("--poses", metavar="FILE", help="JSON list of 4x4 flange poses (flange-to-base)")
+    views.add_argument("--poses", metavar="FILE", help=_POSES_SHAPE)
     scan.add_argument("--label", default="", help="free text stored with the job")
     scan.add_argument("--request-id", help="client-chosen id: submitting it again returns the same job")
     scan.add_argument("--timeout", type=float, default=300.0, help="seconds to wait (default %(default)s)")
     scan.add_argument("--no-wait", action="store_true", help="print the job id and return")
-    scan.set_defaults(run=handler, action="scan")
 
-    jobs = commands.add_parser("jobs", help="list the cell's jobs, newest first")
-    jobs.add_argument("--state", action="append", choices=[s.value for s in JobState])
+    jobs = commands.add("jobs", _command(_jobs, _job_states), help="list the cell's jobs, newest first")
+    jobs.add_argument("--state", action="append", metavar="STATE",
+                      help="only jobs in this state (queued, succeeded, failed, ...); may be repeated")
     jobs.add_argument("--limit", type=int, default=20)
-    jobs.set_defaults(run=handler, action="jobs")
 
-    job = commands.add_parser("job", help="show one job's status and, if done, its result")
+    job = commands.add("job", _command(_job), help="show one job's status and, if done, its result")
     job.add_argument("job_id")
-    job.set_defaults(run=handler, action="job")
 
-    status = commands.add_parser("status", help="the cell at a glance: workers and their load, the queue, "
-                                                "jobs by state, recent failures")
+    status = commands.add("status", _command(_status), help="the cell at a glance: workers and their load, the "
+                                                            "queue, jobs by state, recent failures")
     status.add_argument("--failures", type=int, default=10, help="recent failures to show (default %(default)s)")
     status.add_argument("--json", action="store_true", help="print the daemon's CellStatus as JSON")
-    status.set_defaults(run=handler, action="status")
 
-    cancel = commands.add_parser("cancel", help="cancel a job")
+    cancel = commands.add("cancel", _command(_cancel), help="cancel a job")
     cancel.add_argument("job_id")
-    cancel.set_defaults(run=handler, action="cancel")
 
 
-def _print_event(event: JobEvent) -> None:
+def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | None = None):
+    """The run function of a client command: ``prepare`` checks the command's own input first (before
+    any connection), then ``action`` talks to the cell's daemon."""
+
+    def run(args: argparse.Namespace) -> int:
+        from wire.config import load_config
+        from wire.errors import CellError, NoResponder
+
+        config = load_config(args.config)
+        if prepare is not None:
+            args.prepared = prepare(args)
+        try:
+            return asyncio.run(_connected(action, args, config))
+        except NoResponder:
+            # Every query of these commands goes to the daemon: nobody answering means there is none.
+            print(f"robocell {args.command}: no cell daemon is running for cell {config.cell_id} at "
+                  f"{config.zenoh.router}", file=sys.stderr)
+            return 1
+        except (CellError, TimeoutError) as exc:
+            print(f"robocell {args.command}: {exc}", file=sys.stderr)
+            return 1
+
+    return run
+
+
+async def _connected(action: Action, args: argparse.Namespace, config) -> int:
+    from wire.client import AsyncCellClient
+
+    client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id,
+                                           settings=config.zenoh.client_settings())
+    async with client:
+        return await action(client, args)
+
+
+def print_event(event: JobEvent) -> None:
+    """One line of a job's progress."""
     print(f"  {time.strftime('%H:%M:%S', time.localtime(event.time))}  {event.state.value:<14} {event.message}",
           flush=True)
 
 
-async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
-    if args.poses:
+def _scan_request(args: argparse.Namespace) -> ScanRequest:
+    """The request, checked before connecting; a bad poses file is one line naming what is wrong."""
+    import numpy as np
+    from pydantic import ValidationError
+
+    from wire.messages import ScanRequest, field_errors
+
+    if args.poses is None:
+        return ScanRequest(target=args.target, label=args.label, request_id=args.request_id)
+    try:
         with open(args.poses, encoding="utf-8") as file:
-            request = ScanRequest(flange_poses=json.load(file), label=args.label, request_id=args.request_id)
-    else:
-        request = ScanRequest(target=args.target, label=args.label, request_id=args.request_id)
+            poses = json.load(file)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{args.poses}: not JSON ({exc}); expected {_POSES_SHAPE}") from None
+    try:
+        shape = np.asarray(poses, dtype=np.float64).shape
+    except (ValueError, TypeError):
+        shape = None  # ragged, or not numbers
+    if shape is None or len(shape) != 3 or shape[1:] != (4, 4):
+        got = "not an array of numbers" if shape is None else f"an array of shape {shape}"
+        raise ValueError(f"{args.poses}: expected {_POSES_SHAPE}, got {got}")
+    try:
+        return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id)
+    except ValidationError as exc:
+        errors = field_errors(exc).split("; ")
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        raise ValueError(f"{args.poses}: {errors[0]}{more}") from None
+
+
+async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    from wire.messages import JobState
+
     if not args.no_wait:
         client.listen()  # before the submit: the job's first events can come before its answer
-    status = await client.submit(request)
+    status = await client.submit(args.prepared)
     print(f"job {status.job_id} {status.state.value}", flush=True)
     if args.no_wait:
         return 0
-    final = await client.wait(status.job_id, timeout=args.timeout, on_event=_print_event)
+    final = await client.wait(status.job_id, timeout=args.timeout, on_event=print_event)
     if final.state is not JobState.SUCCEEDED:
         print(f"job {final.job_id} {final.state.value}: {final.error or ''}", file=sys.stderr)
         return 1
@@ -76,12 +141,64 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     return 0
 
 
+def _job_states(args: argparse.Namespace) -> set | None:
+    from wire.messages import JobState
+
+    known = [state.value for state in JobState]
+    unknown = [state for state in args.state or [] if state not in known]
+    if unknown:
+        raise ValueError(f"--state {unknown[0]}: no such state; the states are {', '.join(known)}")
+    return {JobState(s) for s in args.state} if args.state else None
+
+
+async def _jobs(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    for job in await client.list(args.prepared, args.limit):
+        created = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(job.created))
+        print(f"{job.job_id}  {created}  {job.state.value:<14} {job.error or job.request.label}")
+    return 0
+
+
+async def _job(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    from wire.messages import JobState
+
+    status = await client.status(args.job_id)
+    print(status.model_dump_json(indent=1))
+    if status.state is JobState.SUCCEEDED:
+        print((await client.result(args.job_id)).model_dump_json(indent=1))
+    return 0
+
+
+async def _status(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    overview = await client.cell_status(failures=args.failures)
+    print(overview.model_dump_json(indent=1) if args.json else format_status(overview))
+    return 0
+
+
+async def _cancel(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    status = await client.cancel(args.job_id)
+    print(f"job {status.job_id}: cancel requested ({status.state.value})")
+    return 0
+
+
+# --- status --------------------------------------------------------------------------------------
+
 def _age(seconds: float) -> str:
     if seconds < 120:
         return f"{seconds:.0f} s"
     if seconds < 7200:
         return f"{seconds / 60:.0f} min"
     return f"{seconds / 3600:.1f} h"
+
+
+def _table(headers: list[str], rows: list[list[str]], indent: str = "  ") -> list[str]:
+    """Columns as wide as their widest cell; the first left-aligned, the others right-aligned."""
+    widths = [max(len(cell) for cell in column) for column in zip(headers, *rows)]
+
+    def line(cells: list[str]) -> str:
+        first = cells[0].ljust(widths[0])
+        return indent + "  ".join([first, *(cell.rjust(width) for cell, width in zip(cells[1:], widths[1:]))])
+
+    return [line(headers), *(line(row) for row in rows)]
 
 
 def format_status(status: CellStatus) -> str:
@@ -93,14 +210,12 @@ def format_status(status: CellStatus) -> str:
     lines.append(f"reconstructors: {len(pool)} live, capacity {sum(r.capacity for r in healthy)}, "
                  f"{sum(r.in_flight for r in pool)} in flight")
     if pool:
-        lines.append(f"  {'worker':<32}{'capacity':>9}{'load':>6}{'of ours':>8}{'heartbeat':>11}"
-                     f"{'sent':>7}{'failed':>7}")
+        rows = []
         for r in pool:
             heard = "none yet" if r.heartbeat_age_s is None else f"{r.heartbeat_age_s:.1f} s ago"
-            if not r.healthy:
-                heard = "SILENT " + heard
-            lines.append(f"  {r.worker:<32}{r.capacity:>9}{r.in_flight:>6}{r.in_flight_here:>8}{heard:>11}"
-                         f"{r.sent:>7}{r.failed:>7}")
+            rows.append([r.worker, str(r.capacity), str(r.in_flight), str(r.in_flight_here),
+                         heard if r.healthy else f"SILENT {heard}", str(r.sent), str(r.failed)])
+        lines += _table(["worker", "capacity", "load", "of ours", "heartbeat", "sent", "failed"], rows)
     lines.append(f"queue: {status.queued} waiting for the robot (at most {status.max_queued}), "
                  f"{status.waiting_for_reconstructor} for a reconstructor")
     lines.append("jobs: " + ", ".join(f"{state} {n}" for state, n in status.jobs.items()))
@@ -110,37 +225,3 @@ def format_status(status: CellStatus) -> str:
             when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(failure.updated))
             lines.append(f"  {failure.job_id}  {when}  {failure.error}")
     return "\n".join(lines)
-
-
-async def _run(args: argparse.Namespace, config: CellConfig) -> int:
-    client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id, settings=config.zenoh.client_settings())
-    async with client:
-        if args.action == "scan":
-            return await _scan(client, args)
-        if args.action == "jobs":
-            states = {JobState(s) for s in args.state} if args.state else None
-            for job in await client.list(states, args.limit):
-                created = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(job.created))
-                print(f"{job.job_id}  {created}  {job.state.value:<14} {job.error or job.request.label}")
-            return 0
-        if args.action == "status":
-            overview = await client.cell_status(failures=args.failures)
-            print(overview.model_dump_json(indent=1) if args.json else format_status(overview))
-            return 0
-        if args.action == "job":
-            status = await client.status(args.job_id)
-            print(status.model_dump_json(indent=1))
-            if status.state is JobState.SUCCEEDED:
-                print((await client.result(args.job_id)).model_dump_json(indent=1))
-            return 0
-        status = await client.cancel(args.job_id)
-        print(f"job {status.job_id}: cancel requested ({status.state.value})")
-        return 0
-
-
-def run(args: argparse.Namespace, config: CellConfig) -> int:
-    try:
-        return asyncio.run(_run(args, config))
-    except (CellError, TimeoutError) as exc:
-        print(f"robocell {args.command}: {exc}", file=sys.stderr)
-        return 1

@@ -1,4 +1,9 @@
-"""The ``robocell`` command: one entry point for every part of robocell."""
+"""The ``robocell`` command: one entry point for every part of robocell.
+
+Each command lives in a module of this package that registers it (see
+``robocell.command``); :data:`MODULES` lists them in the order ``--help``
+shows them.
+"""
 
 from __future__ import annotations
 
@@ -10,201 +15,51 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
 import argparse
-import json
 import logging
 import sys
 
 from core_cy.errors import CoreError
-from core_cy.reconstruct import Options, reconstruct
+from wire.errors import CellError
 
-from wire import keys
-from wire.bundle import load_bundle
-from wire.config import CellConfig, load_config
-from wire.errors import BundleError, CellError
+from . import calibrate, camera, config, demo, jobs, reconstruct, replay, services, sim
+from .command import Commands
 
-log = logging.getLogger("robocell")
+__all__ = ["build_parser", "main", "MODULES"]
 
-
-def _reconstruct_command(args: argparse.Namespace) -> int:
-    options = Options(n_points=args.n_points, inside_weight=args.inside_weight,
-                      cauchy_scale=args.cauchy_scale)
-    failures = 0
-    for scan in args.scan_dirs:
-        try:
-            bundle = load_bundle(scan)
-            result = reconstruct(bundle.views, segmentation=bundle.segmentation,
-                                 support_plane=bundle.support_plane, options=options)
-            line = {"scan": scan, **result.to_dict(points=args.points)}
-        except (BundleError, CoreError) as exc:
-            failures += 1
-            line = {"scan": scan, "error": str(exc)}
-            print(f"robocell reconstruct: {scan}: {exc}", file=sys.stderr)
-        except Exception as exc:  # a bug must not cost the other bundles their results
-            failures += 1
-            log.exception("internal error on %s", scan)
-            line = {"scan": scan, "error": f"internal error: {type(exc).__name__}: {exc}"}
-        print(json.dumps(line), flush=True)
-    return 1 if failures else 0
+MODULES = (reconstruct, sim, services, jobs, replay, config, calibrate, camera, demo)
+#: The exit status of a program whose reader went away (128 + SIGPIPE), as a shell reports it.
+_BROKEN_PIPE_STATUS = 141
+#: After Ctrl-C, as a shell reports a program it stopped with SIGINT.
+_INTERRUPTED_STATUS = 130
 
 
-def _config(args: argparse.Namespace) -> CellConfig:
-    return load_config(args.config)
-
-
-def _sim_command(args: argparse.Namespace) -> int:
-    if args.what == "camera":
-        from workers.sim import axis_process as sim_camera_worker
-
-        return sim_camera_worker.main(_config(args))
-    if args.what == "kuka":
-        from workers.sim import kuka
-
-        return kuka.run(args)
-    from . import sim as sim_cli
-
-    return sim_cli.run(args)
-
-
-def _worker_id(text: str) -> str:
-    if not keys.WORKER_ID.fullmatch(text):
-        raise argparse.ArgumentTypeError(f"{text!r}: use letters, digits, '.', '_' and '-' (starting with a letter "
-                                         f"or digit), at most 128")
-    return text
-
-
-def _worker_command(args: argparse.Namespace) -> int:
-    config = _config(args)
-    if args.kind == "robot":
-        from workers.robot import worker as robot
-
-        return robot.main(config)
-    if args.kind == "camera":
-        from workers.camera import worker as camera
-
-        return camera.main(config)
-    from workers.reconstruct import worker as reconstructor
-
-    return reconstructor.main(config, args.id)
-
-
-def _router_command(args: argparse.Namespace) -> int:
-    from cell.service import run_router
-
-    return run_router(_config(args), args.listen)
-
-
-def _cell_command(args: argparse.Namespace) -> int:
-    from cell.service import run_daemon
-
-    return run_daemon(_config(args))
-
-
-def _up_command(args: argparse.Namespace) -> int:
-    from .up import up
-
-    return up(_config(args))
-
-
-def _client_command(args: argparse.Namespace) -> int:
-    from . import jobs as client_cli
-
-    return client_cli.run(args, _config(args))
-
-
-def _replay_command(args: argparse.Namespace) -> int:
-    import subprocess
-
-    from cell.recording import find_recording, replay_command
-
-    path = find_recording(args.job, _config(args).run_dir)
-    argv = replay_command(path, web=args.web, web_port=args.web_port, grpc_port=args.grpc_port)
-    if args.web:
-        print(f"serving {path} at http://127.0.0.1:{args.web_port} (Ctrl-C stops)", flush=True)
-    return subprocess.call(argv)
-
-
-def _config_command(args: argparse.Namespace) -> int:
-    print(_config(args).model_dump_json(indent=2))
-    return 0
-
-
-def _demo_command(args: argparse.Namespace) -> int:
-    from .demo import run_demo
-
-    return run_demo(args)
+def _global_options(parser: argparse.ArgumentParser, *, default) -> None:
+    parser.add_argument("-v", "--verbose", action="store_true", default=default, help="log debug messages")
+    parser.add_argument("--config", metavar="FILE", default=default,
+                        help="cell configuration, TOML (default: built-in); before or after the command")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    defaults = Options()
     parser = argparse.ArgumentParser(
         prog="robocell", description="Graspable superquadric models of unknown objects, from a robot cell.")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
-    parser.add_argument("--config", metavar="FILE", help="cell configuration, TOML (default: built-in)")
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    rec = commands.add_parser(
-        "reconstruct", help="fit a superquadric to each scan bundle, one JSON line each",
-        description="Reconstruct scan bundles (DESIGN.md §3). Prints one JSON object per "
-                    "bundle, in order; exits non-zero if any bundle failed.")
-    rec.add_argument("scan_dirs", nargs="+", metavar="SCAN_DIR")
-    rec.add_argument("--points", action="store_true", help="add the carved point cloud")
-    rec.add_argument("--n-points", type=int, default=defaults.n_points,
-                     help="points on the starting sphere (default %(default)s)")
-    rec.add_argument("--inside-weight", type=float, default=defaults.inside_weight,
-                     help="weight of points inside the superquadric; 1 = plain Jaklic (default %(default)s)")
-    rec.add_argument("--cauchy-scale", type=float, default=defaults.cauchy_scale,
-                     help="robust loss scale for points outside, in cloud radii (default %(default)s)")
-    rec.set_defaults(run=_reconstruct_command)
-
-    sim = commands.add_parser(
-        "sim", help="write simulated scan bundles; `sim camera`: a simulated Axis camera; "
-                    "`sim kuka`: a simulated KUKA controller")
-    sim.add_argument("what", nargs="?", choices=["scans", "camera", "kuka"], default="scans",
-                     help="scans (default): write bundles; camera: serve the cell's simulated camera; "
-                          "kuka: a KUKA controller speaking KukaVarProxy (kvp) or the OpenOPC gateway (opc)")
-    from . import sim as sim_cli
-    from workers.sim import kuka as sim_kuka
-
-    sim_cli.add_arguments(sim)
-    sim_kuka.add_arguments(sim)
-    sim.set_defaults(run=_sim_command)
-
-    router = commands.add_parser("router", help="run the Zenoh router the cell's processes connect to")
-    router.add_argument("--listen", metavar="ENDPOINT", help="endpoint (default: zenoh.router of the config)")
-    router.set_defaults(run=_router_command)
-
-    worker = commands.add_parser("worker", help="run a robot, camera or reconstruction worker")
-    worker.add_argument("kind", choices=["robot", "camera", "reconstruct"])
-    worker.add_argument("--id", type=_worker_id, help="reconstruction worker id: letters, digits, '.', '_' "
-                                                       "and '-' (default: host-pid)")
-    worker.set_defaults(run=_worker_command)
-
-    commands.add_parser("cell", help="run the cell daemon").set_defaults(run=_cell_command)
-    commands.add_parser("up", help="run router, workers, simulated camera and daemon; Ctrl-C stops all") \
-        .set_defaults(run=_up_command)
-
-    from . import jobs as client_cli
-
-    client_cli.add_commands(commands, _client_command)
-
-    from . import calibrate as calibrate_cli
-
-    calibrate_cli.add_commands(commands)
-
-    replay = commands.add_parser("replay", help="open a job's Rerun recording in the viewer")
-    replay.add_argument("job", metavar="JOB_ID_OR_FILE")
-    replay.add_argument("--web", action="store_true", help="serve the web viewer on a local port instead")
-    replay.add_argument("--web-port", type=int, default=9090)
-    replay.add_argument("--grpc-port", type=int, default=9876)
-    replay.set_defaults(run=_replay_command)
-
-    commands.add_parser("config", help="print the configuration in effect (defaults + --config)") \
-        .set_defaults(run=_config_command)
-
-    demo = commands.add_parser("demo", help="run a simulated cell, scan an object, compare with the truth")
-    demo.add_argument("--run-dir", default="runs/demo", help="where the cell keeps its files (default %(default)s)")
-    demo.set_defaults(run=_demo_command)
+    _global_options(parser, default=None)
+    parser.set_defaults(verbose=False)
+    # After the command, a global option given there wins; left out, it keeps what was given before it.
+    after = argparse.ArgumentParser(add_help=False)
+    _global_options(after, default=argparse.SUPPRESS)
+    commands = Commands(parser.add_subparsers(dest="_command", required=True, metavar="COMMAND"), "", [after])
+    for module in MODULES:
+        module.register(commands)
     return parser
+
+
+def _stdout_gone() -> int:
+    # The reader (`robocell jobs | head`) stopped reading: say nothing, and keep Python from
+    # complaining again when it flushes stdout on the way out.
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return _BROKEN_PIPE_STATUS
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -212,13 +67,27 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
-        return args.run(args)
+        status = args.run(args)
+        sys.stdout.flush()  # here, where a closed pipe can still be handled
+        return status
+    except BrokenPipeError:
+        return _stdout_gone()
+    except KeyboardInterrupt:  # Ctrl-C: the user knows why it stopped
+        return _INTERRUPTED_STATUS
     except (CellError, CoreError, OSError) as exc:  # OSError: a file or directory that cannot be read or made
         print(f"robocell {args.command}: {exc}", file=sys.stderr)
         return 1
     except ValueError as exc:  # option values the parser could not check
-        print(f"robocell {args.command}: {exc}", file=sys.stderr)
+        print(f"robocell {args.command}: {_one_line(exc)}", file=sys.stderr)
         return 2
+
+
+def _one_line(exc: ValueError) -> str:
+    from pydantic import ValidationError  # loaded already, if it raised this
+
+    from wire.messages import field_errors
+
+    return field_errors(exc) if isinstance(exc, ValidationError) else " ".join(str(exc).split())
 
 
 if __name__ == "__main__":

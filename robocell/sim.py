@@ -1,8 +1,10 @@
-"""``robocell sim``: write simulated scan bundles of known objects.
+"""``robocell sim scans|camera|kuka``: the simulators, each with only its own options.
 
-Only options, no positional arguments, so that sub-commands can be added later.
-The main ``robocell`` program builds the parser with :func:`add_arguments` and
-calls :func:`run`.
+``sim scans`` writes simulated scan bundles of known objects (its options:
+:func:`add_arguments`, its run: :func:`run`); ``sim camera`` serves the
+simulated Axis camera at ``camera.url``, posed by the cell's robot; ``sim
+kuka`` is a simulated KUKA controller behind KukaVarProxy or the OpenOPC
+gateway.
 """
 from __future__ import annotations
 
@@ -11,9 +13,10 @@ import sys
 from pathlib import Path
 
 from workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
-from workers.sim.scans import make_spec, write_standard_set
 
-__all__ = ["add_arguments", "run"]
+from .command import Commands
+
+__all__ = ["register", "add_arguments", "run"]
 
 SHAPES = [*FAMILIES, "cup-stack", "lumpy"]
 # Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
@@ -69,6 +72,8 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
+    from workers.sim.scans import make_spec, write_standard_set
+
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
         if given:
@@ -101,12 +106,46 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry point, ``python -m cell.sim.cli``."""
-    parser = argparse.ArgumentParser(prog="robocell sim", description=__doc__.splitlines()[0])
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
+# --- sim camera and sim kuka -----------------------------------------------------------------
+
+def add_kuka_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``robocell sim kuka``."""
+    parser.add_argument("--protocol", choices=["kvp", "opc"], default="kvp",
+                        help="kvp: KukaVarProxy over TCP; opc: an OpenOPC gateway (Pyro5) (default kvp)")
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    parser.add_argument("--port", type=int,
+                        help="port (default: the protocol's usual one, as [robot.kuka] port has it)")
+    parser.add_argument("--speed", type=float, default=500.0, metavar="MM_S",
+                        help="linear speed at 100 %% override, mm/s (default 500)")
+    parser.add_argument("--rotation-speed", type=float, default=90.0, metavar="DEG_S",
+                        help="rotation speed at 100 %% override, degrees/s (default 90)")
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def _kuka(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from wire.process import run_until_stopped
+    from workers.sim import kuka
+
+    async def serve(stop: asyncio.Event) -> None:
+        await kuka.main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,
+                        rotation_deg_s=args.rotation_speed)
+
+    return run_until_stopped(serve, "simulated KUKA controller")
+
+
+def _camera(args: argparse.Namespace) -> int:
+    from wire.config import load_config
+    from workers.sim import axis_process
+
+    return axis_process.main(load_config(args.config))
+
+
+def register(commands: Commands) -> None:
+    sim = commands.group("sim", help="simulators: scan bundles, an Axis camera, a KUKA controller")
+    add_arguments(sim.add("scans", run, help="write simulated scan bundles of known objects, with their truth.json",
+                          description="Write simulated scan bundles (DESIGN.md §3), one path per line: the "
+                                      "standard benchmark set, or scans of one object (--shape)."))
+    sim.add("camera", _camera, help="serve the simulated Axis camera at camera.url, posed by the cell's robot")
+    add_kuka_arguments(sim.add("kuka", _kuka, help="a simulated KUKA controller speaking KukaVarProxy (kvp) "
+                                                  "or the OpenOPC gateway (opc)"))

@@ -1,5 +1,10 @@
 """``robocell up``: the router, the workers, the simulated camera and the daemon as child processes.
 
+The simulated Axis camera (``robocell sim camera``) is started when the
+camera is an Axis camera (``[camera] backend = "axis"``) whose ``url`` is on
+this machine's loopback, whatever the robot: nothing else could be serving a
+camera there.
+
 The children share one configuration, written as JSON into the run directory
 (every ``--config`` option reads TOML or JSON). Their logs go to
 ``<run dir>/logs/<name>.log``. Stopping sends SIGTERM in reverse start
@@ -10,6 +15,7 @@ its own; once it has stopped, whatever is left in its group is killed too.
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import logging
 import os
 import signal
@@ -23,10 +29,33 @@ from wire.config import CellConfig
 from wire.errors import CellError
 from wire.transport import Transport
 
-__all__ = ["CellProcesses", "up"]
+__all__ = ["CellProcesses", "up", "serves_sim_camera"]
 
 log = logging.getLogger(__name__)
 _STOP_WAIT_S = 5.0
+
+
+def serves_sim_camera(config: CellConfig) -> bool:
+    """Whether the cell needs the simulated Axis camera: an Axis camera at a loopback address."""
+    if config.camera.backend != "axis":
+        return False
+    host = urlsplit(config.camera.url).hostname or ""
+    try:
+        return host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name
+        return False
+
+
+def _robot(config: CellConfig) -> str:
+    robot = config.robot
+    if robot.backend == "kuka":
+        return f"kuka over {robot.kuka.protocol} at {robot.kuka.host}:{robot.kuka.port}"
+    return f"{robot.backend} robot"
+
+
+def _camera(config: CellConfig) -> str:
+    camera = config.camera
+    return f"Axis camera at {camera.url}" if camera.backend == "axis" else f"{camera.backend} camera, rendered in-process"
 
 
 @dataclass
@@ -34,6 +63,7 @@ class _Child:
     name: str
     argv: list[str]
     token: str | None = None    # the liveliness token it declares once ready, if any
+    what: str = ""              # what it is, for a person
     process: asyncio.subprocess.Process | None = None
     stopped: bool = False   # on purpose, by stop_child: not a failure
 
@@ -44,7 +74,7 @@ class CellProcesses:
     def __init__(self, config: CellConfig, *, with_router: bool = True, reconstructors: int = 1,
                  robot: bool = True, camera: bool = True, sim_camera: bool | None = None,
                  daemon: bool = True) -> None:
-        """Which parts run as children; ``sim_camera`` defaults to "if the robot is simulated".
+        """Which parts run as children; ``sim_camera`` defaults to :func:`serves_sim_camera`.
 
         Leaving parts out lets a caller (a test, say) run them itself, in-process.
         """
@@ -54,22 +84,26 @@ class CellProcesses:
         self.log_dir = self.run_dir / "logs"
         command = [sys.executable, "-m", "robocell", "--config", str(self.config_path)]
         if sim_camera is None:
-            sim_camera = config.robot.backend == "sim"
+            sim_camera = serves_sim_camera(config)
         self.command = command
         cell = config.cell_id
-        children = [_Child("router", [*command, "router"])] if with_router else []
+        children = [_Child("router", [*command, "router"], None, f"router on {config.zenoh.router}")] \
+            if with_router else []
         if robot:
-            children.append(_Child("robot", [*command, "worker", "robot"], keys.alive(cell, "robot")))
+            children.append(_Child("robot", [*command, "worker", "robot"], keys.alive(cell, "robot"),
+                                   f"robot worker ({_robot(config)})"))
         if sim_camera:
-            children.append(_Child("sim-camera", [*command, "sim", "camera"]))
+            children.append(_Child("sim-camera", [*command, "sim", "camera"], None,
+                                   f"simulated Axis camera at {config.camera.url}"))
         if camera:
-            children.append(_Child("camera", [*command, "worker", "camera"], keys.alive(cell, "camera")))
+            children.append(_Child("camera", [*command, "worker", "camera"], keys.alive(cell, "camera"),
+                                   f"camera worker ({_camera(config)})"))
         for index in range(reconstructors):
             worker_id = f"{cell}-r{index}-{os.getpid()}"
             children.append(_Child(f"reconstruct-{index}", [*command, "worker", "reconstruct", "--id", worker_id],
-                                   keys.reconstructor_alive(worker_id)))
+                                   keys.reconstructor_alive(worker_id), f"reconstruction worker {worker_id}"))
         if daemon:
-            children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon")))
+            children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon"), f"daemon of cell {cell}"))
         self.children = children
         self._environment: dict[str, str] = {}
 
@@ -100,6 +134,10 @@ class CellProcesses:
                 *child.argv, stdin=asyncio.subprocess.DEVNULL, stdout=log_file, stderr=log_file,
                 env=self._environment, start_new_session=True)  # Ctrl-C goes to `up`, which stops the children in order
 
+    def describe(self) -> list[str]:
+        """One line per part, in start order: what it is."""
+        return [child.what or child.name for child in self.children]
+
     def add_child(self, name: str, argv: list[str], *, token: str | None = None) -> None:
         """Add a child (not started: see :meth:`start_child`); ``token`` is the liveliness key
         it declares once ready. A reconstruction worker, say, on a machine of its own::
@@ -110,10 +148,6 @@ class CellProcesses:
         if any(child.name == name for child in self.children):
             raise CellError(f"there is already a child named {name!r}")
         self.children.append(_Child(name, argv, token))
-
-    def reconstructor_argv(self, worker_id: str) -> list[str]:
-        """The command line of a reconstruction worker of this cell's configuration."""
-        return [*self.command, "worker", "reconstruct", "--id", worker_id]
 
     async def start_child(self, name: str, *, ready_timeout: float = 30.0) -> None:
         """(Re)start one child that is not running, and wait until the cell is ready again.
@@ -257,6 +291,8 @@ def up(config: CellConfig) -> int:
 
     async def run() -> int:
         cell = CellProcesses(config, reconstructors=1)
+        for part in cell.describe():
+            print(f"starting {part}", flush=True)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for signum in (signal.SIGINT, signal.SIGTERM):

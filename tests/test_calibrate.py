@@ -1,4 +1,4 @@
-"""Calibration (cell.calibrate, cell.calibrate_cli) on rendered chessboards with a known camera and mounting.
+"""Calibration (core_cy.calibrate, robocell calibrate) on rendered chessboards with a known camera and mounting.
 
 The renderer draws a printed board (white sheet, dark squares) as polygons
 whose edges are densely sampled and projected with distortion, four times
@@ -7,7 +7,6 @@ detector sees curved edges and soft transitions, as from a real lens.
 """
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import stat
@@ -20,7 +19,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from robocell import calibrate as calibrate_cli
+from robocell.calibrate import capture
+from robocell.config import write_config
+from robocell.main import build_parser
 from core_cy.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
                             parse_board)
 from wire.config import SimConfig, load_config
@@ -292,8 +293,8 @@ def test_write_config_round_trip(tmp_path):
     path.chmod(0o600)
     K = [[812.345678901234, 0.0, 321.25], [0.0, 811.5, 238.75], [0.0, 0.0, 1.0]]
     dist = [-0.2, 0.08, 1e-4, -2.5e-05, 0.0]
-    calibrate_cli.write_config(path, "camera", {"K": K, "dist": dist})
-    calibrate_cli.write_config(path, "", {"T_flange_cam": T_FLANGE_CAM.tolist()})
+    write_config(path, "camera", {"K": K, "dist": dist})
+    write_config(path, "", {"T_flange_cam": T_FLANGE_CAM.tolist()})
     config = load_config(path)
     assert np.allclose(config.camera.K, K, rtol=1e-11) and np.allclose(config.camera.dist, dist, rtol=1e-11)
     assert np.allclose(config.T_flange_cam, T_FLANGE_CAM, atol=1e-11)
@@ -305,14 +306,14 @@ def test_write_config_round_trip(tmp_path):
     assert "# a guess" not in text and text.count("K =") == 1
     assert text.index("T_flange_cam") < text.index("[camera]")
     assert stat.S_IMODE(path.stat().st_mode) == 0o600
-    calibrate_cli.write_config(path, "camera", {"dist": [0.0] * 5})  # again: replaced, not repeated
+    write_config(path, "camera", {"dist": [0.0] * 5})  # again: replaced, not repeated
     assert path.read_text().count("dist =") == 1 and load_config(path).camera.dist == [0.0] * 5
 
 
 def test_write_config_creates_a_file_and_puts_top_level_keys_above_tables(tmp_path):
     path = tmp_path / "new.toml"
-    calibrate_cli.write_config(path, "camera", {"K": K_TRUE.tolist()})
-    calibrate_cli.write_config(path, "", {"T_flange_cam": T_FLANGE_CAM.tolist()})
+    write_config(path, "camera", {"K": K_TRUE.tolist()})
+    write_config(path, "", {"T_flange_cam": T_FLANGE_CAM.tolist()})
     assert path.read_text().startswith("T_flange_cam = ")
     assert np.allclose(load_config(path).camera.K, K_TRUE)
 
@@ -321,24 +322,18 @@ def test_write_config_refuses_to_break_a_file(tmp_path):
     path = tmp_path / "cell.toml"
     path.write_text(CONFIG)
     with pytest.raises(ConfigError, match="camera.dist"):
-        calibrate_cli.write_config(path, "camera", {"dist": [[1.0]]})
+        write_config(path, "camera", {"dist": [[1.0]]})
     path.write_text("[camera\n")
     with pytest.raises(ConfigError, match="cannot update"):
-        calibrate_cli.write_config(path, "camera", {"K": K_TRUE.tolist()})
+        write_config(path, "camera", {"K": K_TRUE.tolist()})
     assert path.read_text() == "[camera\n"
 
 
 # --- the commands -------------------------------------------------------------------------------------
 
-def parser() -> argparse.ArgumentParser:
-    top = argparse.ArgumentParser(prog="robocell")
-    top.add_argument("--config")
-    calibrate_cli.add_commands(top.add_subparsers(dest="command", required=True))
-    return top
-
-
 def run(capsys, *argv: str) -> tuple[int, str, str]:
-    args = parser().parse_args(argv)
+    """A command as ``robocell`` parses it; its errors are raised, not printed."""
+    args = build_parser().parse_args(argv)
     status = args.run(args)
     out, err = capsys.readouterr()
     return status, out, err
@@ -365,12 +360,13 @@ def test_calibrate_commands(files, tmp_path, capsys):
     assert 1000 * np.linalg.norm(error[:3, 3]) < 2.0 and angle_deg(error[:3, :3]) < 0.2
     assert np.allclose(load_config(config).T_flange_cam, hand_eye["T_flange_cam"])
 
-    # K from the configuration just written, named by robocell's own --config
-    args = parser().parse_args(["--config", str(config), "calibrate", "handeye", "--board", "9x6", "--square",
-                                str(SQUARE), "--poses", files["poses"], *files["images"]])
-    assert args.config == str(config) and args.run(args) == 0
-    error = np.linalg.inv(T_FLANGE_CAM) @ np.array(json.loads(capsys.readouterr().out)["T_flange_cam"])
-    assert 1000 * np.linalg.norm(error[:3, 3]) < 2.0 and angle_deg(error[:3, :3]) < 0.2
+    # K from the configuration just written, named by robocell's --config, before the command or after it
+    handeye = ["calibrate", "handeye", "--board", "9x6", "--square", str(SQUARE), "--poses", files["poses"],
+               *files["images"]]
+    for argv in (["--config", str(config), *handeye], [*handeye, "--config", str(config)]):
+        status, out, _ = run(capsys, *argv)
+        error = np.linalg.inv(T_FLANGE_CAM) @ np.array(json.loads(out)["T_flange_cam"])
+        assert status == 0 and 1000 * np.linalg.norm(error[:3, 3]) < 2.0 and angle_deg(error[:3, :3]) < 0.2
 
     with pytest.raises(CalibrationError, match="needs the camera's K"):
         run(capsys, "calibrate", "handeye", "--board", "9x6", "--square", "0.02", "--poses", files["poses"],
@@ -420,13 +416,15 @@ def test_camera_probe_failures(camera, capsys, monkeypatch):
     monkeypatch.setenv("PROBE_PW", "wrong")
     status, out, _ = run(capsys, "camera", "probe", camera.url, "--user", "root", "--password-env", "PROBE_PW")
     assert status == 1
-    assert "resolutions  unknown (HTTP 401 Unauthorized)" in out and "refused the credentials" in out
+    assert f"resolutions  unknown (camera at {camera.url} refused the credentials of user 'root' (HTTP 401))" in out
+    assert "snapshot     FAILED at 640x480: " in out and "refused the credentials" in out
     assert "wrong" not in out
     monkeypatch.delenv("PROBE_PW")
     with pytest.raises(ConfigError, match="PROBE_PW is not set"):
         run(capsys, "camera", "probe", camera.url, "--user", "root", "--password-env", "PROBE_PW")
     status, out, _ = run(capsys, "camera", "probe", camera.url + "/nothing", "--json", "--timeout", "2")
-    assert status == 1 and json.loads(out)["resolutions_error"].startswith("HTTP 401")
+    assert status == 1 and json.loads(out)["resolutions_error"].endswith("requires credentials (HTTP 401) and none "
+                                                                          "are configured")
 
 
 # --- capture through the cell's workers ------------------------------------------------------------------
@@ -460,7 +458,7 @@ def test_capture_then_hand_eye(tmp_path):
         async with await Transport.open(config.zenoh.router, mode="router") as router:
             router.serve(keys.robot_move("calib"), on_move)
             router.serve(keys.camera_capture("calib"), on_capture)
-            return await calibrate_cli.capture(config, [T.tolist() for T in flanges], tmp_path / "cap", settle_s=0)
+            return await capture(config, [T.tolist() for T in flanges], tmp_path / "cap", settle_s=0)
 
     images = asyncio.run(go())
     assert [p.name for p in images] == [f"view{i:02d}.jpg" for i in range(6)]
@@ -471,4 +469,4 @@ def test_capture_then_hand_eye(tmp_path):
     error = np.linalg.inv(T_FLANGE_CAM) @ result["T_flange_cam"]
     assert 1000 * np.linalg.norm(error[:3, 3]) < 2.0 and angle_deg(error[:3, :3]) < 0.2
     with pytest.raises(CalibrationError, match="pose 1: .*rigid"):
-        asyncio.run(calibrate_cli.capture(config, [np.eye(4), 2 * np.eye(4)], tmp_path / "bad"))
+        asyncio.run(capture(config, [np.eye(4), 2 * np.eye(4)], tmp_path / "bad"))

@@ -1,7 +1,13 @@
-"""`robocell reconstruct` and `robocell sim` as other programs use them: real subprocesses."""
+"""The `robocell` command as users and other programs use it: real subprocesses, or `main` with what it prints.
 
+The commands that talk to a running cell are in test_cli_cell.py.
+"""
+
+import ast
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +18,13 @@ import pytest
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
+from robocell.jobs import format_status
+from robocell.main import build_parser, main
+from wire.config import CellConfig, load_config
+from wire.messages import CellStatus, ReconstructorStatus
+
 from tests.bundles import edit_scan
+from tests.cell_fixtures import free_port, wait_until
 
 BUNNY = Path(__file__).resolve().parents[2] / "shared" / "data" / "bunny"
 
@@ -32,7 +44,7 @@ def simulated(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim")
     paths = []
     for shape in ("box", "cylinder", "ellipsoid", "rounded-box"):
-        process = robocell("sim", "--out", out, "--shape", shape, "--seed", 11)
+        process = robocell("sim", "scans", "--out", out, "--shape", shape, "--seed", 11)
         assert process.returncode == 0, process.stderr
         paths += [Path(p) for p in process.stdout.split()]
     return paths
@@ -107,3 +119,173 @@ def test_bad_bundles_fail_one_by_one(tmp_path, sphere_bundle_template):
         assert message in result["error"], (name, result["error"])
         assert "\n" not in result["error"]
     assert all(str(tmp_path / name) in process.stderr for name in BAD_BUNDLES)  # said to a person too
+
+
+# --- one way to build the command ----------------------------------------------------------------------
+
+HEAVY = ("zenoh", "cv2", "scipy", "rerun", "httpx", "core_cy.reconstruct", "pydantic")
+
+
+def test_the_parser_loads_nothing_heavy():
+    """`robocell --help` and the parsing before every command load none of what the commands run."""
+    probe = ("import sys; from robocell.main import build_parser; build_parser(); "
+             f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == []
+
+
+def test_no_command_talks_http_itself():
+    """The camera's HTTP errors are translated in one place, the Axis grabber: the command line uses it."""
+    package = Path(__file__).resolve().parents[1] / "robocell"
+    for path in sorted(package.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            assert not [n for n in names if n.split(".")[0] == "httpx"], path.name
+
+
+@pytest.mark.parametrize("argv, refused", [
+    (["sim", "camera", "--shape", "box"], "--shape box"),
+    (["sim", "scans", "--protocol", "opc"], "--protocol opc"),
+    (["sim", "kuka", "--out", "x"], "--out x"),
+])
+def test_each_simulator_takes_only_its_own_options(argv, refused, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2 and f"unrecognized arguments: {refused}" in capsys.readouterr().err
+
+
+def test_the_global_options_go_before_or_after_the_command(tmp_path, capsys):
+    path = tmp_path / "cell.toml"
+    path.write_text('cell_id = "bay7"\n')
+    for argv in (["--config", str(path), "config"], ["config", "--config", str(path)], ["config", "-v", "--config",
+                                                                                          str(path)]):
+        assert main(argv) == 0
+        assert json.loads(capsys.readouterr().out)["cell_id"] == "bay7", argv
+    # given on both sides, the one after the command wins; left out after it, the one before stays
+    args = build_parser().parse_args(["--config", "a.toml", "-v", "jobs", "--config", "b.toml"])
+    assert (args.config, args.verbose) == ("b.toml", True)
+
+
+def test_the_printed_configuration_reads_back_as_the_same(tmp_path, capsys):
+    """`robocell config > cell.json` is a file every --config reads, to the same configuration."""
+    path = tmp_path / "cell.toml"
+    path.write_text('cell_id = "bay7"\n[robot]\nbackend = "kuka"\n[robot.kuka]\nprotocol = "opc"\n'
+                    'host = "192.0.2.20"\n[camera]\nbackend = "sim"\njpeg_quality = 70\n')
+    assert main(["--config", str(path), "config"]) == 0
+    printed = tmp_path / "printed.json"
+    printed.write_text(capsys.readouterr().out)
+    assert load_config(printed) == load_config(path) != CellConfig()
+
+
+def test_a_wrong_poses_file_is_one_line(tmp_path, capsys):
+    """Checked before anything is sent: no router, no cell needed."""
+    wrong = {"one-pose.json": ([[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.3], [0, 0, 0, 1]],
+                               "expected a JSON list of 2 to 16 4x4 flange poses (flange-to-base, metres), "
+                               "got an array of shape (4, 4)"),
+                 "three-by-three.json": ([np.eye(3).tolist()] * 4, "got an array of shape (4, 3, 3)"),
+                 "not-rigid.json": ([(2 * np.eye(4)).tolist()] * 16, "flange_poses.0: Value error, pose "),
+                 "not-json.json": ("[[1, 0", "not JSON")}
+    for name, (poses, message) in wrong.items():
+        (tmp_path / name).write_text(poses if isinstance(poses, str) else json.dumps(poses))
+        assert main(["scan", "--poses", str(tmp_path / name)]) == 2, name
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and err.startswith(f"robocell scan: {tmp_path / name}: "), err
+        assert message in err, (name, err)
+    main(["scan", "--poses", str(tmp_path / "not-rigid.json")])
+    assert "(and 15 more)" in capsys.readouterr().err
+
+
+def test_an_unreachable_router_is_one_line_without_zenoh_source_paths(tmp_path, capsys):
+    path, port = tmp_path / "cell.toml", free_port()
+    path.write_text(f'[zenoh]\nrouter = "tcp/127.0.0.1:{port}"\n')
+    assert main(["jobs", "--config", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"robocell jobs: cannot reach the Zenoh router at tcp/127.0.0.1:{port}: ")
+    assert err.count("\n") == 1 and ".rs" not in err and "cargo" not in err
+
+
+def test_status_columns_line_up_with_their_headers():
+    workers = [ReconstructorStatus(worker="lab-gpu-host-with-a-long-name.r0_123456", capacity=12, in_flight=3,
+                                   in_flight_here=1, healthy=False, heartbeat_age_s=None, sent=1234, failed=5),
+               ReconstructorStatus(worker="r1", capacity=1, in_flight=0, in_flight_here=0, healthy=True,
+                                   heartbeat_age_s=0.25, sent=7, failed=0)]
+    status = CellStatus(cell="bay", started=0.0, time=30.0, workers={"robot": True, "camera": False},
+                        reconstructors=workers, queued=0, max_queued=100, waiting_for_reconstructor=0,
+                        jobs={"succeeded": 3}, recent_failures=[])
+    lines = format_status(status).splitlines()
+    header = next(i for i, line in enumerate(lines) if line.split()[:1] == ["worker"])
+    table = lines[header:header + 3]
+    assert table[1].split()[0] == workers[0].worker and "SILENT none yet" in table[1]
+    assert len({len(line) for line in table}) == 1  # the right-aligned columns end where their headers do
+    for title in ("capacity", "load", "of ours", "heartbeat", "sent", "failed"):
+        end = table[0].index(title) + len(title)
+        assert table[1][end - 1] != " " and table[2][end - 1] != " " and table[1][end:end + 1] in ("", " "), title
+
+
+# --- replay --------------------------------------------------------------------------------------------
+
+@pytest.fixture
+def recording(tmp_path):
+    """A run directory with one job's recording, and the configuration that names it."""
+    from cell.recording import JobRecording
+
+    run_dir = tmp_path / "runs"
+    with JobRecording(run_dir / "j1.rrd", "j1") as rec:
+        rec.log_text("moving")
+    config = tmp_path / "cell.toml"
+    config.write_text(f"run_dir = '{run_dir}'\n")
+    return config, run_dir
+
+
+def test_replay_opens_only_the_run_directory(recording, tmp_path, capsys):
+    config, run_dir = recording
+    elsewhere = tmp_path / "elsewhere.rrd"
+    shutil.copy(run_dir / "j1.rrd", elsewhere)
+    for given in (str(elsewhere), "../elsewhere"):
+        assert main(["replay", given, "--web", "--config", str(config)]) == 1
+        assert f"robocell replay: {given} is not in the run directory {run_dir}" in capsys.readouterr().err
+
+
+def test_replay_without_a_display_says_to_use_web(recording, monkeypatch, capsys):
+    config, _ = recording
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(name, raising=False)
+    assert main(["replay", "j1", "--config", str(config)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("robocell replay: no display") and "use --web" in err and err.count("\n") == 1
+
+
+def _listening(port: int) -> list[str]:
+    """The local addresses of the TCP sockets listening on ``port`` (IPv4 and IPv6)."""
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            address, _, hex_port = local.partition(":")
+            if state == "0A" and int(hex_port, 16) == port:  # 0A: LISTEN
+                found.append(address)
+    return found
+
+
+def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_ends_it(recording):
+    config, run_dir = recording
+    web_port, grpc_port = free_port(), free_port()
+    process = subprocess.Popen([sys.executable, "-m", "robocell", "replay", "j1", "--web", "--config", str(config),
+                                "--web-port", str(web_port), "--grpc-port", str(grpc_port)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        line = process.stdout.readline()
+        address = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
+        assert line == f"serving {run_dir / 'j1.rrd'}: open {address} (Ctrl-C stops)\n"
+        wait_until(lambda: _listening(web_port) and _listening(grpc_port), timeout=30, interval=0.1,
+                   what="the viewer's servers")
+        assert set(_listening(web_port) + _listening(grpc_port)) == {"0100007F"}  # 127.0.0.1 only
+        os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground group
+        _, stderr = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate(timeout=30)
+    assert process.returncode == 0 and "Traceback" not in stderr and "KeyboardInterrupt" not in stderr

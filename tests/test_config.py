@@ -10,14 +10,53 @@ from wire.config import CellConfig, load_config
 from wire.errors import ConfigError
 
 
-def test_no_file_gives_the_defaults_and_a_file_overrides_them(tmp_path):
-    assert load_config(None) == CellConfig()
+EVERY_SECTION = """\
+cell_id = "bay2"
+run_dir = "/var/lib/robocell"
+max_queued = 7
+T_flange_cam = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.12], [0, 0, 0, 1]]
+
+[zenoh]
+router = "tcp/192.0.2.1:7448"
+
+[robot]
+backend = "kuka"
+kuka = { protocol = "opc", host = "192.0.2.20", override = 10 }
+
+[camera]
+url = "https://192.0.2.90"
+resolution = [1280, 960]
+
+[scan]
+table_height = 0.02
+plan = { standoff = 0.4, elevations_deg = [50, 40], azimuths_deg = [0, 180] }
+
+[reconstruct]
+processes = 4
+
+[sim]
+shape = "cylinder"
+
+[timeouts]
+move_s = 12.5
+"""
+
+
+def test_a_file_sets_every_section(tmp_path):
     path = tmp_path / "cell.toml"
-    path.write_text('cell_id = "bay2"\n[robot]\nspeed = 0.1\n[scan]\nplan = { standoff = 0.4, '
-                    'elevations_deg = [50, 40], azimuths_deg = [0, 180] }\n')
-    config = load_config(path)
-    assert (config.cell_id, config.robot.speed, config.scan.plan.standoff) == ("bay2", 0.1, 0.4)
-    assert config.camera == CellConfig().camera
+    path.write_text(EVERY_SECTION)
+    config, default = load_config(path), CellConfig()
+    assert [name for name in CellConfig.model_fields if getattr(config, name) == getattr(default, name)] == []
+    assert (config.cell_id, str(config.run_dir), config.max_queued, config.T_flange_cam[2][3]) == \
+        ("bay2", "/var/lib/robocell", 7, 0.12)
+    assert config.zenoh.router == "tcp/192.0.2.1:7448"
+    assert (config.robot.backend, config.robot.kuka.protocol, config.robot.kuka.host, config.robot.kuka.override,
+            config.robot.kuka.port) == ("kuka", "opc", "192.0.2.20", 10, 7766)   # the opc gateway's port
+    assert (config.camera.url, config.camera.resolution, config.camera.K) == \
+        ("https://192.0.2.90", (1280, 960), default.camera.K)                   # what is left out stays
+    assert (config.scan.table_height, config.scan.plan.standoff, config.scan.plan.azimuths_deg) == (0.02, 0.4, [0, 180])
+    assert (config.reconstruct.processes, config.sim.shape, config.timeouts.move_s) == (4, "cylinder", 12.5)
+    assert config.timeouts.capture_s == default.timeouts.capture_s
 
 
 @pytest.mark.parametrize("text, named", [

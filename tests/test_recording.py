@@ -242,11 +242,11 @@ def test_find_recording(tmp_path, monkeypatch):
 def test_replay_command_native_and_web(tmp_path):
     path = tmp_path / "j.rrd"
     native = replay_command(path)
-    assert native[1:] == [str(path)]
+    assert native[1:] == [str(path), "--bind", "127.0.0.1"]  # rerun's own default is every network
     assert Path(native[0]).name == "rerun"
     assert Path(native[0]).parent == Path(sys.executable).parent  # the venv's own viewer first
     web = replay_command(path, web=True, web_port=9191, grpc_port=9877)
-    assert web == [native[0], str(path), "--serve-web", "--bind", "127.0.0.1", "--port", "9877",
+    assert web == [native[0], str(path), "--bind", "127.0.0.1", "--serve-web", "--port", "9877",
                    "--web-viewer-port", "9191"]
     help_text = subprocess.run([native[0], "--help"], capture_output=True, text=True, timeout=60, check=True).stdout
     for flag in ("--serve-web", "--bind", "--port", "--web-viewer-port"):

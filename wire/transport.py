@@ -32,6 +32,18 @@ _RECONNECT = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_fac
 _LINK_GRACE_S = 0.1
 # Zenoh answers a query that ran out of time with one error reply carrying this payload.
 _ZENOH_TIMEOUT = b"Timeout"
+# Zenoh ends an error's text with where in its Rust source it was raised: " at /root/.cargo/.../x.rs:447."
+_RUST_SOURCE = re.compile(r"!?\s+at \S+\.rs:\d+\.?\s*$")
+
+
+def _zenoh_message(exc: zenoh.ZError) -> str:
+    """A Zenoh error's text for a person: without the Rust source location it ends with.
+
+    >>> _zenoh_message(zenoh.ZError("Unable to connect to any of [Single(tcp/127.0.0.1:1)]!  at "
+    ...                             "/root/.cargo/git/checkouts/zenoh/src/net/runtime/orchestrator.rs:447."))
+    'Unable to connect to any of [Single(tcp/127.0.0.1:1)]'
+    """
+    return _RUST_SOURCE.sub("", str(exc))
 
 
 def session_config(endpoint: str, *, mode: str = "client", settings: dict | None = None,
@@ -216,7 +228,7 @@ class Transport:
             session = await asyncio.to_thread(zenoh.open, config)
         except zenoh.ZError as exc:
             what = "listen on" if mode == "router" else "reach the Zenoh router at"
-            raise TransportError(f"cannot {what} {endpoint}: {exc}") from exc
+            raise TransportError(f"cannot {what} {endpoint}: {_zenoh_message(exc)}") from exc
         return cls(session, asyncio.get_running_loop(), endpoint, follow_link=mode == "client")
 
     async def close(self) -> None:
@@ -288,7 +300,7 @@ class Transport:
             async with asyncio.timeout(timeout + 5.0):
                 await asyncio.wait({done, lost}, return_when=asyncio.FIRST_COMPLETED)
         except zenoh.ZError as exc:
-            raise TransportError(f"query on {key} failed: {exc}") from exc
+            raise TransportError(f"query on {key} failed: {_zenoh_message(exc)}") from exc
         except asyncio.TimeoutError:
             lost.cancel()
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s") from None
@@ -376,7 +388,7 @@ class Transport:
         try:
             self._session.put(key, payload, **kwargs)
         except zenoh.ZError as exc:
-            raise TransportError(f"publishing on {key} failed: {exc}") from exc
+            raise TransportError(f"publishing on {key} failed: {_zenoh_message(exc)}") from exc
 
     def subscribe(self, key: str) -> Subscription:
         """Publications on ``key`` as :class:`Reply` objects (key, payload, encoding, attachment)."""

@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import enum
 import logging
+import re
 import ssl
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Literal
@@ -35,12 +36,15 @@ from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, Ca
 if TYPE_CHECKING:
     from wire.backends import AxisCameraConfig
 
-__all__ = ["AxisCamera", "SNAPSHOT_PATH"]
+__all__ = ["AxisCamera", "SNAPSHOT_PATH", "PARAM_PATH", "parse_resolutions"]
 
 logger = logging.getLogger(__name__)
 
 #: The VAPIX snapshot endpoint, relative to the camera's base URL.
 SNAPSHOT_PATH = "/axis-cgi/jpg/image.cgi"
+#: The VAPIX parameter list (the resolutions a camera offers), relative to the camera's base URL.
+PARAM_PATH = "/axis-cgi/param.cgi"
+_RESOLUTIONS = "Properties.Image.Resolution"
 _SOI, _EOI = b"\xff\xd8", b"\xff\xd9"
 _SNIPPET = 200  # characters of an error page quoted in a message
 
@@ -68,6 +72,26 @@ def _map_httpx_errors(source: str, timeout_s: float) -> Iterator[None]:
         raise CameraConnectionError(
             f"connection to camera at {source} failed: {type(exc).__name__}: {exc}", source=source
         ) from exc
+
+
+def parse_resolutions(text: str) -> list[tuple[int, int]]:
+    """The resolutions in an Axis ``param.cgi`` answer, in its order.
+
+    Raises
+    ------
+    ValueError
+        If the answer lists no resolutions (the message quotes its start).
+
+    Examples
+    --------
+    >>> parse_resolutions("root.Properties.Image.Resolution=1920x1080,1280x720\\n")
+    [(1920, 1080), (1280, 720)]
+    """
+    for line in text.splitlines():
+        key, sep, value = line.partition("=")
+        if sep and key.strip().endswith(_RESOLUTIONS):
+            return [(int(w), int(h)) for w, h in re.findall(r"(\d+)x(\d+)", value)]
+    raise ValueError(" ".join(text.split())[:_SNIPPET] or "empty answer")
 
 
 def _snippet(response: httpx.Response) -> str:
@@ -260,6 +284,30 @@ class AxisCamera(Camera):
                 await asyncio.sleep(delay)
         raise AssertionError("unreachable")  # the loop returns or raises
 
+    async def resolutions(self) -> list[tuple[int, int]]:
+        """The resolutions the camera offers (VAPIX ``param.cgi``), in its order; one attempt.
+
+        Raises
+        ------
+        CameraAuthError, CameraResponseError, CameraTimeout, CameraConnectionError
+            As :meth:`snapshot`; a :class:`CameraResponseError` also for an answer that lists none.
+        RuntimeError
+            Outside ``async with``.
+        """
+        if self._state is not _State.OPENED:
+            raise RuntimeError("use AxisCamera inside 'async with' before calling resolutions()")
+        assert self._client is not None
+        endpoint = self._source + PARAM_PATH
+        with _map_httpx_errors(self._source, self._timeout_s):
+            async with asyncio.timeout(self._timeout_s):
+                response = await self._client.get(endpoint, params={"action": "list", "group": _RESOLUTIONS})
+        self._check_status(response, endpoint, "parameter list")
+        try:
+            return parse_resolutions(response.text)
+        except ValueError as exc:
+            raise CameraResponseError(f"camera at {self._source} lists no resolutions: {exc}",
+                                      source=self._source, status=response.status_code) from None
+
     async def _attempt(self) -> Snapshot:
         assert self._client is not None
         with _map_httpx_errors(self._source, self._timeout_s):
@@ -267,8 +315,8 @@ class AxisCamera(Camera):
                 response = await self._client.get(self.endpoint, params=self._params)
         return self._check(response)
 
-    def _check(self, response: httpx.Response) -> Snapshot:
-        """The JPEG of a good answer; a :class:`CameraError` for anything else."""
+    def _check_status(self, response: httpx.Response, endpoint: str, what: str) -> None:
+        """Nothing for HTTP 200; a :class:`CameraError` for any other status."""
         status, src = response.status_code, self._source
         if status in (401, 403):
             if self._username is None:
@@ -277,12 +325,17 @@ class AxisCamera(Camera):
                 msg = f"camera at {src} refused the credentials of user {self._username!r} (HTTP {status})"
             raise CameraAuthError(msg, source=src, status=status)
         if status == 404:
-            msg = f"no VAPIX snapshot endpoint at {self.endpoint} (HTTP 404)"
+            msg = f"no VAPIX {what} endpoint at {endpoint} (HTTP 404)"
             raise CameraResponseError(msg, source=src, status=404)
         if status != 200:
             detail = _snippet(response)
             msg = f"camera at {src} answered HTTP {status} {response.reason_phrase}" + (f": {detail}" if detail else "")
             raise CameraResponseError(msg, source=src, status=status)
+
+    def _check(self, response: httpx.Response) -> Snapshot:
+        """The JPEG of a good answer; a :class:`CameraError` for anything else."""
+        src = self._source
+        self._check_status(response, self.endpoint, "snapshot")
         body = response.content
         ctype = response.headers.get("content-type", "").split(";")[0].strip().lower()
         problem, size = None, None

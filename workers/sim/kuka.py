@@ -11,12 +11,11 @@ $AXIS_ACT is made up (no kinematic model): it only has the right form.
 :class:`KvpServer` speaks KukaVarProxy's framing (``workers.kuka.kvp``);
 :class:`OpcGateway` is a Pyro5 daemon with the gateway's object ids
 ``OpenOpcGatewayServer`` and ``OpcDaClient`` and openopc2's method signatures.
-``robocell sim kuka --protocol kvp|opc`` runs one (:func:`main`, :func:`run`).
+``robocell sim kuka --protocol kvp|opc`` runs one (:func:`main`).
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import logging
@@ -33,7 +32,7 @@ from wire.backends import SIM_OPC_SERVER, KukaKvpConfig, KukaOpcConfig
 from workers.robot.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
 from workers.robot.kuka.kvp import READ, WRITE, decode_request, encode_response
 
-__all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main", "add_arguments", "run"]
+__all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main"]
 
 log = logging.getLogger(__name__)
 #: Each protocol's usual port, as the bridge's configuration has it.
@@ -334,26 +333,3 @@ async def main(protocol: Literal["kvp", "opc"], host: str = "127.0.0.1", port: i
     async with SimKuka(protocol, host, port, **options) as sim:
         log.info("simulated KUKA controller: %s on %s:%d", protocol, host, sim.port)
         await (stop or asyncio.Event()).wait()
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``robocell sim kuka``."""
-    parser.add_argument("--protocol", choices=sorted(DEFAULT_PORTS), default="kvp",
-                        help="kvp: KukaVarProxy over TCP; opc: an OpenOPC gateway (Pyro5)")
-    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, help="port (default 7000 for kvp, 7766 for opc)")
-    parser.add_argument("--speed", type=float, default=500.0, metavar="MM_S",
-                        help="linear speed at 100 %% override, mm/s (default 500)")
-    parser.add_argument("--rotation-speed", type=float, default=90.0, metavar="DEG_S",
-                        help="rotation speed at 100 %% override, degrees/s (default 90)")
-
-
-def run(args: argparse.Namespace) -> int:
-    """Run ``robocell sim kuka`` until interrupted; 0 on a clean stop."""
-    from wire.process import run_until_stopped
-
-    async def serve(stop: asyncio.Event) -> None:
-        await main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,
-                   rotation_deg_s=args.rotation_speed)
-
-    return run_until_stopped(serve, "simulated KUKA controller")
