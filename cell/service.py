@@ -20,14 +20,25 @@ def run_router(config: CellConfig, endpoint: str | None = None) -> int:
     endpoint = endpoint or config.zenoh.router
 
     async def run(stop: asyncio.Event) -> None:
-        router = await Transport.open(endpoint, mode="router", settings=config.zenoh.router_session_settings())
+        settings = config.zenoh.router_session_settings(config.cell_id)
+        router = await Transport.open(endpoint, mode="router", settings=settings)
         log.info("Zenoh router listening on %s", endpoint)
+        if "access_control" in settings:
+            log.info("access by role: %s", _roles_summary(config))
+        elif any(key.startswith("transport/auth/usrpwd") for key in settings):
+            log.warning("zenoh.roles is empty: every user the router lets in may do everything")
         try:
             await stop.wait()
         finally:
             await router.close()
 
     return run_until_stopped(run, "router")
+
+
+def _roles_summary(config: CellConfig) -> str:
+    """``cell1: client alice, bob; daemon cell1`` and so on, one cell after another."""
+    return "; ".join(f"{cell}: " + ", ".join(f"{role} {' '.join(names)}" for role, names in roles.items() if names)
+                     for cell, roles in config.zenoh.users_by_role(config.cell_id).items())
 
 
 def run_daemon(config: CellConfig) -> int:

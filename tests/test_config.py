@@ -6,7 +6,8 @@ import re
 
 import pytest
 
-from wire.config import CellConfig, load_config
+from wire.access import ROLES
+from wire.config import CellConfig, Roles, load_config
 from wire.errors import ConfigError
 
 
@@ -71,6 +72,9 @@ def test_a_file_sets_every_section(tmp_path):
     ("[camera]\nK = [[600, 0, 320], [0, 600, 240]]\n", "camera.K: List should have at least 3 items"),
     ("[camera]\nresolution = [640, 0]\n", "camera.resolution.1: Input should be greater than 0"),
     ("[camera]\ndist = [0.1]\n", "camera.dist: .*4, 5, 8, 12 or 14 distortion coefficients, got 1"),
+    ("[zenoh.roles]\nclients = ['alice']\n", "zenoh.roles.0.clients: Extra inputs are not permitted"),
+    ("[zenoh.roles]\nclient = ['alice:secret']\n", "zenoh.roles.0.client.0: String should match pattern"),
+    ("[[zenoh.roles]]\ncells = ['_pool']\ndaemon = ['d']\n", "zenoh.roles.0.cells.0: String should match"),
 ])
 def test_an_invalid_file_is_refused_naming_the_file_and_the_field(tmp_path, text, named):
     path = tmp_path / "cell.toml"
@@ -122,3 +126,39 @@ def test_a_zenoh_user_needs_its_password_in_the_environment(monkeypatch):
         config.zenoh.client_settings()
     monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", "pw")
     assert config.zenoh.client_settings()["transport/auth/usrpwd/password"] == "pw"
+
+
+def _subjects(roles: str, tmp_path) -> dict[str, list[str]]:
+    """The access control's subjects of a cell "bay1" file with ``roles``."""
+    path = tmp_path / "cell.toml"
+    path.write_text('cell_id = "bay1"\n[zenoh]\nrouter_settings = { "transport/auth/usrpwd/dictionary_file" = '
+                    '"users.txt" }\n' + roles)
+    config = load_config(path)
+    block = config.zenoh.router_session_settings(config.cell_id)["access_control"]
+    return {subject["id"]: subject["usernames"] for subject in block["subjects"]}
+
+
+def test_roles_are_in_the_files_cell_unless_a_table_names_its_cells(tmp_path):
+    assert _subjects('[zenoh.roles]\nclient = ["alice"]\nreconstruct = ["r"]\n', tmp_path) == {
+        "client@bay1": ["alice"], "reconstruct": ["r"]}
+    assert _subjects('[[zenoh.roles]]\nclient = ["alice"]\ndaemon = ["bay1"]\n'
+                     '[[zenoh.roles]]\ncells = ["bay2", "bay3"]\nclient = ["alice", "bob"]\nreconstruct = ["r"]\n',
+                     tmp_path) == {"client@bay1": ["alice"], "daemon@bay1": ["bay1"], "client@bay2": ["alice", "bob"],
+                                   "client@bay3": ["alice", "bob"], "reconstruct": ["r"]}
+
+
+def test_without_roles_the_router_has_no_access_control():
+    assert "access_control" not in CellConfig().zenoh.router_session_settings("cell1")
+    config = CellConfig.model_validate({"zenoh": {"roles": {"cells": ["bay2"]}}})
+    assert "access_control" not in config.zenoh.router_session_settings("cell1")
+
+
+def test_roles_without_a_users_dictionary_are_refused():
+    config = CellConfig.model_validate({"zenoh": {"roles": {"client": ["alice"]}}})
+    with pytest.raises(ConfigError, match="zenoh.roles names users, but zenoh.router_settings has no "
+                                          "'transport/auth/usrpwd/dictionary_file'"):
+        config.zenoh.router_session_settings("cell1")
+
+
+def test_the_roles_table_has_a_field_for_every_role():
+    assert set(Roles.model_fields) - {"cells"} == set(ROLES)

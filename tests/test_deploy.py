@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from wire import keys
 from wire.config import load_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
@@ -25,3 +26,37 @@ def test_systemd_units_run_the_documented_commands():
     assert "robocell --config /etc/robocell/cell.toml router" in units["robocell-router.service"]
     assert "robocell --config /etc/robocell/cell.toml cell" in units["robocell-cell.service"]
     assert "robocell --config /etc/robocell/cell.toml worker %i" in units["robocell-worker@.service"]
+
+
+def _allowed(block: dict, subject: str, flow: str, message: str) -> set[str]:
+    """The key expressions on which ``subject`` may send (ingress) or receive (egress) ``message``."""
+    return {key for rule in block["rules"] if rule["id"].split(" ")[0] == subject
+            and flow in rule["flows"] and message in rule["messages"] for key in rule["key_exprs"]}
+
+
+def test_the_cell_host_router_gives_each_role_its_part():
+    config = load_config(DEPLOY / "cell-host.toml")
+    block = config.zenoh.router_session_settings(config.cell_id)["access_control"]
+    assert block["enabled"] and block["default_permission"] == "deny"
+    assert {s["id"]: s["usernames"] for s in block["subjects"]} == {
+        "client@cell1": ["alice", "bob"], "observer@cell1": ["dashboard"], "daemon@cell1": ["cell1"],
+        "robot@cell1": ["cell1"], "camera@cell1": ["cell1"], "reconstruct": ["recon"]}
+    cell = config.cell_id
+    client_asks = _allowed(block, "client@cell1", "ingress", "query")
+    assert {keys.submit(cell), keys.cancel(cell, "*"), keys.result(cell, "*")} <= client_asks
+    assert not client_asks & {keys.robot_move(cell), keys.camera_capture(cell), keys.reconstructor("*")}
+    assert keys.cancel(cell, "*") not in _allowed(block, "observer@cell1", "ingress", "query")
+    assert keys.submit(cell) not in _allowed(block, "reconstruct", "ingress", "query")
+    for subject in ("client@cell1", "observer@cell1", "reconstruct"):
+        assert not _allowed(block, subject, "ingress", "put") & {keys.events(cell, "*")}
+    serving = {s["id"] for s in block["subjects"]
+               if keys.reconstructor("*") in _allowed(block, s["id"], "ingress", "declare_queryable")}
+    assert serving == {"reconstruct"}
+
+
+def test_the_readme_gives_every_user_of_the_roles_a_password_line():
+    config = load_config(DEPLOY / "cell-host.toml")
+    named = {user for roles in config.zenoh.users_by_role(config.cell_id).values() for users in roles.values()
+             for user in users}
+    readme = (DEPLOY / "README.md").read_text()
+    assert {user for user in named if f"\n   {user}:<" in readme} == named

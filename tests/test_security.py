@@ -5,51 +5,19 @@ it can neither submit a job nor read an image.
 """
 
 import asyncio
-import datetime
-import ipaddress
 
 import pytest
-from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import NameOID
 
 from robocell.demo import free_port
+from tests.pki import router_tls_settings, tls_settings, write_pki
 from wire.errors import TransportError
 from wire.transport import Response, Transport
-
-
-def _certificate(subject: str, key, issuer_name, issuer_key, *, ca: bool) -> x509.Certificate:
-    now = datetime.datetime.now(datetime.timezone.utc)
-    builder = (x509.CertificateBuilder()
-               .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
-               .issuer_name(issuer_name).public_key(key.public_key())
-               .serial_number(x509.random_serial_number())
-               .not_valid_before(now - datetime.timedelta(minutes=5))
-               .not_valid_after(now + datetime.timedelta(days=1))
-               .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
-    if not ca:
-        builder = builder.add_extension(x509.SubjectAlternativeName(
-            [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]), critical=False)
-    return builder.sign(issuer_key, hashes.SHA256())
 
 
 @pytest.fixture(scope="module")
 def pki(tmp_path_factory):
     """A CA, a router certificate for 127.0.0.1, and a user dictionary."""
-    directory = tmp_path_factory.mktemp("pki")
-    ca_key = ec.generate_private_key(ec.SECP256R1())
-    ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "robocell test CA")])
-    ca = _certificate("robocell test CA", ca_key, ca_name, ca_key, ca=True)
-    router_key = ec.generate_private_key(ec.SECP256R1())
-    router = _certificate("127.0.0.1", router_key, ca_name, ca_key, ca=False)
-    pem = serialization.Encoding.PEM
-    (directory / "ca.pem").write_bytes(ca.public_bytes(pem))
-    (directory / "router.pem").write_bytes(router.public_bytes(pem))
-    (directory / "router.key").write_bytes(router_key.private_bytes(
-        pem, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
-    (directory / "users.txt").write_text("cell1:right-password\n")
-    return directory
+    return write_pki(tmp_path_factory.mktemp("pki"), {"cell1": "right-password"})
 
 
 def _run(coroutine):
@@ -58,12 +26,7 @@ def _run(coroutine):
 
 async def _with_router(pki, check):
     endpoint = f"tls/127.0.0.1:{free_port()}"
-    router = await Transport.open(endpoint, mode="router", settings={
-        "transport/link/tls/listen_certificate": str(pki / "router.pem"),
-        "transport/link/tls/listen_private_key": str(pki / "router.key"),
-        "transport/link/tls/root_ca_certificate": str(pki / "ca.pem"),
-        "transport/auth/usrpwd/dictionary_file": str(pki / "users.txt"),
-    })
+    router = await Transport.open(endpoint, mode="router", settings={**tls_settings(pki), **router_tls_settings(pki)})
     try:
         return await check(endpoint)
     finally:
@@ -71,9 +34,7 @@ async def _with_router(pki, check):
 
 
 def _client_settings(pki, *, ca=True, user="cell1", password="right-password"):
-    settings = {}
-    if ca:
-        settings["transport/link/tls/root_ca_certificate"] = str(pki / "ca.pem")
+    settings = tls_settings(pki) if ca else {}
     if user is not None:
         settings["transport/auth/usrpwd/user"] = user
         settings["transport/auth/usrpwd/password"] = password

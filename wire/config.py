@@ -13,17 +13,39 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, AliasChoices, Field, ValidationError
+from pydantic import AfterValidator, AliasChoices, Field, ValidationError, field_validator
 
+from . import keys
+from .access import USER_NAME, access_control
 from .backends import AxisCameraConfig, CameraConfig, RobotConfig, Section, SimRobotConfig
 from .errors import ConfigError
 from .messages import Point, Pose, ViewPlan, field_errors
 
-__all__ = ["CellConfig", "load_config", "DEFAULT_HAND_EYE"]
+__all__ = ["CellConfig", "Roles", "load_config", "DEFAULT_HAND_EYE"]
 
 # A camera 10 cm out along the flange's z axis, looking along it, rotated so that
 # image "up" is the flange's x axis: a typical wrist mount.
 DEFAULT_HAND_EYE = [[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.1], [0.0, 0.0, 0.0, 1.0]]
+
+
+CellId = Annotated[str, Field(pattern=rf"^{keys.CELL_ID.pattern}$")]
+UserName = Annotated[str, Field(pattern=rf"^{USER_NAME.pattern}$")]
+# Where the router's users and their passwords are: without it, no session has a user to match a role.
+_DICTIONARY_FILE = "transport/auth/usrpwd/dictionary_file"
+
+
+class Roles(Section):
+    """Zenoh users by role, for the router's access control (``wire.access``, deploy/README.md)."""
+
+    #: The cells these users act in; by default the cell of this file (``cell_id``).
+    cells: list[CellId] | None = None
+    client: list[UserName] = []
+    observer: list[UserName] = []
+    daemon: list[UserName] = []
+    robot: list[UserName] = []
+    camera: list[UserName] = []
+    #: Reconstruction workers serve the pool of every cell, whichever cells are named.
+    reconstruct: list[UserName] = []
 
 
 class ZenohConfig(Section):
@@ -35,6 +57,14 @@ class ZenohConfig(Section):
     router_settings: dict[str, object] = {}
     #: Zenoh user/password authentication; the password comes from ROBOCELL_ZENOH_PASSWORD.
     user: str | None = None
+    #: For the router: who may do what (``[zenoh.roles]``, or ``[[zenoh.roles]]`` for other cells
+    #: with users of their own). Empty: every session the router lets in may do everything.
+    roles: list[Roles] = []
+
+    @field_validator("roles", mode="before")
+    @classmethod
+    def _one_table_or_many(cls, value: object) -> object:
+        return [value] if isinstance(value, dict) else value
 
     def client_settings(self) -> dict[str, object]:
         """What a client session (every process but the router) adds to its configuration.
@@ -54,9 +84,34 @@ class ZenohConfig(Section):
             settings["transport/auth/usrpwd/password"] = password
         return settings
 
-    def router_session_settings(self) -> dict[str, object]:
-        """What the router's session adds to its configuration."""
-        return {**self.settings, **self.router_settings}
+    def router_session_settings(self, cell_id: str) -> dict[str, object]:
+        """What the router's session adds to its configuration: with ``roles``, its access control
+        (the roles of a table without ``cells`` are in ``cell_id``).
+
+        Raises
+        ------
+        ConfigError
+            If ``roles`` names users but the router has no users' dictionary to know them by.
+        """
+        settings = {**self.settings, **self.router_settings}
+        users = self.users_by_role(cell_id)
+        if users:
+            if _DICTIONARY_FILE not in settings:
+                raise ConfigError(f"zenoh.roles names users, but zenoh.router_settings has no {_DICTIONARY_FILE!r}: "
+                                  f"the router could not tell who is who, and would refuse everyone")
+            settings["access_control"] = access_control(users)
+        return settings
+
+    def users_by_role(self, cell_id: str) -> dict[str, dict[str, list[str]]]:
+        """``roles`` as cell id -> role -> user names (empty without roles)."""
+        users: dict[str, dict[str, list[str]]] = {}
+        for table in self.roles:
+            for cell in table.cells if table.cells is not None else [cell_id]:
+                for role, names in table.model_dump(exclude={"cells"}).items():
+                    users.setdefault(cell, {}).setdefault(role, []).extend(names)
+        if not any(names for roles in users.values() for names in roles.values()):
+            return {}
+        return users
 
 
 class ScanConfig(Section):
@@ -106,7 +161,7 @@ def _run_dir(path: Path) -> Path:
 
 
 class CellConfig(Section):
-    cell_id: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")] = "cell1"
+    cell_id: CellId = "cell1"
     run_dir: Annotated[Path, AfterValidator(_run_dir)] = Path("runs")
     zenoh: ZenohConfig = ZenohConfig()
     robot: RobotConfig = SimRobotConfig()

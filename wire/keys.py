@@ -49,12 +49,14 @@ import re
 __all__ = [
     "submit", "jobs", "job", "result", "cancel", "events", "robot_move", "robot_state",
     "camera_capture", "alive", "status", "reconstructor", "reconstructor_alive", "reconstructor_info",
-    "reconstructor_heartbeat", "ticket", "WORKER_ID", "safe_worker_id", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
+    "reconstructor_heartbeat", "ticket", "CELL_ID", "WORKER_ID", "safe_worker_id", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
     "HEARTBEAT_CHANGE_GAP_S",
 ]
 
 ROOT = "robocell"
 POOL = f"{ROOT}/_pool"
+#: What a cell id must match: one key chunk, never starting with "_" (the pool's keys do).
+CELL_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 
 
 def submit(cell: str) -> str:
