@@ -345,11 +345,8 @@ class CellDaemon:
             job = self._queued.pop(job_id, None)
             if job is None:
                 continue  # cancelled while it waited
-            left_lane = self._start(job, scan_steps(len(job.poses)))
-            waiting = asyncio.ensure_future(left_lane.wait())
-            # asyncio.wait, unlike await, does not raise when the job (not the lane) is cancelled.
-            await asyncio.wait({job.task, waiting}, return_when=asyncio.FIRST_COMPLETED)
-            waiting.cancel()
+            # Set by the job however it ends, so a cancelled job does not stop the lane.
+            await self._start(job, scan_steps(len(job.poses))).wait()
 
     def _start(self, job: Job, steps: list[Step], *, resumed: bool = False) -> asyncio.Event:
         """Run the job's steps in a task of its own (a stopping daemon cancels it); the event is

@@ -210,7 +210,10 @@ class CellProcesses:
         try:
             while loop.time() < deadline:
                 self._check_running()
-                alive = set(await transport.alive(f"{keys.ROOT}/**", timeout=1.0))
+                # The cell's tokens and the pool's, each asked for by name: a deployment with roles
+                # lets a client watch those, not the whole of robocell/**.
+                alive = set(await transport.alive(keys.alive(self.config.cell_id), timeout=1.0))
+                alive |= set(await transport.alive(keys.RECONSTRUCTORS_ALIVE, timeout=1.0))
                 missing = sorted(expected - alive)
                 if sim_camera and not await self._sim_camera_listening():
                     missing.append(f"the simulated camera at {self.config.camera.url}")
