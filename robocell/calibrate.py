@@ -128,10 +128,13 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
                   settle_s: float = 0.5) -> list[Path]:
     """Move the robot through ``poses`` and save a camera image at each, for ``calibrate handeye``.
 
-    Asks the robot and camera workers directly (no job, no daemon), so run it while
-    the cell is not scanning. Writes ``view00.jpg``, ... and ``poses.json``: the
-    poses the robot reports it reached, not the commanded ones, rewritten after
-    every view so that an interrupted run leaves images and poses that match.
+    Not a job of the daemon, on purpose: a calibration is not a scan (its poses aim at a board,
+    there is nothing to reconstruct and no result for the job store, and its pictures must
+    come back to whoever calibrates), so it asks the robot and camera workers itself. The
+    daemon owns the robot while it runs, so this refuses to move while a daemon of the cell is
+    up. Writes ``view00.jpg``, ... and ``poses.json``: the poses the robot reports it reached,
+    not the commanded ones, rewritten after every view so that an interrupted run leaves
+    images and poses that match.
 
     Parameters
     ----------
@@ -152,7 +155,7 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
     Raises
     ------
     CalibrationError
-        For a pose that is not a rigid 4x4 transform.
+        For a pose that is not a rigid 4x4 transform, or while the cell's daemon runs.
     TransportError
         If a worker is not running, refuses a move (its reason in the message) or does not answer in time.
     """
@@ -176,6 +179,9 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
     reached: list[list[list[float]]] = []
     async with await Transport.open(client_config.zenoh.router, settings=client_config.zenoh.client_settings(),
                                     connect_timeout_s=10.0) as transport:
+        if await transport.alive(keys.alive(cell, "daemon"), timeout=2.0):
+            raise CalibrationError(f"the daemon of cell {cell} is running, and it owns the robot while it does: "
+                                   f"stop it (robocell cell), then capture the calibration images")
         for i, move in enumerate(moves):
             reply = await transport.query(keys.robot_move(cell), move.model_dump_json(), timeout=timeouts.move_s)
             moved = parse(MoveReply, reply.payload)

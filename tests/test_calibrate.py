@@ -454,12 +454,17 @@ def test_capture_then_hand_eye(tmp_path):
         info = CaptureInfo(width=SIZE[0], height=SIZE[1], source="test", time=0.0, duration_s=0.0)
         return Response(jpeg, encoding="image/jpeg", attachment=info.model_dump_json())
 
-    async def go():
+    async def go(with_a_daemon: bool = False):
         async with await Transport.open(config.zenoh.router, mode="router") as router:
             router.serve(keys.robot_move("calib"), on_move)
             router.serve(keys.camera_capture("calib"), on_capture)
+            if with_a_daemon:  # its token, as a running daemon declares it
+                router.declare_token(keys.alive("calib", "daemon"))
             return await capture(config, [T.tolist() for T in flanges], tmp_path / "cap", settle_s=0)
 
+    with pytest.raises(CalibrationError, match="the daemon of cell calib is running, and it owns the robot"):
+        asyncio.run(go(with_a_daemon=True))
+    assert at == []  # not moved
     images = asyncio.run(go())
     assert [p.name for p in images] == [f"view{i:02d}.jpg" for i in range(6)]
     poses = json.loads((tmp_path / "cap" / "poses.json").read_text())
