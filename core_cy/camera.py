@@ -22,6 +22,8 @@ __all__ = ["Camera", "undistort_mask"]
 # JSON round trips and real calibrations keep about 9 digits; a pose whose
 # rotation is off by more than this is not a rotation.
 _DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
+# Points on each edge and diagonal of the image where the distortion is checked.
+_BORDER_SAMPLES = 33
 
 
 def _matrix(value, shape: tuple[int, ...], name: str, view: int | None) -> np.ndarray:
@@ -55,8 +57,9 @@ class Camera:
     ------
     CameraError
         If a matrix has the wrong shape, is not finite, K is not an
-        upper-triangular intrinsic matrix with positive focal lengths, or the
-        pose is not a proper rigid transform.
+        upper-triangular intrinsic matrix with positive focal lengths, the
+        pose is not a proper rigid transform, or dist moves a pixel of the
+        image K implies by more than the image's half-diagonal (no lens does).
 
     Examples
     --------
@@ -93,6 +96,9 @@ class Camera:
             if not np.all(np.isfinite(dist)):
                 raise CameraError("dist contains NaN or infinity", view=view)
             dist = dist if np.any(dist) else None
+            problem = None if dist is None else _distortion_error(K, dist)
+            if problem is not None:
+                raise CameraError(problem, view=view)
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "dist", dist)
@@ -172,6 +178,13 @@ def undistort_mask(mask: np.ndarray, camera: Camera) -> np.ndarray:
     (H, W) ndarray of uint8
         The undistorted silhouette, 0 or 255; ``mask`` itself if the camera
         has no distortion.
+
+    Raises
+    ------
+    CameraError
+        If the distortion sends pixels to infinity, or moves the whole
+        silhouette out of the image: coefficients no lens has (the wrong
+        order or units, say).
     """
     if camera.dist is None:
         return mask
@@ -180,4 +193,45 @@ def undistort_mask(mask: np.ndarray, camera: Camera) -> np.ndarray:
         camera.K, camera.dist, None, camera.K, (width, height), cv2.CV_32FC1
     )
     resampled = cv2.remap(mask, map_x, map_y, cv2.INTER_LINEAR, borderValue=0)
-    return np.where(resampled >= 128, np.uint8(255), np.uint8(0))
+    silhouette = np.where(resampled >= 128, np.uint8(255), np.uint8(0))
+    if not silhouette.any() and mask.any():
+        raise CameraError(f"dist {_coefficients(camera.dist)} moves the whole silhouette out of the image",
+                          view=camera.view)
+    return silhouette
+
+
+def _coefficients(dist: np.ndarray) -> str:
+    return "[" + ", ".join(f"{value:g}" for value in dist) + "]"
+
+
+def _distortion_error(K: np.ndarray, dist: np.ndarray) -> str | None:
+    """What is wrong with ``dist`` as a lens's distortion, or None.
+
+    Undistorting takes every pixel of the ideal image from where the lens put
+    it. A real lens moves no pixel by more than the image's half-diagonal
+    (strong barrel distortion pulls the corners in by a third or so); larger
+    moves, and overflows, come from coefficients in the wrong order or units
+    and leave nothing to undistort. The image is the one K implies: from
+    (0, 0) to twice the principal point.
+    """
+    cx, cy = max(K[0, 2], 1.0), max(K[1, 2], 1.0)
+    border = np.linspace(0.0, 1.0, _BORDER_SAMPLES)
+    pixels = np.concatenate([  # the four edges and both diagonals, corners included
+        np.column_stack([border * 2 * cx, np.zeros_like(border)]),
+        np.column_stack([border * 2 * cx, np.full_like(border, 2 * cy)]),
+        np.column_stack([np.zeros_like(border), border * 2 * cy]),
+        np.column_stack([np.full_like(border, 2 * cx), border * 2 * cy]),
+        np.column_stack([border * 2 * cx, border * 2 * cy]),
+        np.column_stack([border * 2 * cx, (1 - border) * 2 * cy]),
+    ])
+    ideal = np.linalg.solve(K, np.column_stack([pixels, np.ones(len(pixels))]).T).T
+    with np.errstate(all="ignore"):
+        lens, _ = cv2.projectPoints(ideal, np.zeros(3), np.zeros(3), np.eye(3), dist)
+        moved = np.linalg.norm(lens.reshape(-1, 2) - ideal[:, :2], axis=1)
+        half_diagonal = np.linalg.norm(ideal[:, :2], axis=1).max()
+        worst = float(moved.max() / half_diagonal) if np.isfinite(moved).all() else np.inf
+    if worst <= 1.0:
+        return None
+    how = "to infinity" if worst == np.inf else f"by up to {worst:.3g} times its half-diagonal"
+    return (f"dist {_coefficients(dist)} moves pixels of the image {how}, which no lens does "
+            f"(expected OpenCV's k1, k2, p1, p2[, k3, ...] for this K)")

@@ -14,6 +14,7 @@ import numpy as np
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, occupancy
 from .errors import FitError, GeometryError, ImageError
+from .images import checked_size
 from .quality import radial_residual, silhouette_iou
 from .refine import refine_to_silhouettes
 from .segment import RED_HSV, Segmentation, segment, silhouette_from_mask
@@ -120,21 +121,26 @@ class Reconstruction:
 
 
 def decode_image(data: bytes, *, grayscale: bool = False, view: int | None = None) -> np.ndarray:
-    """Decode encoded image bytes (JPEG, PNG, ...) with OpenCV.
+    """Decode an encoded PNG or JPEG with OpenCV, its size checked from its header first.
+
+    The pixels are taken as the sensor gave them: an EXIF orientation is not
+    applied, since K describes the sensor's rows and columns.
 
     Raises
     ------
     ImageError
-        If the bytes are not a decodable image, or a JPEG is truncated
-        (OpenCV would silently return a half-grey image).
+        If the bytes are not a decodable PNG or JPEG, declare more than
+        ``core_cy.images.MAX_IMAGE_PIXELS``, or a JPEG is truncated (OpenCV
+        would silently return a half-grey image).
     """
+    what = "the mask" if grayscale else "the image"
     if data.startswith(_JPEG_START) and not data.rstrip(b"\x00").endswith(_JPEG_END):
         raise ImageError("the JPEG is truncated (no end-of-image marker)", view=view)
-    flags = cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_COLOR
+    checked_size(data, what=what, view=view)
+    flags = (cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_COLOR) | cv2.IMREAD_IGNORE_ORIENTATION
     image = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if image is None:
-        raise ImageError(f"the {'mask' if grayscale else 'image'} is not a decodable image "
-                         f"({len(data)} bytes)", view=view)
+        raise ImageError(f"{what} is not a decodable image ({len(data)} bytes)", view=view)
     return image
 
 

@@ -1,4 +1,6 @@
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -69,3 +71,30 @@ def test_missing_and_malformed_scan_json(tmp_path):
     (tmp_path / "scan.json").write_text(json.dumps([1, 2]))
     with pytest.raises(BundleError, match="scan.json: Input should be a valid dictionary"):
         load_bundle(tmp_path)
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.mark.parametrize("name", ["bunny", "dtu65/three", "dtu65/six"])
+def test_real_photographs_have_the_size_their_K_was_calibrated_for(name):
+    if not (DATA / name / "scan.json").exists():
+        pytest.skip(f"no test data at {DATA / name}")
+    assert len(load_bundle(DATA / name).views) in (3, 6)
+
+
+def test_symlinks_within_the_bundle_are_followed(bundle, tmp_path):
+    (bundle / "pictures").mkdir()
+    (bundle / "view1.jpg").rename(bundle / "pictures" / "first.jpg")
+    (bundle / "view1.jpg").symlink_to("pictures/first.jpg")
+    edit_scan(bundle, lambda s: s["views"][2].update(image="pictures/first.jpg"))
+    (tmp_path / "latest").symlink_to(bundle)  # the bundle's own directory may be a link
+    loaded = load_bundle(tmp_path / "latest")
+    assert loaded.views[1].image == loaded.views[2].image == (bundle / "pictures" / "first.jpg").read_bytes()
+
+
+@pytest.mark.parametrize("name", ["pictures/../view0.jpg", "./../sphere/view0.jpg"])
+def test_no_name_climbs_out_even_to_come_back(bundle, name):
+    edit_scan(bundle, lambda s: s["views"][0].update(image=name))
+    with pytest.raises(BundleError, match=f"^view 0: image file '{re.escape(name)}' is outside the bundle"):
+        load_bundle(bundle)

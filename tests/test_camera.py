@@ -87,5 +87,33 @@ def test_undistort_mask_recovers_the_ideal_silhouette():
     assert _iou(recovered, ideal) > 0.98
 
 
+@pytest.mark.parametrize("dist", [
+    [-0.45, 0.25, 0.0, 0.0, -0.08],               # strong barrel (a 100-degree lens)
+    [0.05, -0.01, 0.002, -0.001],                   # mild pincushion, decentred
+    [30.0, 20.0, 0.0, 0.0, 1.0, 30.5, 22.0, 2.0],   # the rational model: large terms that cancel
+])
+def test_real_lenses_distortion_is_accepted(dist):
+    assert Camera(K=intrinsics(), T_world_cam=np.eye(4), dist=dist).dist is not None
+
+
+@pytest.mark.parametrize("dist, moved", [
+    ([1e300, 0, 0, 0, 0], "to infinity"),            # overflows once squared
+    ([0, 0, 1e6, 0], "by up to 1.31e+06 times"),     # a tangential term in the wrong units
+    ([-10.0, 0, 0, 0], "by up to 4.43 times"),       # the corners fold back through the centre
+])
+def test_distortion_no_lens_has_is_named(dist, moved):
+    with pytest.raises(CameraError, match=r"^view 1: dist \[.*\] moves pixels of the image ") as info:
+        Camera(K=intrinsics(), T_world_cam=np.eye(4), dist=dist, view=1)
+    assert moved in str(info.value)
+
+
+def test_undistortion_that_loses_the_silhouette_is_an_error_not_an_empty_view():
+    mask = np.zeros((480, 640), np.uint8)
+    mask[0:3, 0:3] = 255  # in the corner, where barrel distortion pulls the ideal image's edge from
+    camera = Camera(K=intrinsics(), T_world_cam=np.eye(4), dist=[-0.4, 0, 0, 0], view=0)
+    with pytest.raises(CameraError, match="^view 0: dist .* moves the whole silhouette out of the image"):
+        undistort_mask(mask, camera)
+
+
 def _iou(a, b):
     return np.count_nonzero(a & b) / np.count_nonzero(a | b)

@@ -88,7 +88,7 @@ BAD_BUNDLES = {
     "truncated-jpeg": (lambda d: (d / "view2.jpg").write_bytes((d / "view2.jpg").read_bytes()[:3000]),
                        "view 2: the JPEG is truncated"),
     "garbage-jpeg": (lambda d: (d / "view0.jpg").write_bytes(b"\xff\xd8 this is not a JPEG \xff\xd9"),
-                     "view 0: the image is not a decodable image"),
+                     "view 0: image file 'view0.jpg' is not a decodable image"),
     "empty-silhouette": (lambda d: edit_scan(d, lambda s: s.update(
         segmentation={"method": "hsv", "lower": [50, 90, 40], "upper": [70, 255, 255]})),
         "view 0: the silhouette is empty"),

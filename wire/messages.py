@@ -61,18 +61,21 @@ class Message(BaseModel):
     schema_version: Annotated[Literal[1], BeforeValidator(_integer)] = SCHEMA_VERSION
 
 
-def field_errors(exc: ValidationError, *, whole: str = "message") -> str:
+def field_errors(exc: ValidationError, *, whole: str = "message", at_most: int = 10) -> str:
     """One line naming each invalid field: ``target: List should have at least 3 items``.
 
     The tag of a discriminated union (``backend=kuka``, see ``wire.backends``) is not a field,
     and is left out of the field's name.
 
-    ``whole`` names what an error about the whole input (no field) is about.
+    ``whole`` names what an error about the whole input (no field) is about. Past ``at_most``
+    errors, the line says how many more there are (hostile input can hold thousands).
     """
-    return "; ".join(
-        f"{'.'.join(str(p) for p in error['loc'] if '=' not in str(p)) or whole}: {error['msg']}"
-        for error in exc.errors()
-    )
+    errors = exc.errors()
+    named = [f"{'.'.join(str(p) for p in error['loc'] if '=' not in str(p)) or whole}: {error['msg']}"
+             for error in errors[:at_most]]
+    if len(errors) > at_most:
+        named.append(f"and {len(errors) - at_most} more")
+    return "; ".join(named)
 
 
 M = TypeVar("M", bound=BaseModel)

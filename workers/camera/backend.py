@@ -10,44 +10,11 @@ in ``wire.backends``, and a line in :func:`workers.camera.worker.make_camera`.
 from __future__ import annotations
 
 import abc
-import struct
 from dataclasses import dataclass
 
+from core_cy.images import jpeg_size
+
 __all__ = ["Camera", "Snapshot", "jpeg_size"]
-
-# Start-of-frame markers (baseline, extended, progressive, lossless...): they carry the size.
-_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-
-
-def jpeg_size(data: bytes) -> tuple[int, int] | None:
-    """(width, height) from a JPEG's frame header, or None if there is none.
-
-    Examples
-    --------
-    >>> import cv2, numpy as np
-    >>> jpeg_size(cv2.imencode(".jpg", np.zeros((48, 64, 3), np.uint8))[1].tobytes())
-    (64, 48)
-    >>> jpeg_size(b"not a jpeg") is None
-    True
-    """
-    if not data.startswith(b"\xff\xd8"):
-        return None
-    at = 2
-    while at + 4 <= len(data):
-        if data[at] != 0xFF:
-            return None
-        marker = data[at + 1]
-        if marker == 0xFF:  # fill byte
-            at += 1
-            continue
-        (length,) = struct.unpack(">H", data[at + 2:at + 4])
-        if marker in _SOF:
-            if at + 9 > len(data):
-                return None
-            height, width = struct.unpack(">HH", data[at + 5:at + 9])
-            return width, height
-        at += 2 + length
-    return None
 
 
 @dataclass(frozen=True)
