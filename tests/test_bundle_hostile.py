@@ -29,3 +29,22 @@ def test_hostile_bundles_get_one_line_errors_and_the_good_ones_are_still_done(tm
         assert message in result.get("error", ""), (name, result)
         assert "internal error" not in result["error"] and "\n" not in result["error"]
     assert "Traceback" not in process.stderr
+
+
+def test_the_reconstruction_worker_checks_each_picture_against_its_calibration():
+    """The worker's input is untrusted too: a picture of another size than K's is named, not carved."""
+    import cv2
+    import numpy as np
+
+    from wire.messages import CameraModel, ReconstructReply, ReconstructRequest, ReconstructView
+    from workers.reconstruct.worker import reconstruct_request
+
+    small = cv2.imencode(".jpg", np.zeros((240, 320, 3), np.uint8))[1].tobytes()
+    camera = CameraModel(K=[[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
+    pose = [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 1], [0, 0, 0, 1]]
+    request = ReconstructRequest(job_id="j", views=[ReconstructView(camera=camera, T_world_cam=pose, length=len(small))] * 2)
+    reply_json, payload = reconstruct_request(request.model_dump_json(), small * 2)
+    reply = ReconstructReply.model_validate_json(reply_json)
+    assert reply.result is None and payload == b""
+    assert reply.error.startswith("view 0: the picture is 320x240 pixels, but K was calibrated for about 640x480")
+    assert reply.error_kind == "ImageError"

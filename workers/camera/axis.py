@@ -29,9 +29,11 @@ from typing import TYPE_CHECKING, Literal
 
 import httpx
 
-from .backend import Camera, Snapshot, jpeg_size
+from core_cy.images import jpeg_size
 from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
+
+from .backend import Camera, Snapshot
 
 if TYPE_CHECKING:
     from wire.backends import AxisCameraConfig

@@ -12,9 +12,8 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass
 
-from core_cy.images import jpeg_size
 
-__all__ = ["Camera", "Snapshot", "jpeg_size"]
+__all__ = ["Camera", "Snapshot"]
 
 
 @dataclass(frozen=True)
@@ -25,20 +24,6 @@ class Snapshot:
     width: int
     height: int
     encoding: str = "image/jpeg"
-
-    @classmethod
-    def from_jpeg(cls, data: bytes) -> Snapshot:
-        """The snapshot of a JPEG, its size read from its header.
-
-        Raises
-        ------
-        ValueError
-            If ``data`` is not a JPEG with a frame header.
-        """
-        size = jpeg_size(data)
-        if size is None:
-            raise ValueError("not a JPEG with a frame header")
-        return cls(data, *size)
 
 
 class Camera(abc.ABC):

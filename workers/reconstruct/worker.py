@@ -40,6 +40,7 @@ from wire.messages import (POINTS_ENCODING, Blob, Reconstruction, ReconstructRep
 from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
+from core_cy.images import check_calibrated_size, checked_size
 from core_cy.reconstruct import Options, View, reconstruct
 from wire.process import open_transport, run_until_stopped
 
@@ -65,7 +66,9 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         views, offset = [], 0
         for index, view in enumerate(request.views):
             camera = Camera(K=view.camera.K, T_world_cam=view.T_world_cam, dist=view.camera.dist, view=index)
-            views.append(View(camera, image=payload[offset:offset + view.length]))
+            image = payload[offset:offset + view.length]
+            check_calibrated_size(camera, *checked_size(image, what="the picture", view=index), what="the picture")
+            views.append(View(camera, image=image))
             offset += view.length
         result = reconstruct(views, segmentation=core_segmentation(request.segmentation),
                              support_plane=request.support_plane, options=Options(**request.options))
