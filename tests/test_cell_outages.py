@@ -5,6 +5,8 @@ Every part is a child process; the router too, so that it can be killed and star
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 
 import pytest
@@ -46,3 +48,29 @@ def test_a_robot_worker_away_for_a_while_costs_no_job(cell):
     cell.loop.run(cell.processes.start_child("robot"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]
     assert [f.state for f in finals] == [JobState.SUCCEEDED] * 2, [f.error for f in finals]
+
+
+def test_a_camera_restarted_costs_no_job(cell):
+    """The simulated camera (an HTTP server) is away for 3 s: the camera worker, still up, answers
+    that it cannot connect, and the daemon tries again until the camera is back."""
+    ids = [cell.submit(label=f"camera away {k}").job_id for k in range(3)]
+    cell.loop.run(cell.processes.stop_child("sim-camera"))
+    time.sleep(3.0)
+    cell.loop.run(cell.processes.start_child("sim-camera"), timeout=60)
+    finals = [cell.wait(job_id) for job_id in ids]
+    assert [f.state for f in finals] == [JobState.SUCCEEDED] * 3, [f.error for f in finals]
+
+
+def test_a_reconstructor_paused_for_a_while_costs_no_job(cell):
+    """The only reconstructor stops (SIGSTOP) for longer than the heartbeat allows: its job is
+    taken from it, and waits, with the queued ones, for a worker that answers."""
+    worker = cell.processes.child("reconstruct-0").process
+    ids = [cell.submit(label=f"reconstructor paused {k}").job_id for k in range(3)]
+    cell.wait_state(ids[0], {JobState.RECONSTRUCTING})
+    os.kill(worker.pid, signal.SIGSTOP)
+    try:
+        time.sleep(cell.config.timeouts.heartbeat_s + 3.0)
+    finally:
+        os.kill(worker.pid, signal.SIGCONT)
+    finals = [cell.wait(job_id) for job_id in ids]
+    assert [f.state for f in finals] == [JobState.SUCCEEDED] * 3, [f.error for f in finals]
