@@ -47,7 +47,7 @@ from __future__ import annotations
 import re
 
 __all__ = [
-    "submit", "jobs", "job", "result", "cancel", "events", "robot_move", "robot_state",
+    "submit", "jobs", "job", "result", "cancel", "events", "robot_move", "robot_grip", "robot_state",
     "camera_capture", "alive", "status", "reconstructor", "reconstructor_alive", "reconstructor_info",
     "reconstructor_heartbeat", "ticket", "CELL_ID", "WORKER_ID", "safe_worker_id", "RECONSTRUCTORS_ALIVE", "RECONSTRUCTORS_HEARTBEAT", "HEARTBEAT_PERIOD_S",
     "HEARTBEAT_CHANGE_GAP_S",
@@ -100,6 +100,11 @@ def status(cell: str) -> str:
 def robot_move(cell: str) -> str:
     """Query with a MoveRequest; replies with a MoveReply once the robot is there."""
     return f"{ROOT}/{cell}/robot/move"
+
+
+def robot_grip(cell: str) -> str:
+    """Query with a GripRequest; replies with a GripReply once the gripper has closed or opened."""
+    return f"{ROOT}/{cell}/robot/gripper"
 
 
 def robot_state(cell: str) -> str:

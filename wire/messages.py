@@ -19,7 +19,8 @@ from pydantic import AfterValidator, BeforeValidator, BaseModel, ConfigDict, Fie
 __all__ = [
     "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
     "JobStatus", "JobEvent", "Superquadric", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
-    "RobotState", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView", "Blob",
+    "RobotState", "GripRequest", "GripReply", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
+    "Blob",
     "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
     "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING",
 ]
@@ -224,6 +225,21 @@ class MoveRequest(Message):
 
 class MoveReply(Message):
     T_base_flange: Pose              # where the robot really is
+    duration_s: float
+
+
+class GripRequest(Message):
+    """Close (``close``) or open the parallel-jaw gripper."""
+
+    close: bool
+    job_id: str | None = None
+
+
+class GripReply(Message):
+    closed: bool
+    holding: bool | None = None      # the fingers stopped on something; None: the gripper cannot tell
+    width: float | None = None       # the opening between the pads now, metres, if known
+    reason: str = ""                 # why it holds or not, where the robot knows (a simulator)
     duration_s: float
 
 

@@ -10,16 +10,30 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from core_cy.plan import Workspace, workspace_violation
 from wire.errors import MoveRefused
 
-__all__ = ["RobotBackend", "ProgressCallback", "refuse_outside"]
+__all__ = ["RobotBackend", "ProgressCallback", "Grip", "refuse_outside"]
 
 #: Called while a move runs: the flange's pose now (4x4, base frame), and whether it still moves.
 ProgressCallback = Callable[[np.ndarray, bool], None]
+
+
+@dataclass(frozen=True)
+class Grip:
+    """The parallel-jaw gripper after a command: closed or open, and what the backend can tell."""
+
+    closed: bool
+    #: Whether the fingers stopped on something; None where the gripper cannot tell.
+    holding: bool | None = None
+    #: The opening between the pads now, metres; None where the gripper cannot tell.
+    width: float | None = None
+    #: Why it holds or not, where the backend knows (the simulator judges against its truth).
+    reason: str = ""
 
 
 def refuse_outside(target: np.ndarray, workspace: Workspace, *, prefix: str = "move refused") -> None:
@@ -49,6 +63,11 @@ class RobotBackend(abc.ABC):
     @abc.abstractmethod
     def pose(self) -> np.ndarray:
         """The flange's pose as last known (4x4, base frame)."""
+
+    @abc.abstractmethod
+    async def grip(self, close: bool) -> Grip:
+        """Close (``close``) or open the gripper, and return once it has; a gripper that does not
+        get there in time raises a ``CellError`` that says so."""
 
     async def __aenter__(self) -> RobotBackend:
         await self.open()

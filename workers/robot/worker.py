@@ -16,7 +16,7 @@ import numpy as np
 from wire import keys
 from wire.backends import KukaRobotConfig, RobotConfig
 from wire.config import CellConfig
-from wire.messages import MoveReply, MoveRequest, RobotState, parse
+from wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
 from wire.process import open_transport, run_until_stopped
 from wire.transport import Request, RequestError, Response, Transport
 
@@ -68,11 +68,26 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
             reply = MoveReply(T_base_flange=reached.tolist(), duration_s=time.monotonic() - began)
         return Response(reply.model_dump_json())
 
+    async def on_grip(request: Request) -> Response:
+        try:
+            command = parse(GripRequest, request.payload)
+        except ValueError as exc:
+            raise RequestError(str(exc)) from None
+        async with motion:  # the gripper is on the arm: not while it moves
+            began = time.monotonic()
+            grip = await backend.grip(command.close)  # a CellError goes back with its kind
+            reply = GripReply(closed=grip.closed, holding=grip.holding, width=grip.width, reason=grip.reason,
+                              duration_s=time.monotonic() - began)
+        log.info("gripper %s%s", "closed" if grip.closed else "open",
+                 f" for job {command.job_id}" if command.job_id else "")
+        return Response(reply.model_dump_json())
+
     async def on_state(request: Request) -> Response:
         state = RobotState(T_base_flange=backend.pose().tolist(), moving=moving, time=time.time())
         return Response(state.model_dump_json())
 
     transport.serve(keys.robot_move(cell), on_move)
+    transport.serve(keys.robot_grip(cell), on_grip)
     transport.serve(keys.robot_state(cell), on_state)
 
 

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from wire.backends import SimRobotConfig
-from workers.robot.backend import ProgressCallback, RobotBackend
+from workers.robot.backend import Grip, ProgressCallback, RobotBackend
 
 __all__ = ["SimRobot"]
 
@@ -26,6 +26,7 @@ class SimRobot(RobotBackend):
     def __init__(self, config: SimRobotConfig) -> None:
         self._config = config
         self._pose = np.asarray(config.home, dtype=np.float64)
+        self._closed = False
 
     async def open(self) -> None:
         pass
@@ -62,4 +63,7 @@ class SimRobot(RobotBackend):
         self._pose = target.copy()
         return self.pose()
 
-
+    async def grip(self, close: bool) -> Grip:
+        """The simulated gripper closes or opens at once; it cannot tell whether it holds."""
+        self._closed = close
+        return Grip(closed=close)

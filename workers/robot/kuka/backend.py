@@ -21,10 +21,10 @@ import numpy as np
 
 from wire.backends import KukaConfig, KukaKvpConfig, Workspace
 
-from ..backend import RobotBackend, refuse_outside
+from ..backend import Grip, RobotBackend, refuse_outside
 from . import variables as v
 from .e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
-from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
+from wire.errors import CellError, DrivesOff, EmergencyStop, MoveFailed, MoveRefused
 
 from .errors import ControllerBusy, ControllerRefused, KukaError, KukaProtocolError, KukaTimeout, Unreachable
 
@@ -248,3 +248,6 @@ class KukaBackend(RobotBackend):
         if distance_mm > self.reached_tolerance_mm or angle_deg > self.reached_tolerance_deg:
             raise MoveFailed(f"the move ended {distance_mm:.2f} mm and {angle_deg:.2f} deg from its target "
                              f"(tolerance {self.reached_tolerance_mm:g} mm, {self.reached_tolerance_deg:g} deg)")
+
+    async def grip(self, close: bool) -> Grip:
+        raise CellError("the KUKA bridge has no gripper yet")
