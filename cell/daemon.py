@@ -53,7 +53,7 @@ from .pool import ReconstructorPool
 from .presence import Absent, Presence
 from .recorder import Recorder
 from .pictures import Pictures
-from .steps import Reconstruct, Step, StepFailed, scan_steps
+from .steps import PLACE_POSES, Step, StepFailed, job_steps, pick_poses
 from .store import JobStore, queued_event
 
 __all__ = ["CellDaemon"]
@@ -191,10 +191,13 @@ class CellDaemon:
                 continue
             if job.state is JobState.CANCELLING:
                 self._transition(job, JobState.CANCELLED, "cancelled by request (before the daemon restarted)")
+            elif job.state is JobState.PICKING:  # the gripper may hold it, wherever the arm stopped
+                self._transition(job, JobState.FAILED, "picking: the daemon stopped during the pick: the gripper may "
+                                 "still hold the object; not picked again", error=StepFailed("", kind="PickInterrupted"))
             elif pictures is not None:
                 log.warning("job %s: the daemon restarted during its reconstruction: resuming it", job.job_id)
                 job.captures = pictures
-                self._start(job, [Reconstruct(len(pictures))], resumed=True)
+                self._start(job, job_steps(job.request, len(pictures))[2 * len(pictures):], resumed=True)
             else:
                 if job.state is not JobState.QUEUED:
                     log.warning("job %s: the daemon restarted during its views: taking them again", job.job_id)
@@ -346,7 +349,7 @@ class CellDaemon:
             if job is None:
                 continue  # cancelled while it waited
             # Set by the job however it ends, so a cancelled job does not stop the lane.
-            await self._start(job, scan_steps(len(job.poses))).wait()
+            await self._start(job, job_steps(job.request, len(job.poses))).wait()
 
     def _start(self, job: Job, steps: list[Step], *, resumed: bool = False) -> asyncio.Event:
         """Run the job's steps in a task of its own (a stopping daemon cancels it); the event is
@@ -420,8 +423,11 @@ class CellDaemon:
         assert result is not None, "the last step leaves the result"
         total = result.timings_ms.get("total", float("nan"))
         attempt = f" (attempt {result.attempts})" if result.attempts > 1 else ""
-        event = job.transition(JobState.SUCCEEDED, f"reconstructed by {result.worker} in {total:.1f} ms{attempt}",
-                               now=self.clock(), result=result)
+        message = f"reconstructed by {result.worker} in {total:.1f} ms{attempt}"
+        if result.pick is not None:
+            held = {True: "held", False: "missed", None: "closed on it"}[result.pick.held]
+            message += f"; picked with grasp {result.pick.grasp}: {held}" + (", placed" if result.pick.placed else "")
+        event = job.transition(JobState.SUCCEEDED, message, now=self.clock(), result=result)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
         await asyncio.shield(self._db.call(self._save_result, job, result, event))
         self._db.post(self._pictures.drop, job.job_id)
@@ -444,6 +450,12 @@ class CellDaemon:
             violation = workspace_violation(pose, self.config.robot.workspace)
             if violation:
                 raise RequestError(f"view {view} is outside the workspace: {violation}")
+        if scan.pick is not None and scan.pick.place is not None:  # the grasp waits for the scan; the place need not
+            placing = pick_poses(np.asarray(scan.pick.place), scan.pick, self.config)
+            for name in PLACE_POSES:
+                violation = workspace_violation(placing[name], self.config.robot.workspace)
+                if violation:
+                    raise RequestError(f"pick.place: the {name} pose is outside the workspace: {violation}")
         if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
             known = await self._db.call(self._jobs.find_request, scan.request_id)
             if known is not None:

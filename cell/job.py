@@ -6,7 +6,7 @@ Every state, and every legal move between states, is written down once, in
 is a transition too: a waiting job is cancelled at once; a working job goes to
 ``cancelling``, its step is interrupted, and it ends ``cancelled``::
 
-    queued ──▶ moving ⇄ capturing ──▶ reconstructing ──▶ succeeded
+    queued ──▶ moving ⇄ capturing ──▶ reconstructing ──▶ (picking) ──▶ succeeded
       │            (working states)            │
       │                   ├──────────────────▶ failed
       │                   ╰──▶ cancelling ──▶ cancelled
@@ -37,7 +37,7 @@ __all__ = ["TRANSITIONS", "WORKING", "IllegalTransition", "Job", "Picture"]
 
 S = JobState
 #: States in which a step runs.
-WORKING = frozenset({S.MOVING, S.CAPTURING, S.RECONSTRUCTING})
+WORKING = frozenset({S.MOVING, S.CAPTURING, S.RECONSTRUCTING, S.PICKING})
 _ENDS = frozenset({S.SUCCEEDED, S.FAILED})
 
 #: Every legal move: from a state, the states it may go to.
@@ -91,6 +91,8 @@ class Job:
     result: ScanResult | None = None
     #: The reconstruction worker's reply (attachment, payload), and the job time it came, for the recording.
     reconstruction: tuple[bytes, bytes, float] | None = None
+    #: A pick's flange poses by name ("above", "grasp", "lift", ...), once a grasp is chosen.
+    pick_poses: dict[str, np.ndarray] = field(default_factory=dict)
     #: Why the job's recording cannot be written, if it cannot.
     recording_error: str | None = None
     #: The task that runs the job's steps, once it runs.

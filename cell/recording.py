@@ -11,6 +11,7 @@ base, z up, metres. Entities::
     world/camera{i}/silhouette       SegmentationImage (0 background, 1 object)
     world/points/{name}              Points3D ("sphere", "carved")
     world/{name}                     Mesh3D ("fit", "truth")
+    world/grasps/{i|chosen}          Transform3D, Boxes3D (the grippers of the planned grasps)
     log                              TextLog
 """
 
@@ -174,6 +175,22 @@ class JobRecording:
         self._log(f"world/{name}", rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles,
                                               vertex_normals=_vertex_normals(vertices, triangles),
                                               albedo_factor=colour))
+
+    def log_grasps(self, grasps, widths, chosen: int | None, gripper: dict) -> None:
+        """Grasps as grippers (two fingers and the palm, as boxes), each closed to the width its
+        grasp expects: ``grasps`` (G, 4, 4) grasp-to-world, ``chosen`` highlighted."""
+        finger_half = [gripper["finger_width"] / 2, gripper["finger_thickness"] / 2, gripper["finger_length"] / 2]
+        palm_half = [gripper["palm_width"] / 2, 0.0, 0.003]
+        tip = gripper["pad_length"] / 2
+        for index, (T, width) in enumerate(zip(grasps, widths)):
+            T = np.asarray(T, dtype=np.float64)
+            gap = width / 2 + gripper["finger_thickness"] / 2
+            centres = [[0.0, side * gap, tip - gripper["finger_length"] / 2] for side in (-1.0, 1.0)]
+            centres.append([0.0, 0.0, tip - gripper["finger_length"]])
+            halves = [finger_half, finger_half, [palm_half[0], gap + finger_half[1], palm_half[2]]]
+            colour = (255, 140, 0) if index == chosen else (150, 150, 150)
+            entity = f"world/grasps/{'chosen' if index == chosen else index}"
+            self._log(entity, _transform(T), rr.Boxes3D(centers=centres, half_sizes=halves, colors=colour))
 
     def close(self) -> None:
         """Flush and write the file's footer; the file is then complete. Idempotent."""

@@ -19,18 +19,20 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from core_cy.plan import camera_poses
 from wire import keys
 from wire.config import CellConfig
 from wire.errors import CellError, LinkDown
-from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message, MoveReply, MoveRequest,
-                           ReconstructReply, ReconstructRequest, ReconstructView, ScanResult, Superquadric, parse)
+from core_cy.plan import camera_poses, workspace_violation
+from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, GripReply, GripRequest, JobState, Message,
+                           MoveReply, MoveRequest, PickOutcome, PickRequest, ReconstructReply, ReconstructRequest,
+                           ReconstructView, ScanRequest, ScanResult, Superquadric, parse)
 from wire.transport import Reply
 
 from .job import Job, Picture
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
 
-__all__ = ["Step", "StepFailed", "Cell", "Move", "Capture", "Reconstruct", "scan_steps"]
+__all__ = ["Step", "StepFailed", "Cell", "Move", "Capture", "Reconstruct", "ChooseGrasp", "PickMove", "Gripper",
+           "scan_steps", "job_steps"]
 
 
 class StepFailed(CellError):
@@ -195,12 +197,136 @@ class Reconstruct(Step):
                                  kind="ImplausibleResult")
             job.reconstruction = (reply.attachment or b"", reply.payload, cell.clock() - job.started)
             job.result = ScanResult(
-                job_id=job.job_id, superquadric=answer.result.superquadric,
+                job_id=job.job_id, superquadric=answer.result.superquadric, grasps=answer.result.grasps,
                 silhouette_iou=answer.result.silhouette_iou, residual=answer.result.residual,
                 timings_ms=answer.result.timings_ms, T_base_cam=[c.T_base_cam.tolist() for c in job.captures],
                 durations_s=job.durations_s, worker=answer.worker or worker, attempts=attempt)
             return
         raise StepFailed(f"gave up after {attempts} attempts: {'; '.join(failures)}")
+
+
+class ChooseGrasp(Step):
+    """The best of the result's grasps whose every pose the robot may take; the poses of the pick.
+
+    Fails before any motion: with no grasp at all ("no grasp holds this object"), or when the
+    robot may reach none (naming the limit the best one breaks).
+    """
+
+    state = JobState.PICKING
+
+    def __init__(self, pick: PickRequest) -> None:
+        self.pick = pick
+
+    def describe(self) -> str:
+        return "choosing a grasp"
+
+    async def run(self, job: Job, cell: Cell) -> None:
+        assert job.result is not None, "the reconstruction leaves the result"
+        if not job.result.grasps:
+            raise StepFailed("no grasp holds this object", kind="NoGrasp")
+        first_problem = None
+        for index, grasp in enumerate(job.result.grasps):
+            # The gripper is symmetric under a half turn about its approach: take the turn the wrist prefers.
+            for turned in (False, True):
+                poses = pick_poses(np.asarray(grasp.T_world_grasp), self.pick, cell.config, half_turn=turned)
+                problem = next(((name, why) for name, pose in poses.items()
+                                if (why := workspace_violation(pose, cell.config.robot.workspace))), None)
+                if problem is None:
+                    job.pick_poses = poses
+                    cell.record(job, "log_grasps", [g.T_world_grasp for g in job.result.grasps],
+                                [g.width for g in job.result.grasps], index, cell.config.gripper.dimensions())
+                    job.result.pick = PickOutcome(grasp=index, T_base_flange=poses["grasp"].tolist(), held=None)
+                    return
+                first_problem = first_problem or problem
+        assert first_problem is not None
+        name, why = first_problem
+        raise StepFailed(f"no grasp is within the robot's reach: the best one's {name} pose: {why}", kind="MoveRefused")
+
+
+class PickMove(Step):
+    """Move the flange to one of the pick's poses."""
+
+    state = JobState.PICKING
+    needs_robot = True
+
+    def __init__(self, pose: str, doing: str) -> None:
+        self.pose, self.doing = pose, doing
+
+    def describe(self) -> str:
+        return self.doing
+
+    async def run(self, job: Job, cell: Cell) -> None:
+        if self.pose in PLACE_POSES and not _holding(job):
+            return  # nothing in the gripper to put down
+        reply = await cell.ask(job, "robot", keys.robot_move(cell.config.cell_id),
+                               MoveRequest(T_base_flange=job.pick_poses[self.pose].tolist(), job_id=job.job_id),
+                               cell.config.timeouts.move_s)
+        moved = _parse(MoveReply, reply.payload, "the robot worker")
+        job.durations_s[f"pick {self.pose}"] = moved.duration_s
+        cell.record(job, "log_robot_pose", np.asarray(moved.T_base_flange))
+
+
+class Gripper(Step):
+    """Open or close the gripper; closing on the object says whether it holds it. A release that
+    puts the object down (``places``) is skipped when the gripper missed it."""
+
+    state = JobState.PICKING
+    needs_robot = True
+
+    def __init__(self, close: bool, doing: str, *, places: bool = False) -> None:
+        self.close, self.doing, self.places = close, doing, places
+
+    def describe(self) -> str:
+        return self.doing
+
+    async def run(self, job: Job, cell: Cell) -> None:
+        assert job.result is not None and job.result.pick is not None
+        pick = job.result.pick
+        if self.places and not _holding(job):
+            return
+        reply = await cell.ask(job, "robot", keys.robot_grip(cell.config.cell_id),
+                               GripRequest(close=self.close, job_id=job.job_id), cell.config.timeouts.move_s)
+        grip = _parse(GripReply, reply.payload, "the robot worker")
+        if self.close:
+            pick.held, pick.reason, pick.width = grip.holding, grip.reason, grip.width
+            verdict = {True: "holds it", False: "missed it", None: "closed (the gripper cannot tell what it holds)"}
+            cell.note(job, f"the gripper {verdict[grip.holding]}{': ' + grip.reason if grip.reason else ''}")
+        pick.placed = pick.placed or self.places
+
+
+#: The pick's poses that put the object down: skipped when the gripper missed it.
+PLACE_POSES = ("above place", "place", "away")
+
+
+def _holding(job: Job) -> bool:
+    pick = job.result.pick if job.result is not None else None
+    return pick is not None and pick.held is not False
+
+
+def pick_poses(T_world_grasp: np.ndarray, pick: PickRequest, config: CellConfig, *,
+               half_turn: bool = False) -> dict[str, np.ndarray]:
+    """The flange poses of a pick with this grasp: above it, at it, lifted; and with a place, above
+    the place, at it, and backed away. Pure."""
+    grasp = T_world_grasp.copy()
+    if half_turn:
+        grasp[:3, :2] *= -1
+    flange_from_grasp = np.linalg.inv(np.asarray(config.gripper.T_flange_grasp))
+
+    def back(T: np.ndarray, distance: float) -> np.ndarray:  # along the grasp's approach, away from it
+        moved = T.copy()
+        moved[:3, 3] -= distance * T[:3, 2]
+        return moved
+
+    def up(T: np.ndarray, distance: float) -> np.ndarray:
+        moved = T.copy()
+        moved[2, 3] += distance
+        return moved
+
+    grasps = {"above": back(grasp, pick.approach_m), "grasp": grasp, "lift": up(grasp, pick.lift_m)}
+    if pick.place is not None:
+        place = np.asarray(pick.place)
+        grasps |= {"above place": up(place, pick.lift_m), "place": place, "away": back(place, pick.approach_m)}
+    return {name: T @ flange_from_grasp for name, T in grasps.items()}
 
 
 def scan_steps(n_views: int) -> list[Step]:
@@ -211,6 +337,20 @@ def scan_steps(n_views: int) -> list[Step]:
     return [*steps, Reconstruct(n_views)]
 
 
+def job_steps(request: ScanRequest, n_views: int) -> list[Step]:
+    """The steps of a request: its scan, and its pick if it asks for one."""
+    steps = scan_steps(n_views)
+    if request.pick is None:
+        return steps
+    steps += [ChooseGrasp(request.pick), Gripper(False, "opening the gripper"),
+              PickMove("above", "moving above the grasp"), PickMove("grasp", "approaching"),
+              Gripper(True, "closing the gripper"), PickMove("lift", "lifting")]
+    if request.pick.place is not None:
+        steps += [PickMove("above place", "carrying it over"), PickMove("place", "putting it down"),
+                  Gripper(False, "letting go", places=True), PickMove("away", "backing away")]
+    return steps
+
+
 def _reconstruct_request(job: Job, config: CellConfig) -> ReconstructRequest:
     camera = CameraModel(K=config.camera.K, dist=config.camera.dist)
     settings = config.reconstruct
@@ -218,7 +358,8 @@ def _reconstruct_request(job: Job, config: CellConfig) -> ReconstructRequest:
                if (value := getattr(settings, name)) is not None}
     views = [ReconstructView(camera=camera, T_world_cam=c.T_base_cam.tolist(), length=len(c.jpeg))
              for c in job.captures]
-    return ReconstructRequest(job_id=job.job_id, views=views, support_plane=config.support_plane, options=options)
+    return ReconstructRequest(job_id=job.job_id, views=views, support_plane=config.support_plane, options=options,
+                              gripper=config.gripper.dimensions())
 
 
 def _implausible(fit: Superquadric, pictures: list[Picture], config: CellConfig) -> str | None:

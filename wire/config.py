@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, AliasChoices, Field, ValidationError, field_validator
+from pydantic import AfterValidator, AliasChoices, Field, ValidationError, field_validator, model_validator
 
 from . import keys
 from .access import USER_NAME, access_control
@@ -114,6 +114,38 @@ class ZenohConfig(Section):
         return users
 
 
+# The gripper's mounting: the grasp frame (DESIGN.md §3) 20 cm out along the flange's z axis,
+# approaching along it (a gripper body of about 14 cm, then its fingers).
+DEFAULT_FLANGE_GRASP = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.2], [0.0, 0.0, 0.0, 1.0]]
+
+
+class GripperConfig(Section):
+    """The cell's parallel-jaw gripper (DESIGN.md §3), metres, and where it sits on the flange."""
+
+    max_opening: float = 0.085
+    finger_length: float = 0.045
+    finger_width: float = 0.02
+    finger_thickness: float = 0.008
+    pad_length: float = 0.02
+    palm_width: float = 0.06
+    #: The pads' coefficient of friction on the objects the cell picks.
+    friction: float = 0.5
+    #: The grasp frame in the flange frame (grasp-to-flange): a robot reaches a grasp with its
+    #: flange at ``T_world_grasp @ inv(T_flange_grasp)``.
+    T_flange_grasp: Pose = DEFAULT_FLANGE_GRASP
+
+    @model_validator(mode="after")
+    def _a_gripper(self) -> "GripperConfig":
+        from core_cy.gripper import Gripper  # the one check of a gripper's dimensions
+
+        Gripper.from_dict(self.dimensions())  # a GripperError is a ValueError: named by pydantic
+        return self
+
+    def dimensions(self) -> dict[str, float]:
+        """The gripper of DESIGN.md §3 (GRIPPER.json), without its mounting."""
+        return self.model_dump(exclude={"T_flange_grasp"})
+
+
 class ScanConfig(Section):
     #: The table surface's height in the robot base frame (the support plane z = height).
     table_height: float = 0.0
@@ -172,6 +204,7 @@ class CellConfig(Section):
     reconstruct: ReconstructConfig = ReconstructConfig()
     sim: SimConfig = SimConfig()
     timeouts: Timeouts = Timeouts()
+    gripper: GripperConfig = GripperConfig()
     #: Jobs that may wait in the queue; a submit beyond this is refused.
     max_queued: Annotated[int, Field(ge=1)] = 100
 

@@ -18,7 +18,8 @@ from pydantic import AfterValidator, BeforeValidator, BaseModel, ConfigDict, Fie
 
 __all__ = [
     "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
-    "JobStatus", "JobEvent", "Superquadric", "ScanResult", "ErrorReply", "MoveRequest", "MoveReply",
+    "JobStatus", "JobEvent", "Superquadric", "Grasp", "PickRequest", "PickOutcome", "ScanResult", "ErrorReply",
+    "MoveRequest", "MoveReply",
     "RobotState", "GripRequest", "GripReply", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
     "Blob",
     "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
@@ -111,8 +112,23 @@ class ViewPlan(BaseModel):
         return self
 
 
+class PickRequest(BaseModel):
+    """After the scan, pick the object up with the best grasp the robot can reach.
+
+    The gripper opens, moves ``approach_m`` back from the grasp along its approach, goes in,
+    closes, and lifts the object ``lift_m`` straight up; with ``place`` (the grasp frame's pose
+    there, grasp-to-base) it then carries it over, lowers it there, opens, and backs away.
+    """
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    approach_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
+    lift_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
+    place: Pose | None = None
+
+
 class ScanRequest(Message):
-    """Scan one object: either explicit flange poses, or a target point to plan views around.
+    """Scan one object: either explicit flange poses, or a target point to plan views around;
+    with ``pick``, then pick it up.
 
     ``flange_poses`` are flange-to-base transforms in the robot base frame. ``request_id``,
     chosen by the client, makes submitting idempotent.
@@ -122,6 +138,7 @@ class ScanRequest(Message):
     flange_poses: Annotated[list[Pose], Field(min_length=2, max_length=MAX_VIEWS)] | None = None
     target: Point | None = None
     plan: ViewPlan | None = None
+    pick: PickRequest | None = None
     label: Annotated[str, Field(max_length=200)] = ""
 
     @model_validator(mode="after")
@@ -140,6 +157,8 @@ class JobState(str, enum.Enum):
     MOVING = "moving"
     CAPTURING = "capturing"
     RECONSTRUCTING = "reconstructing"
+    #: Choosing a grasp, moving to it, closing the gripper, lifting, placing (a pick).
+    PICKING = "picking"
     #: A cancel was accepted; the job stops at the end of what it is doing.
     CANCELLING = "cancelling"
     SUCCEEDED = "succeeded"
@@ -177,9 +196,38 @@ class Superquadric(BaseModel):
     T_world_object: Pose
 
 
+class Grasp(BaseModel):
+    """A parallel-jaw grasp (DESIGN.md §3): the grasp frame (z the approach, y the closing
+    direction, the origin between the pads), the object's width between the pads, and how
+    likely it is to hold given the model's own error."""
+
+    model_config = ConfigDict(extra="forbid")
+    T_world_grasp: Pose
+    width: Annotated[float, Field(gt=0)]
+    score: Annotated[float, Field(ge=0, le=1)]
+    approach: Literal["top", "side", "tilted"] = "top"
+
+
+class PickOutcome(BaseModel):
+    """How a pick went. ``held`` is None where the gripper cannot tell; in a simulated cell the
+    simulator judges the grasp against its true object, and ``reason`` says why."""
+
+    model_config = ConfigDict(extra="forbid")
+    grasp: int                              # which of the result's grasps, from 0
+    T_base_flange: Pose                     # where the flange was when the gripper closed
+    held: bool | None
+    reason: str = ""
+    width: float | None = None              # the gripper's opening once closed, metres, if known
+    placed: bool = False
+
+
 class ScanResult(Message):
     job_id: str
     superquadric: Superquadric
+    #: Grasps of the cell's gripper, best first; empty when none is likely to hold (DESIGN.md §3).
+    grasps: list[Grasp] = []
+    #: For a job that asked for a pick.
+    pick: PickOutcome | None = None
     silhouette_iou: list[float]
     residual: float
     timings_ms: dict[str, float]
@@ -298,6 +346,9 @@ class ReconstructRequest(Message):
     segmentation: dict | None = None        # as in scan.json
     support_plane: Row4 | None = None
     options: dict = {}                      # core_cy.reconstruct.Options fields
+    #: The gripper to plan grasps for (DESIGN.md §3's GRIPPER.json), and how many; None: no grasps.
+    gripper: dict[str, float] | None = None
+    max_grasps: Annotated[int, Field(ge=1, le=50)] = 10
     #: This attempt's id, ``<cell>/<job_id>/<attempt>``: unique on the network, listed in the
     #: worker's heartbeat while it works on it, and echoed in its reply.
     ticket: Annotated[str, Field(max_length=300)] | None = None
@@ -313,6 +364,7 @@ class Reconstruction(BaseModel):
     timings_ms: dict[str, float]
     centre: Point                           # the enclosing sphere the points started on
     radius: PositiveFloat
+    grasps: list[Grasp] = []                # of the request's gripper, best first
 
 
 class ReconstructReply(Message):
