@@ -13,8 +13,11 @@ import argparse
 import json
 import logging
 import sys
+import time
 
 from core_cy.errors import CoreError
+from core_cy.grasp import plan_grasps
+from core_cy.gripper import DEFAULT_GRIPPER, Gripper, grasps_to_json
 from core_cy.reconstruct import Options, reconstruct
 
 from . import keys
@@ -25,9 +28,42 @@ from .errors import BundleError, CellError
 log = logging.getLogger("robocell")
 
 
+def _gripper(path: str | None) -> Gripper:
+    """The gripper of ``--gripper``, or the built-in one; a bad file is a one-line error."""
+    if path is None:
+        return DEFAULT_GRIPPER
+    try:
+        with open(path, "rb") as file:
+            return Gripper.from_json(file.read(1 << 16))
+    except OSError as exc:
+        raise CoreError(f"cannot read the gripper file: {exc.strerror}") from exc
+
+
+def _with_grasps(line: dict, result, bundle, gripper: Gripper, max_grasps: int) -> dict:
+    """Add DESIGN.md §3's ``grasps`` to a result line, and their time to ``timings_ms``."""
+    start = time.perf_counter()
+    grasps = plan_grasps(result.superquadric, bundle.support_plane, gripper, residual=result.residual,
+                         silhouette_iou=result.silhouette_iou, points=result.points, max_grasps=max_grasps)
+    ms = (time.perf_counter() - start) * 1e3
+    timings = line["timings_ms"]
+    timings["grasp"] = round(ms, 3)
+    timings["total"] = round(timings["total"] + ms, 3)
+    return {**line, "grasps": grasps_to_json(grasps)}
+
+
 def _reconstruct_command(args: argparse.Namespace) -> int:
     options = Options(n_points=args.n_points, inside_weight=args.inside_weight,
                       cauchy_scale=args.cauchy_scale)
+    if not args.grasps and (args.gripper is not None or args.max_grasps is not None):
+        print("robocell reconstruct: --gripper and --max-grasps only apply with --grasps", file=sys.stderr)
+        return 2
+    gripper = None
+    if args.grasps:
+        try:
+            gripper = _gripper(args.gripper)
+        except CoreError as exc:
+            print(f"robocell reconstruct: {args.gripper}: {exc}", file=sys.stderr)
+            return 2
     failures = 0
     for scan in args.scan_dirs:
         try:
@@ -35,6 +71,8 @@ def _reconstruct_command(args: argparse.Namespace) -> int:
             result = reconstruct(bundle.views, segmentation=bundle.segmentation,
                                  support_plane=bundle.support_plane, options=options)
             line = {"scan": scan, **result.to_dict(points=args.points)}
+            if gripper is not None:
+                line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
         except (BundleError, CoreError) as exc:
             failures += 1
             line = {"scan": scan, "error": str(exc)}
@@ -63,6 +101,16 @@ def _sim_command(args: argparse.Namespace) -> int:
     from .sim import cli as sim_cli
 
     return sim_cli.run(args)
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive whole number")
+    return value
 
 
 def _worker_id(text: str) -> str:
@@ -154,6 +202,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="weight of points inside the superquadric; 1 = plain Jaklic (default %(default)s)")
     rec.add_argument("--cauchy-scale", type=float, default=defaults.cauchy_scale,
                      help="robust loss scale for points outside, in cloud radii (default %(default)s)")
+    rec.add_argument("--grasps", action="store_true",
+                     help="add parallel-jaw grasps of the object, best first (DESIGN.md §3)")
+    rec.add_argument("--gripper", metavar="GRIPPER.json",
+                     help="the gripper's dimensions for --grasps (default: the built-in gripper)")
+    rec.add_argument("--max-grasps", type=_positive, metavar="N", help="at most N grasps per bundle (default 10)")
     rec.set_defaults(run=_reconstruct_command)
 
     sim = commands.add_parser(

@@ -12,10 +12,14 @@ The stages (DESIGN.md §1), each in its own module:
     quality     silhouette IoU and residual of a fit
     scoring     volumetric IoU of two superquadrics, for scoring against a truth
     reconstruct the whole pipeline, with timings per stage
+    gripper     parallel-jaw grippers and the grasp frame
+    grasp       ranked grasps of a superquadric, judged against the fit's own error (kernel in Cython)
 """
 
 from .camera import Camera
-from .errors import CameraError, CoreError, FitError, GeometryError, ImageError, SilhouetteError
+from .errors import CameraError, CoreError, FitError, GeometryError, GripperError, ImageError, SilhouetteError
+from .grasp import plan_grasps
+from .gripper import Grasp, Gripper
 from .reconstruct import Options, Reconstruction, View, reconstruct
 from .scoring import centre_error, volumetric_iou
 from .segment import Segmentation
@@ -24,5 +28,5 @@ from .superquadric import Superquadric, fit_superquadric
 __all__ = [
     "Camera", "View", "Options", "Reconstruction", "reconstruct", "Segmentation", "Superquadric",
     "fit_superquadric", "volumetric_iou", "centre_error", "CoreError", "CameraError", "ImageError",
-    "SilhouetteError", "GeometryError", "FitError",
+    "SilhouetteError", "GeometryError", "FitError", "GripperError", "Gripper", "Grasp", "plan_grasps",
 ]

@@ -8,7 +8,8 @@ can catch that; the tree lets them be more specific::
     ├── ImageError         an image cannot be decoded or has the wrong shape
     ├── SilhouetteError    a view's silhouette is empty or fills the image
     ├── GeometryError      the views do not constrain the object (rays, support plane)
-    └── FitError           the superquadric fit cannot run on these points
+    ├── FitError           the superquadric fit cannot run on these points
+    └── GripperError       a gripper description is missing a value or has an absurd one
 
 Errors about one view carry its index in ``view`` and name it in the message.
 """
@@ -22,6 +23,7 @@ __all__ = [
     "SilhouetteError",
     "GeometryError",
     "FitError",
+    "GripperError",
 ]
 
 
@@ -51,3 +53,7 @@ class GeometryError(CoreError):
 
 class FitError(CoreError):
     """The superquadric fit cannot run on the given points."""
+
+
+class GripperError(CoreError):
+    """A gripper description is missing a field, or a field's value is absurd."""
