@@ -140,28 +140,52 @@ def _support(sizes, shape, w):
     return ((v[..., 0] ** p + v[..., 1] ** p) ** (q / p) + v[..., 2] ** q) ** (1 / q)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products along the last axis (np.cross costs more than the product here)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _rotations(vectors: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation matrices (..., 3, 3) of rotation vectors (..., 3) (axis times angle)."""
+    theta = np.linalg.norm(vectors, axis=-1)
+    axis = vectors / np.maximum(theta, 1e-300)[..., None]
+    K = np.zeros(vectors.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
+    K -= np.swapaxes(K, -1, -2)
+    return np.eye(3) + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
+
+
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
-def _upright(frame: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, bool]:
-    """The frame turned so that its axis nearest the vertical is vertical, if within 25 degrees.
+def _turned(frame: np.ndarray, current: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The frame turned by the smallest rotation taking unit vector ``current`` to ``target``."""
+    turn_axis = _cross(current, target)
+    sine = np.linalg.norm(turn_axis)
+    if sine < 1e-12:
+        return frame
+    return _rotation(turn_axis / sine, math.atan2(sine, current @ target)) @ frame
 
-    An object at rest on a plane rests on a face, or with a principal axis along
-    the plane's normal (its stable poses), so the fit's tilt is its error.
+
+def _upright(frame: np.ndarray, down: np.ndarray, round_axis: int | None) -> tuple[np.ndarray, bool]:
+    """The frame turned so that one of its axes is vertical, if the fit is within 25 degrees of it.
+
+    An object at rest on a plane rests with a principal axis along the plane's
+    normal (its stable poses), so the fit's tilt is its error. Around a round
+    axis any direction is principal: that axis, if nearly level, is made level.
     """
     cosines = frame.T @ down
     axis = int(np.argmax(np.abs(cosines)))
-    if abs(cosines[axis]) < math.cos(_SNAP):
-        return frame, False
-    current = frame[:, axis] * np.sign(cosines[axis])
-    turn_axis = np.cross(current, down)
-    sine = np.linalg.norm(turn_axis)
-    if sine < 1e-12:
-        return frame, True
-    return _rotation(turn_axis / sine, math.atan2(sine, current @ down)) @ frame, True
+    if abs(cosines[axis]) >= math.cos(_SNAP):
+        return _turned(frame, frame[:, axis] * np.sign(cosines[axis]), down), True
+    if round_axis is not None and abs(cosines[round_axis]) <= math.sin(_SNAP):
+        level = frame[:, round_axis] - cosines[round_axis] * down
+        return _turned(frame, frame[:, round_axis], level / np.linalg.norm(level)), True
+    return frame, False
 
 
 def _frames(sq: Superquadric, down: np.ndarray | None):
@@ -170,10 +194,9 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
 
     Frame axis 2 is the superquadric's z (the e1 axis). Around a round axis, the
     frame turns in steps from the one whose approach axis points most nearly down.
-    With a support plane, each frame is set upright (:func:`_upright`).
+    With a support plane, the object's frame is first set upright (:func:`_upright`).
     """
     R, a, e = sq.T_world_object[:3, :3], sq.size, sq.shape
-    frames, sizes, shapes = [R], [a], [e]
 
     def close(u, v):
         return abs(u - v) <= _ROUND_SIZE * max(u, v)
@@ -188,6 +211,10 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
         rings.append((1, 2, 0))
     if len(rings) > 1 and down is not None:  # a ball: turning about the vertical axis suffices
         rings = [max(rings, key=lambda ring: abs(R[:, ring[0]] @ down))]
+    upright = False
+    if down is not None:
+        R, upright = _upright(R, down, rings[0][0] if len(rings) == 1 else None)
+    frames, sizes, shapes = [R], [a], [e]
     for axis, u, v in rings:
         mean = (a[u] + a[v]) / 2
         ring_size = a.copy()
@@ -203,10 +230,7 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
             frames.append(turn @ R)
             sizes.append(ring_size)
             shapes.append(ring_shape)
-    upright = [False] * len(frames)
-    if down is not None:
-        frames, upright = zip(*(_upright(frame, down) for frame in frames))
-    return np.array(frames), np.array(sizes), np.array(shapes), np.array(upright)
+    return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright)
 
 
 def _check_plane(support_plane) -> np.ndarray | None:
@@ -238,7 +262,7 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     y = F[f, :, i]
     z = s[:, None] * F[f, :, j]
     keep = np.ones(len(f), bool) if plane is None else z @ plane[:3] <= 0.1
-    x = np.cross(y[keep], z[keep])
+    x = _cross(y[keep], z[keep])
     R_grasp = np.stack([x, y[keep], z[keep]], axis=2)
     f, i, j, s = f[keep], i[keep], j[keep], s[keep]
     c = {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i, "j": j, "k": 3 - i - j, "s": s,
@@ -379,23 +403,17 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     scale = np.maximum(0.3, 1 + draws[:, None, 0:3] * length / sizes_grasp[None, :, :])
     shift = draws[:, 3:6] * length
     if plane is None:
-        turn = np.broadcast_to(draws[:, None, 6:9] * angle, (len(draws), len(R_grasp), 3))
+        rotation = np.broadcast_to(_rotations(draws[:, None, 6:9] * angle), (len(draws), len(R_grasp), 3, 3))
     else:
         normal = plane[:3]
-        side = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+        side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
         side /= np.linalg.norm(side)
-        basis = np.stack([normal, side, np.cross(normal, side)])  # rows: world axes of the draws
-        tilt = np.where(upright, _TILT_ERROR, angle)
-        sigma = np.stack([np.full(len(R_grasp), angle), tilt, tilt], axis=1)  # (M, 3)
-        world = np.einsum("pmk,ka->pma", draws[:, None, 6:9] * sigma[None], basis)
-        turn = np.einsum("mab,pma->pmb", R_grasp, world)  # the rotation vectors in grasp axes
-    theta = np.linalg.norm(turn, axis=2)
-    axis = turn / np.maximum(theta, 1e-300)[:, :, None]
-    K = np.zeros(turn.shape + (3,))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
-    K -= np.swapaxes(K, -1, -2)
-    rotation = (np.eye(3) + np.sin(theta)[..., None, None] * K
-                + (1 - np.cos(theta))[..., None, None] * K @ K)
+        basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
+        # World rotations of a free frame and of an upright one, then in each grasp's axes.
+        world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
+                                     draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
+        W = world[upright.astype(np.intp)]  # (M, P, 3, 3)
+        rotation = np.swapaxes(np.swapaxes(R_grasp, 1, 2)[:, None] @ W @ R_grasp[:, None], 0, 1)
     variant = np.where(draws[:, 9] > 0.43, 1, np.where(draws[:, 9] < -0.43, 2, 0))
     return variant.astype(np.int_), np.ascontiguousarray(scale), np.ascontiguousarray(rotation), shift
 
@@ -557,8 +575,8 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
                      _hull(candidates, points, superquadric, gripper, error[0]))
     if len(pairs["i"]) == 0:
         return []
-    kinds = np.array([_approach_kind(R[:, 2], plane) for R in pairs["R"]])
-    preference = np.array([_APPROACH_ORDER.index(kind) for kind in kinds])
+    preference = _approach_preference(pairs["R"][:, :, 2], plane)
+    kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
     pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
     score = _robust(pairs, gripper, error, plane)
@@ -581,12 +599,10 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
     return grasps
 
 
-def _approach_kind(approach: np.ndarray, plane: np.ndarray | None) -> str:
+def _approach_preference(approach: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
+    """Index into ``_APPROACH_ORDER`` of each approach (N, 3): "top" within 30 degrees of
+    straight down the plane's normal, "side" within 30 degrees of level, else "tilted"."""
     if plane is None:
-        return "tilted"
-    down = float(-approach @ plane[:3])
-    if down >= math.cos(math.radians(30)):
-        return "top"
-    if abs(down) <= math.sin(math.radians(30)):
-        return "side"
-    return "tilted"
+        return np.full(len(approach), 2)
+    down = -approach @ plane[:3]
+    return np.where(down >= math.cos(math.radians(30)), 0, np.where(np.abs(down) <= 0.5, 1, 2))
