@@ -65,7 +65,7 @@ _PALM_CLEARANCE = 0.05
 _COMPLIANCE = 1 / 20  # of the pad length: how far the pads give
 # A cross-section is round when its two sizes differ by less than this fraction
 # and its exponent is within this of 1.
-_ROUND_SIZE, _ROUND_SHAPE = 0.08, 0.25
+_ROUND_SIZE, _ROUND_SHAPE = 0.08, 0.3
 _RING_STEP = math.radians(30)
 _SNAP = math.radians(25)  # a frame this near upright is set upright
 _TILT_ERROR = math.radians(1.0)  # of an upright frame about the horizontal
@@ -78,6 +78,7 @@ _SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its en
 # The exponents' error: rounder, and boxier (fits of boxes come out rounder than they are).
 _SHAPE_ERROR = (0.2, -0.3)
 _SHAPE_LIMITS = (0.1, 1.9)
+_SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too long
 # Sample grid of the surface facing each finger: across the finger, along the approach.
 _SAMPLES = (5, 7)
 _APPROACH_ORDER = ("top", "side", "tilted")
@@ -190,7 +191,7 @@ def _upright(frame: np.ndarray, down: np.ndarray, round_axis: int | None) -> tup
 
 def _frames(sq: Superquadric, down: np.ndarray | None):
     """Object frames to grasp in: F (n, 3, 3) world axes as columns, sizes (n, 3), shape (n, 2),
-    upright (n,) bool.
+    upright (n,) bool, and own (n,) bool: along the object's own axes (not turned about one).
 
     Frame axis 2 is the superquadric's z (the e1 axis). Around a round axis, the
     frame turns in steps from the one whose approach axis points most nearly down.
@@ -230,7 +231,18 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
             frames.append(turn @ R)
             sizes.append(ring_size)
             shapes.append(ring_shape)
-    return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright)
+    own = [0]  # frames along the object's own axes, where the jaws also slide
+    if down is not None and not upright:
+        # Fitted more than 25 degrees off upright: an object at rest rarely is, but a single
+        # superquadric of a non-convex one (an L) often is. Try the frame set upright too.
+        axis = int(np.argmax(np.abs(R.T @ down)))
+        own.append(len(frames))
+        frames.append(_turned(R, R[:, axis] * np.sign(R[:, axis] @ down), down))
+        sizes.append(a)
+        shapes.append(e)
+    slides = np.zeros(len(frames), bool)
+    slides[own] = True
+    return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright), slides
 
 
 def _check_plane(support_plane) -> np.ndarray | None:
@@ -255,7 +267,7 @@ def _take(c: dict[str, np.ndarray], index) -> dict[str, np.ndarray]:
 def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) -> dict[str, np.ndarray]:
     """Every (frame, closing axis i, approach axis j, approach sign, slide ``dx``) not
     approaching from below."""
-    F, sizes, shapes, upright = _frames(sq, None if plane is None else -plane[:3])
+    F, sizes, shapes, upright, own = _frames(sq, None if plane is None else -plane[:3])
     combos = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
     f = np.repeat(np.arange(len(F)), len(combos))
     i, j, s = (np.tile(combos[:, c], len(F)) for c in range(3))
@@ -272,8 +284,9 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     reach = np.maximum(0.0, c["sizes"][np.arange(len(f)), c["k"]] - gripper.finger_width / 2)
     slides = [c]
     for fraction in _SLIDES:
-        moved = _take(c, np.flatnonzero((f == 0) & (reach > 0.1 * c["sizes"].max(axis=1))))
-        moved["dx"] = fraction * reach[(f == 0) & (reach > 0.1 * c["sizes"].max(axis=1))]
+        slides_here = own[f] & (reach > 0.1 * c["sizes"].max(axis=1))
+        moved = _take(c, np.flatnonzero(slides_here))
+        moved["dx"] = fraction * reach[slides_here]
         slides.append(moved)
     c = {key: np.concatenate([part[key] for part in slides]) for key in c}
     c["id"] = np.arange(len(c["dx"]))
@@ -389,7 +402,8 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
                    upright: np.ndarray, plane: np.ndarray | None):
     """The model's error drawn ``_ERROR_DRAWS`` times (fixed draws, so planning is repeatable).
 
-    Sizes along the grasp axes and the centre move by the length error. The
+    Sizes along the grasp axes (half an error smaller on average) and the centre move
+    by the length error. The
     rotation is drawn in the world: about the plane's normal by the angle error,
     about the two horizontal axes by it too, or by ``_TILT_ERROR`` for a frame set
     upright; without a plane, about each grasp axis by the angle error.
@@ -400,7 +414,9 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     """
     length, angle = error
     draws = _DRAWS
-    scale = np.maximum(0.3, 1 + draws[:, None, 0:3] * length / sizes_grasp[None, :, :])
+    # A hull only errs outward, and fits of it mostly do too: the semi-axes are drawn
+    # half a standard error smaller on average.
+    scale = np.maximum(0.3, 1 + (draws[:, None, 0:3] - _SIZE_BIAS) * length / sizes_grasp[None, :, :])
     shift = draws[:, 3:6] * length
     if plane is None:
         rotation = np.broadcast_to(_rotations(draws[:, None, 6:9] * angle), (len(draws), len(R_grasp), 3, 3))
