@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.robocell-installed
 
-.PHONY: install demo test bench bench-cell bench-scale contract clean
+.PHONY: install demo test bench bench-cell bench-scale bench-grasp contract clean
 
 # A bare `make`: the venv with robocell installed, nothing run.
 install: $(STAMP)
@@ -35,6 +35,10 @@ bench-cell: $(STAMP)
 
 bench-scale: $(STAMP)
 	$(BIN)/python bench/bench_scale.py
+
+# Grasps planned on real reconstructions of simulated scenes, judged against the true objects.
+bench-grasp: $(STAMP)
+	$(BIN)/python bench/bench_grasp.py
 
 # Scores `robocell reconstruct` on scans from a renderer written apart from ours.
 contract: $(STAMP)

@@ -12,7 +12,10 @@ The stages (DESIGN.md §1), each in its own module:
     quality     silhouette IoU and residual of a fit
     scoring     volumetric IoU of two superquadrics, for scoring against a truth
     reconstruct the whole pipeline, with timings per stage
+    gripper     parallel-jaw grippers and the grasp frame
+    grasp       ranked grasps of a superquadric, judged against the fit's own error (kernel in Cython)
     rigid       the one check of a rigid transform
+    images      an image's size from its header, checked before decoding
     plan        where the camera looks from: flange poses around a target, the workspace check
     calibrate   chessboard calibration: intrinsics and hand-eye
 """
@@ -26,8 +29,9 @@ _WHERE = {
     "Camera": "camera", "View": "reconstruct", "Options": "reconstruct", "Reconstruction": "reconstruct",
     "reconstruct": "reconstruct", "Segmentation": "segment", "Superquadric": "superquadric",
     "fit_superquadric": "superquadric", "volumetric_iou": "scoring", "centre_error": "scoring",
+    "Gripper": "gripper", "Grasp": "gripper", "plan_grasps": "grasp",
     "CoreError": "errors", "CameraError": "errors", "ImageError": "errors", "SilhouetteError": "errors",
-    "GeometryError": "errors", "FitError": "errors", "CalibrationError": "errors",
+    "GeometryError": "errors", "FitError": "errors", "CalibrationError": "errors", "GripperError": "errors",
 }
 __all__ = list(_WHERE)
 

@@ -9,7 +9,8 @@ can catch that; the tree lets them be more specific::
     ├── SilhouetteError    a view's silhouette is empty or fills the image
     ├── GeometryError      the views do not constrain the object (rays, support plane)
     ├── FitError           the superquadric fit cannot run on these points
-    └── CalibrationError   calibration images or robot poses cannot give a calibration
+    ├── CalibrationError   calibration images or robot poses cannot give a calibration
+    └── GripperError       a gripper description is missing a value or has an absurd one
 
 Errors about one view carry its index in ``view`` and name it in the message.
 """
@@ -24,6 +25,7 @@ __all__ = [
     "GeometryError",
     "FitError",
     "CalibrationError",
+    "GripperError",
 ]
 
 
@@ -58,3 +60,7 @@ class FitError(CoreError):
 class CalibrationError(CoreError):
     """Calibration images or robot poses cannot give a calibration: too few usable images,
     poses that do not match the images, or poses that are not rigid motions."""
+
+
+class GripperError(CoreError):
+    """A gripper description is missing a field, or a field's value is absurd."""

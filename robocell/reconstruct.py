@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import sys
+import time
 
 from .command import Commands
 
@@ -27,6 +28,50 @@ def register(commands: Commands) -> None:
                         help="weight of points inside the superquadric; 1 = plain Jaklic (default: the algorithm's)")
     parser.add_argument("--cauchy-scale", type=float,
                         help="robust loss scale for points outside, in cloud radii (default: the algorithm's)")
+    parser.add_argument("--grasps", action="store_true",
+                        help="add parallel-jaw grasps of the object, best first (DESIGN.md §3)")
+    parser.add_argument("--gripper", metavar="GRIPPER.json",
+                        help="the gripper's dimensions for --grasps (default: the built-in gripper)")
+    parser.add_argument("--max-grasps", type=_positive, metavar="N", help="at most N grasps per bundle (default 10)")
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive whole number")
+    return value
+
+
+def _gripper(path: str | None):
+    """The gripper of ``--gripper``, or the built-in one; a bad file is a one-line error."""
+    from core_cy.errors import CoreError
+    from core_cy.gripper import DEFAULT_GRIPPER, Gripper
+
+    if path is None:
+        return DEFAULT_GRIPPER
+    try:
+        with open(path, "rb") as file:
+            return Gripper.from_json(file.read(1 << 16))
+    except OSError as exc:
+        raise CoreError(f"cannot read the gripper file: {exc.strerror}") from exc
+
+
+def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
+    """Add DESIGN.md §3's ``grasps`` to a result line, and their time to ``timings_ms``."""
+    from core_cy.grasp import plan_grasps
+    from core_cy.gripper import grasps_to_json
+
+    start = time.perf_counter()
+    grasps = plan_grasps(result.superquadric, bundle.support_plane, gripper, residual=result.residual,
+                         silhouette_iou=result.silhouette_iou, points=result.points, max_grasps=max_grasps)
+    ms = (time.perf_counter() - start) * 1e3
+    timings = line["timings_ms"]
+    timings["grasp"] = round(ms, 3)
+    timings["total"] = round(timings["total"] + ms, 3)
+    return {**line, "grasps": grasps_to_json(grasps)}
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
@@ -37,6 +82,16 @@ def _reconstruct(args: argparse.Namespace) -> int:
 
     given = {"n_points": args.n_points, "inside_weight": args.inside_weight, "cauchy_scale": args.cauchy_scale}
     options = Options(**{name: value for name, value in given.items() if value is not None})
+    if not args.grasps and (args.gripper is not None or args.max_grasps is not None):
+        print("robocell reconstruct: --gripper and --max-grasps only apply with --grasps", file=sys.stderr)
+        return 2
+    gripper = None
+    if args.grasps:
+        try:
+            gripper = _gripper(args.gripper)
+        except CoreError as exc:
+            print(f"robocell reconstruct: {args.gripper}: {exc}", file=sys.stderr)
+            return 2
     failures = 0
     for scan in args.scan_dirs:
         try:
@@ -44,6 +99,8 @@ def _reconstruct(args: argparse.Namespace) -> int:
             result = reconstruct(bundle.views, segmentation=bundle.segmentation,
                                  support_plane=bundle.support_plane, options=options)
             line = {"scan": scan, **result.to_dict(points=args.points)}
+            if gripper is not None:
+                line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
         except (BundleError, CoreError) as exc:
             failures += 1
             line = {"scan": scan, "error": str(exc)}

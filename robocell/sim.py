@@ -12,13 +12,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
+from workers.sim.objects import COMPOUNDS, FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject, compound
 
 from .command import Commands
 
 __all__ = ["register", "add_arguments", "run"]
 
-SHAPES = [*FAMILIES, "cup-stack", "lumpy"]
+SHAPES = [*FAMILIES, "cup-stack", "lumpy", *COMPOUNDS]
 # Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
 # radius, height of one cup; for a lumpy figure: the radii of its ellipsoid.
 DEFAULT_SIZE = {
@@ -37,8 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard"], dest="set_name",
-                       help="write a fixed benchmark set (the default when --shape is not given)")
+    which.add_argument("--set", choices=["standard", "grasp"], dest="set_name",
+                       help="write a fixed benchmark set (the default when --shape is not given): standard, "
+                            "or grasp (bench/bench_grasp.py's scenes, 10 per family)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
                         help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
@@ -60,8 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _make_object(args: argparse.Namespace) -> SimObject:
-    size = tuple(args.size) if args.size is not None else DEFAULT_SIZE[args.shape]
     position = tuple(args.position) if args.position is not None else (0.6, 0.0)
+    if args.shape in COMPOUNDS:
+        if args.size is not None or args.lying:
+            raise ValueError(f"--size and --lying do not apply to {args.shape} (its parts follow --seed)")
+        return compound(args.shape, position, 30.0 if args.yaw is None else args.yaw, seed=args.seed)
+    size = tuple(args.size) if args.size is not None else DEFAULT_SIZE[args.shape]
     if args.shape == "cup-stack":
         return CupStack(position, *size, top_inverted=not args.lying)
     if args.shape == "lumpy":
@@ -72,6 +77,7 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
+    from workers.sim.grasp_set import grasp_set
     from workers.sim.scans import make_spec, write_standard_set
 
     if args.shape is None:
@@ -79,7 +85,11 @@ def run(args: argparse.Namespace) -> int:
         if given:
             print(f"robocell sim: {', '.join(given)} only apply with --shape", file=sys.stderr)
             return 2
-        for path in write_standard_set(args.out, seed=args.seed, write_masks=args.masks):
+        if args.set_name == "grasp":
+            paths = (spec.write(args.out, write_masks=args.masks) for spec in grasp_set(args.seed))
+        else:
+            paths = write_standard_set(args.out, seed=args.seed, write_masks=args.masks)
+        for path in paths:
             print(path, flush=True)
         return 0
     count = 1 if args.count is None else args.count

@@ -19,12 +19,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "COMPOUNDS",
     "FAMILIES",
+    "CompoundObject",
     "CupStack",
     "LumpyFigure",
     "SimObject",
     "SuperquadricObject",
     "box",
+    "compound",
     "cylinder",
     "ellipsoid",
     "rotation_z",
@@ -408,3 +411,108 @@ class LumpyFigure:
             "amplitude": self.amplitude,
             **_bbox_truth(self.mesh()),
         }
+
+
+class CompoundObject:
+    """A union of superquadric parts, one rigid object (a mug and its handle, say).
+
+    The parts may overlap; their meshes are drawn together (the z-buffer keeps
+    what is in front) and ``truth()`` lists them as DESIGN.md §3's ``parts``.
+    """
+
+    def __init__(self, name: str, parts: Sequence[SuperquadricObject]) -> None:
+        if not parts:
+            raise ValueError("a compound object needs at least one part")
+        self.name = str(name)
+        self.parts = tuple(parts)
+        self._mesh: Mesh | None = None
+
+    def inside(self, points_world: ArrayLike) -> NDArray[np.bool_]:
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        out = np.zeros(len(P), dtype=bool)
+        for part in self.parts:
+            out |= part.inside(P)
+        return out
+
+    def mesh(self) -> Mesh:
+        if self._mesh is None:
+            vertices, faces, offset = [], [], 0
+            for part in self.parts:
+                v, f = part.mesh()
+                vertices.append(v)
+                faces.append(f + offset)
+                offset += len(v)
+            self._mesh = (np.vstack(vertices), np.vstack(faces).astype(np.int32))
+        return self._mesh
+
+    def truth(self) -> dict[str, Any]:
+        parts = [{key: part.truth()[key] for key in ("size", "shape", "T_world_object")} for part in self.parts]
+        return {"kind": "compound", "name": self.name, "parts": parts, **_bbox_truth(self.mesh())}
+
+
+def _placed(family: str | Sequence[float], size: ArrayLike, R: ArrayLike, centre: ArrayLike) -> SuperquadricObject:
+    shape = FAMILIES[family] if isinstance(family, str) else family
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, centre
+    return SuperquadricObject(size, shape, T)
+
+
+def _cup_stack(rng: np.random.Generator) -> list[tuple]:
+    """Two cups (short cylinders), the upper one a little narrower or wider, standing on the lower."""
+    r1, h1 = rng.uniform(0.022, 0.037), rng.uniform(0.025, 0.04)
+    r2, h2 = float(np.clip(r1 + rng.uniform(-0.008, 0.008), 0.018, 0.038)), rng.uniform(0.02, 0.035)
+    return [("cylinder", (r1, r1, h1), np.eye(3), (0.0, 0.0, h1)),
+            ("cylinder", (r2, r2, h2), np.eye(3), (0.0, 0.0, 2 * h1 + h2 - 0.002))]
+
+
+def _mug(rng: np.random.Generator) -> list[tuple]:
+    """A cylinder with a C-shaped handle of three bars on one side."""
+    r, h = rng.uniform(0.025, 0.036), rng.uniform(0.035, 0.05)
+    reach, bar = rng.uniform(0.018, 0.028), rng.uniform(0.004, 0.006)
+    span = rng.uniform(0.45, 0.7) * h  # half the handle's height
+    wide = rng.uniform(0.005, 0.008)  # half the handle's width (tangential)
+    z0 = h
+    out_x = r + reach - bar
+    return [("cylinder", (r, r, h), np.eye(3), (0.0, 0.0, z0)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (r + (reach - 0.004) / 2, 0.0, z0 + span)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (r + (reach - 0.004) / 2, 0.0, z0 - span)),
+            ("rounded-box", (bar, wide, span + bar), np.eye(3), (out_x, 0.0, z0))]
+
+
+def _box_and_ball(rng: np.random.Generator) -> list[tuple]:
+    """A lying box with a ball resting on its top, sunk 2 mm into it so that the two are one body."""
+    a = (rng.uniform(0.03, 0.06), rng.uniform(0.015, 0.035), rng.uniform(0.012, 0.03))
+    ball = rng.uniform(0.012, min(0.03, a[1] + 0.01))
+    offset = rng.uniform(-0.5, 0.5) * (a[0] - ball)
+    return [("box", a, np.eye(3), (0.0, 0.0, a[2])),
+            ("ellipsoid", (ball, ball, ball), np.eye(3), (offset, 0.0, 2 * a[2] + ball - 0.002))]
+
+
+def _l_of_boxes(rng: np.random.Generator) -> list[tuple]:
+    """Two boxes in an L: a lying bar, and an upright block standing on one of its ends."""
+    bar = (rng.uniform(0.04, 0.07), rng.uniform(0.012, 0.03), rng.uniform(0.01, 0.02))
+    post = (rng.uniform(0.012, 0.025), bar[1], rng.uniform(0.025, 0.05))
+    x = bar[0] - post[0]
+    return [("box", bar, np.eye(3), (0.0, 0.0, bar[2])),
+            ("box", post, np.eye(3), (x, 0.0, 2 * bar[2] + post[2] - 0.002))]
+
+
+#: Compound objects: name -> a function drawing its parts (family, size, R, centre in its own frame).
+COMPOUNDS = {"cups": _cup_stack, "mug": _mug, "box-and-ball": _box_and_ball, "l-boxes": _l_of_boxes}
+
+
+def compound(name: str, position_xy: ArrayLike, yaw_deg: float = 0.0, seed: int = 0) -> CompoundObject:
+    """A compound object of :data:`COMPOUNDS` with sizes drawn from ``seed``, on the table at
+    ``position_xy``, turned ``yaw_deg`` about the vertical.
+
+    Examples
+    --------
+    >>> mug = compound("mug", (0.6, 0.0), seed=1)
+    >>> len(mug.truth()["parts"]), round(float(mug.mesh()[0][:, 2].min()), 9)
+    (4, 0.0)
+    """
+    parts = COMPOUNDS[name](np.random.default_rng(seed))
+    R = rotation_z(yaw_deg)
+    xy = np.append(np.asarray(position_xy, dtype=np.float64).reshape(2), 0.0)
+    return CompoundObject(name, [_placed(family, size, R @ R_part, R @ np.asarray(centre) + xy)
+                                 for family, size, R_part, centre in parts])

@@ -1,0 +1,185 @@
+# cython: boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Kernel of core_cy.grasp: a grasp's margins on perturbed copies of the model's sampled surface."""
+
+from libc.math cimport acos, fabs, pow, sqrt, INFINITY, NAN
+
+
+cdef inline double _clip_unit(double v) noexcept nogil:
+    return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+
+
+def half_chords(const double[:, ::1] sizes not None, const double[:, ::1] shape not None,
+                const long[::1] axis not None, const double[:, ::1] u not None,
+                double[::1] half not None, double[:, ::1] normal not None):
+    """Half-chords of centred, axis-aligned superquadrics along a frame axis, and the normals.
+
+    sizes (M, 3), shape (M, 2) as (e1, e2), with frame axis 2 carrying e1; axis (M,) the
+    chord's axis; u (M, 3) the point's other two coordinates (``u[axis]`` is ignored).
+    Writes half (M,), NaN where the line misses, and normal (M, 3): the unit outward
+    normal at the surface point whose ``axis`` coordinate is ``+half``, the others ``u``'s.
+    """
+    cdef Py_ssize_t row, n = u.shape[0], c
+    cdef double s[3]
+    cdef double p[3]
+    cdef double g[3]
+    cdef double e1, e2, S, B, common, length, h
+    cdef int k, other
+    with nogil:
+        for row in range(n):
+            for c in range(3):
+                s[c] = sizes[row, c]
+                p[c] = fabs(u[row, c]) / s[c]
+            e1, e2, k = shape[row, 0], shape[row, 1], <int>axis[row]
+            if k == 2:
+                S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
+                B = 1 - pow(S, e2 / e1) if S < 1 else -1.0
+                h = pow(B, e1 / 2) if B > 0 else NAN
+            else:
+                other = 1 - k
+                S = pow(p[2], 2 / e1)
+                B = pow(1 - S, e1 / e2) - pow(p[other], 2 / e2) if S < 1 else -1.0
+                h = pow(B, e2 / 2) if B > 0 else NAN
+            if h != h:
+                half[row] = NAN
+                normal[row, 0], normal[row, 1], normal[row, 2] = 0.0, 0.0, 0.0
+                continue
+            half[row] = h * s[k]
+            p[k] = h
+            S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
+            common = pow(S, e2 / e1 - 1) if S > 0 else 0.0
+            g[0] = common * pow(p[0], 2 / e2 - 1) / s[0]
+            g[1] = common * pow(p[1], 2 / e2 - 1) / s[1]
+            g[2] = pow(p[2], 2 / e1 - 1) / s[2]
+            for c in range(3):
+                if c != k and u[row, c] < 0:
+                    g[c] = -g[c]
+            length = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+            for c in range(3):
+                normal[row, c] = g[c] / length if length > 0 else 0.0
+
+
+def perturbed_margins(const double[:, :, :, ::1] points not None,
+                      const double[:, :, :, ::1] normals not None,
+                      const unsigned char[:, :, ::1] valid not None,
+                      const long[::1] variant not None,
+                      const double[:, :, ::1] frame not None,
+                      const double[:, :, ::1] scale not None,
+                      const double[:, :, :, ::1] rotation not None,
+                      const double[:, ::1] shift not None,
+                      const double[:, ::1] centre not None,
+                      double half_width, double palm, double tip, double half_open,
+                      double compliance, double cone,
+                      double[:, ::1] work not None,
+                      double[:, :, ::1] out not None):
+    """Open-jaw and friction margins of each grasp under each perturbation of its model.
+
+    points, normals : (V, M, 2N, 3) surface samples of grasp m's model (shape variant v),
+        in the model's frame about its centre: the first N face the +y finger, the last N
+        the -y one.
+    frame : (M, 3, 3) model-frame to grasp-frame rotation of each grasp.
+    valid : (V, M, 2N) 1 where a sample exists.
+    variant : (P,) shape variant of each perturbation; scale (P, M, 3) stretch of
+        the model about its centre along the grasp axes; rotation (P, M, 3, 3) about
+        the centre, in each grasp's frame; shift (P, 3).
+    centre : (M, 3) the model's centre in each grasp frame.
+    work : (2N, 4) scratch.
+    out : (M, P, 4) written: open-jaw margin (half_open minus the farthest touch),
+        friction margin (cone minus the contacts' worst angle off antipodal, radians),
+        1.0 if both fingers reach the object else 0.0 (the margins are then 0), and the
+        lowest z of the sampled surface across the fingers' width (+inf if none).
+    """
+    cdef Py_ssize_t n_grasps = points.shape[1], n_samples = points.shape[2], half = n_samples // 2
+    cdef Py_ssize_t n_perturbations = variant.shape[0]
+    cdef Py_ssize_t a, b, k, v, side
+    cdef double dx, dy, dz, qx, qy, qz, sx, sy, sz, ext, ux, uy, uz
+    cdef double top, bottom, near, nx, ny, nz, length, line_x, line_y, line_z
+    cdef double cx[2]
+    cdef double cy[2]
+    cdef double cz[2]
+    cdef double mx[2]
+    cdef double my[2]
+    cdef double mz[2]
+    cdef double count[2]
+    cdef double angle1, angle2
+    cdef bint reached_up, reached_down
+    with nogil:
+        for a in range(n_grasps):
+            for b in range(n_perturbations):
+                v = variant[b]
+                sx, sy, sz = scale[b, a, 0], scale[b, a, 1], scale[b, a, 2]
+                top, bottom, near = -INFINITY, -INFINITY, INFINITY
+                reached_up, reached_down = False, False
+                for k in range(n_samples):
+                    work[k, 3] = 0.0
+                    if not valid[v, a, k]:
+                        continue
+                    ux, uy, uz = points[v, a, k, 0], points[v, a, k, 1], points[v, a, k, 2]
+                    dx = (frame[a, 0, 0] * ux + frame[a, 0, 1] * uy + frame[a, 0, 2] * uz) * sx
+                    dy = (frame[a, 1, 0] * ux + frame[a, 1, 1] * uy + frame[a, 1, 2] * uz) * sy
+                    dz = (frame[a, 2, 0] * ux + frame[a, 2, 1] * uy + frame[a, 2, 2] * uz) * sz
+                    qx = centre[a, 0] + shift[b, 0] + rotation[b, a, 0, 0] * dx + rotation[b, a, 0, 1] * dy + rotation[b, a, 0, 2] * dz
+                    qy = centre[a, 1] + shift[b, 1] + rotation[b, a, 1, 0] * dx + rotation[b, a, 1, 1] * dy + rotation[b, a, 1, 2] * dz
+                    qz = centre[a, 2] + shift[b, 2] + rotation[b, a, 2, 0] * dx + rotation[b, a, 2, 1] * dy + rotation[b, a, 2, 2] * dz
+                    if fabs(qx) > half_width:
+                        continue
+                    if qz < near:
+                        near = qz
+                    if qz < palm or qz > tip:
+                        continue
+                    work[k, 0], work[k, 1], work[k, 2], work[k, 3] = qx, qy, qz, 1.0
+                    if k < half:
+                        reached_up = True
+                        if qy > top:
+                            top = qy
+                    else:
+                        reached_down = True
+                        if -qy > bottom:
+                            bottom = -qy
+                out[a, b, 3] = near
+                if not (reached_up and reached_down):
+                    out[a, b, 0], out[a, b, 1], out[a, b, 2] = 0.0, 0.0, 0.0
+                    continue
+                for side in range(2):
+                    cx[side], cy[side], cz[side] = 0.0, 0.0, 0.0
+                    mx[side], my[side], mz[side] = 0.0, 0.0, 0.0
+                    count[side] = 0.0
+                for k in range(n_samples):
+                    if work[k, 3] == 0.0:
+                        continue
+                    side = 0 if k < half else 1
+                    ext = top - work[k, 1] if side == 0 else bottom + work[k, 1]
+                    if ext > compliance:
+                        continue
+                    # The normal: inverse-stretched, turned, normalised.
+                    ux, uy, uz = normals[v, a, k, 0], normals[v, a, k, 1], normals[v, a, k, 2]
+                    dx = (frame[a, 0, 0] * ux + frame[a, 0, 1] * uy + frame[a, 0, 2] * uz) / sx
+                    dy = (frame[a, 1, 0] * ux + frame[a, 1, 1] * uy + frame[a, 1, 2] * uz) / sy
+                    dz = (frame[a, 2, 0] * ux + frame[a, 2, 1] * uy + frame[a, 2, 2] * uz) / sz
+                    nx = rotation[b, a, 0, 0] * dx + rotation[b, a, 0, 1] * dy + rotation[b, a, 0, 2] * dz
+                    ny = rotation[b, a, 1, 0] * dx + rotation[b, a, 1, 1] * dy + rotation[b, a, 1, 2] * dz
+                    nz = rotation[b, a, 2, 0] * dx + rotation[b, a, 2, 1] * dy + rotation[b, a, 2, 2] * dz
+                    length = sqrt(nx * nx + ny * ny + nz * nz)
+                    if length > 0:
+                        mx[side] += nx / length
+                        my[side] += ny / length
+                        mz[side] += nz / length
+                    cx[side] += work[k, 0]
+                    cy[side] += work[k, 1]
+                    cz[side] += work[k, 2]
+                    count[side] += 1.0
+                line_x = cx[0] / count[0] - cx[1] / count[1]
+                line_y = cy[0] / count[0] - cy[1] / count[1]
+                line_z = cz[0] / count[0] - cz[1] / count[1]
+                length = sqrt(line_x * line_x + line_y * line_y + line_z * line_z)
+                angle1, angle2 = 3.141592653589793, 3.141592653589793
+                if length > 0:
+                    line_x, line_y, line_z = line_x / length, line_y / length, line_z / length
+                    length = sqrt(mx[0] * mx[0] + my[0] * my[0] + mz[0] * mz[0])
+                    if length > 0:
+                        angle1 = acos(_clip_unit((mx[0] * line_x + my[0] * line_y + mz[0] * line_z) / length))
+                    length = sqrt(mx[1] * mx[1] + my[1] * my[1] + mz[1] * mz[1])
+                    if length > 0:
+                        angle2 = acos(_clip_unit(-(mx[1] * line_x + my[1] * line_y + mz[1] * line_z) / length))
+                out[a, b, 0] = half_open - (top if top > bottom else bottom)
+                out[a, b, 1] = cone - (angle1 if angle1 > angle2 else angle2)
+                out[a, b, 2] = 1.0

@@ -1,0 +1,624 @@
+"""Parallel-jaw grasps from a superquadric, ranked by how likely they are to hold (DESIGN.md §1.9).
+
+The gripper and the grasp frame are in :mod:`core_cy.gripper`. Planning, for a
+superquadric (sizes, exponents, pose) on a support plane:
+
+1. **Candidates.** Frames of the object: its own axes and, around an axis
+   whose cross-section is round, that frame turned in 30-degree steps from the
+   one whose approach comes straight from above. A frame within 25 degrees of
+   upright is set upright: an object at rest on a plane has a principal axis
+   along its normal, so the fit's tilt is its error. In each frame the jaws
+   close along one axis and approach along another, from either side (not
+   from below the plane); in the object's own frame they also slide along the
+   third axis, halfway and all the way to either end. Each is tried at four
+   depths: the pads' centre just inside the object, the deepest the palm and
+   the plane allow, halfway between, and on the model's widest section.
+2. **Nominal checks**, in closed form (the jaws are aligned with the model's
+   axes, so the widest chord the fingers meet and the normal there follow from
+   the inside-outside function): the object fits the open jaws, the palm stays
+   clear, the pads' centre line meets the object, the contact normals lie
+   within the friction cone, and no finger or palm corner comes within a
+   clearance of the support plane. With the carved hull's points: the palm
+   also stays clear of the hull (which holds the whole object, also what the
+   superquadric leaves out, like a mug's handle), the hull reaches past the
+   pads' centre between the fingers, and no hull point the model leaves
+   unexplained lies where an open finger goes.
+3. **Robustness.** The best candidates are checked again on the model moved by
+   its own error, drawn 24 times (fixed draws, so planning is repeatable):
+   semi-axes and centre by the length error, the orientation by the angle
+   error (mostly about the vertical for an upright frame), the exponents
+   rounder or boxier. The errors come from the fit's evidence, its residual
+   and how well it covers the silhouettes (:func:`model_error`). Each draw is
+   checked on a grid of surface points facing the fingers (kernel in Cython):
+   open jaws, palm, reach, and the contacts (the patches within
+   ``pad_length/20`` of each finger's first touch: the pads give a little)
+   antipodal within the friction cone. ``score`` is the share of draws that
+   hold (smoothed over a quarter of a standard error): an estimate of the
+   chance that the grasp holds, on the cautious side.
+
+Grasps scoring below ``min_score`` (0.05) are left out; an object no
+candidate fits nominally (too big, say) gives an empty list, never a guess.
+Among grasps within 0.05 in score, one from above comes first, then one with
+more room in the jaws.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+from scipy.special import ndtr
+
+from ._grasp_cy import half_chords as _half_chords
+from ._grasp_cy import perturbed_margins as _perturbed_margins
+from .errors import CoreError
+from .gripper import DEFAULT_GRIPPER, Grasp, Gripper, grasps_to_json
+from .superquadric import Superquadric, inside_outside
+
+__all__ = ["Gripper", "Grasp", "DEFAULT_GRIPPER", "plan_grasps", "grasps_to_json", "model_error"]
+
+# Clearances, as fractions of the finger length: of every gripper corner from the
+# support plane, and (nominally) of the palm from the object.
+_TABLE_CLEARANCE = 0.05
+_PALM_CLEARANCE = 0.05
+_COMPLIANCE = 1 / 20  # of the pad length: how far the pads give
+# A cross-section is round when its two sizes differ by less than this fraction
+# and its exponent is within this of 1.
+_ROUND_SIZE, _ROUND_SHAPE = 0.08, 0.3
+_RING_STEP = math.radians(30)
+_SNAP = math.radians(25)  # a frame this near upright is set upright
+_TILT_ERROR = math.radians(1.0)  # of an upright frame about the horizontal
+_ROBUST_KEEP = 16  # candidates (with their depth) checked under perturbation
+_ERROR_DRAWS = 24  # draws of the model's error per candidate
+_MIN_SCORE = 0.05
+_SCORE_STEP = 0.05  # scores closer than this rank as equal
+_HULL_POINTS = 400  # at most this many hull points are checked
+_SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its end
+# The exponents' error: rounder, and boxier (fits of boxes come out rounder than they are).
+_SHAPE_ERROR = (0.2, -0.3)
+_SHAPE_LIMITS = (0.1, 1.9)
+_SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too long
+# Sample grid of the surface facing each finger: across the finger, along the approach.
+_SAMPLES = (5, 7)
+_APPROACH_ORDER = ("top", "side", "tilted")
+
+
+def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_iou=None) -> tuple[float, float]:
+    """Standard errors (length, radians) of a fitted superquadric, from its own evidence.
+
+    The length error grows with the fit's ``residual`` (RMS distance of the
+    hull's points from the surface) and with the share of the silhouettes it
+    fails to cover (``1 - mean IoU``, times the mean semi-axis); it is at
+    least 2 % of the mean semi-axis. The angle error grows with the uncovered
+    share, from 2 degrees. The factors were set on simulated three-view scans
+    so that 90 % of the actual errors of sizes, centre and axes lie within
+    1.64 standard errors.
+
+    Examples
+    --------
+    >>> sq = Superquadric([0.02, 0.03, 0.04], [1.0, 1.0], np.eye(4))
+    >>> [round(v, 4) for v in model_error(sq, 0.002, [0.95, 0.95, 0.95])]
+    [0.002, 0.0949]
+    """
+    mean_size = float(np.mean(superquadric.size))
+    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    miss = min(max(miss, 0.0), 1.0)
+    length = max(0.65 * residual, 1.3 * miss * mean_size, 0.02 * mean_size)
+    angle = math.radians(2.0) + 1.2 * miss
+    return length, angle
+
+
+def _half_chord(sizes, shape, axis, u):
+    """Half the chord of a centred, axis-aligned superquadric along frame axis ``axis``.
+
+    Frame axis 2 carries e1. ``sizes`` (M, 3), ``shape`` (M, 2), ``axis`` (M,) int,
+    ``u`` (M, 3) frame coordinates (``u[axis]`` is ignored). Returns the half-chord
+    (M,), NaN where the line misses, and the unit outward normal (M, 3) at the
+    surface point with ``u[axis] = +half``.
+
+    Examples
+    --------
+    >>> sizes, shape = np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 1.0]])
+    >>> half, normal = _half_chord(sizes, shape, np.array([0]), np.array([[0.0, 0.0, 1.5]]))
+    >>> round(float(half[0]), 6), normal.round(6).tolist()
+    (0.866025, [[0.981981, 0.0, 0.188982]])
+    """
+    half, normal = np.empty(len(u)), np.empty((len(u), 3))
+    _half_chords(np.ascontiguousarray(sizes, dtype=np.float64), np.ascontiguousarray(shape, dtype=np.float64),
+                 np.ascontiguousarray(axis, dtype=np.int_), np.ascontiguousarray(u, dtype=np.float64),
+                 half, normal)
+    return half, normal
+
+
+def _support(sizes, shape, w):
+    """Support function (max of ``w . u``) of a centred superquadric, frame coordinates.
+
+    ``sizes`` (..., 3), ``shape`` (..., 2), ``w`` (..., 3): the nested dual norm.
+    """
+    p, q = 2 / (2 - shape[..., 1]), 2 / (2 - shape[..., 0])
+    v = np.abs(w * sizes)
+    return ((v[..., 0] ** p + v[..., 1] ** p) ** (q / p) + v[..., 2] ** q) ** (1 / q)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products along the last axis (np.cross costs more than the product here)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _rotations(vectors: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation matrices (..., 3, 3) of rotation vectors (..., 3) (axis times angle)."""
+    theta = np.linalg.norm(vectors, axis=-1)
+    axis = vectors / np.maximum(theta, 1e-300)[..., None]
+    K = np.zeros(vectors.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
+    K -= np.swapaxes(K, -1, -2)
+    return np.eye(3) + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def _turned(frame: np.ndarray, current: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The frame turned by the smallest rotation taking unit vector ``current`` to ``target``."""
+    turn_axis = _cross(current, target)
+    sine = np.linalg.norm(turn_axis)
+    if sine < 1e-12:
+        return frame
+    return _rotation(turn_axis / sine, math.atan2(sine, current @ target)) @ frame
+
+
+def _upright(frame: np.ndarray, down: np.ndarray, round_axis: int | None) -> tuple[np.ndarray, bool]:
+    """The frame turned so that one of its axes is vertical, if the fit is within 25 degrees of it.
+
+    An object at rest on a plane rests with a principal axis along the plane's
+    normal (its stable poses), so the fit's tilt is its error. Around a round
+    axis any direction is principal: that axis, if nearly level, is made level.
+    """
+    cosines = frame.T @ down
+    axis = int(np.argmax(np.abs(cosines)))
+    if abs(cosines[axis]) >= math.cos(_SNAP):
+        return _turned(frame, frame[:, axis] * np.sign(cosines[axis]), down), True
+    if round_axis is not None and abs(cosines[round_axis]) <= math.sin(_SNAP):
+        level = frame[:, round_axis] - cosines[round_axis] * down
+        return _turned(frame, frame[:, round_axis], level / np.linalg.norm(level)), True
+    return frame, False
+
+
+def _frames(sq: Superquadric, down: np.ndarray | None):
+    """Object frames to grasp in: F (n, 3, 3) world axes as columns, sizes (n, 3), shape (n, 2),
+    upright (n,) bool, and own (n,) bool: along the object's own axes (not turned about one).
+
+    Frame axis 2 is the superquadric's z (the e1 axis). Around a round axis, the
+    frame turns in steps from the one whose approach axis points most nearly down.
+    With a support plane, the object's frame is first set upright (:func:`_upright`).
+    """
+    R, a, e = sq.T_world_object[:3, :3], sq.size, sq.shape
+
+    def close(u, v):
+        return abs(u - v) <= _ROUND_SIZE * max(u, v)
+
+    ellipsoid = abs(e[0] - 1) <= _ROUND_SHAPE and abs(e[1] - 1) <= _ROUND_SHAPE
+    rings = []
+    if close(a[0], a[1]) and abs(e[1] - 1) <= _ROUND_SHAPE:
+        rings.append((2, 0, 1))
+    if ellipsoid and close(a[1], a[2]):
+        rings.append((0, 1, 2))
+    if ellipsoid and close(a[0], a[2]):
+        rings.append((1, 2, 0))
+    if len(rings) > 1 and down is not None:  # a ball: turning about the vertical axis suffices
+        rings = [max(rings, key=lambda ring: abs(R[:, ring[0]] @ down))]
+    upright = False
+    if down is not None:
+        R, upright = _upright(R, down, rings[0][0] if len(rings) == 1 else None)
+    frames, sizes, shapes = [R], [a], [e]
+    for axis, u, v in rings:
+        mean = (a[u] + a[v]) / 2
+        ring_size = a.copy()
+        ring_size[u] = ring_size[v] = mean
+        ring_shape = np.array([e[0], 1.0]) if axis == 2 else np.array([1.0, 1.0])
+        start = 0.0
+        if down is not None:
+            along = down - (down @ R[:, axis]) * R[:, axis]
+            if np.linalg.norm(along) > 0.1:
+                start = math.atan2(along @ R[:, v], along @ R[:, u])
+        for step in range(round(math.pi / _RING_STEP)):
+            turn = _rotation(R[:, axis], start + step * _RING_STEP)
+            frames.append(turn @ R)
+            sizes.append(ring_size)
+            shapes.append(ring_shape)
+    own = [0]  # frames along the object's own axes, where the jaws also slide
+    if down is not None and not upright:
+        # Fitted more than 25 degrees off upright: an object at rest rarely is, but a single
+        # superquadric of a non-convex one (an L) often is. Try the frame set upright too.
+        axis = int(np.argmax(np.abs(R.T @ down)))
+        own.append(len(frames))
+        frames.append(_turned(R, R[:, axis] * np.sign(R[:, axis] @ down), down))
+        sizes.append(a)
+        shapes.append(e)
+    slides = np.zeros(len(frames), bool)
+    slides[own] = True
+    return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright), slides
+
+
+def _check_plane(support_plane) -> np.ndarray | None:
+    if support_plane is None:
+        return None
+    try:
+        plane = np.asarray(support_plane, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise CoreError(f"support_plane must be 4 finite numbers, got {support_plane!r}") from exc
+    if plane.shape != (4,) or not np.all(np.isfinite(plane)):
+        raise CoreError(f"support_plane must be 4 finite numbers [nx, ny, nz, d], got shape {plane.shape}")
+    length = np.linalg.norm(plane[:3])
+    if length == 0:
+        raise CoreError("support_plane's normal (nx, ny, nz) must not be zero")
+    return plane / length
+
+
+def _take(c: dict[str, np.ndarray], index) -> dict[str, np.ndarray]:
+    return {key: value[index] for key, value in c.items()}
+
+
+def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) -> dict[str, np.ndarray]:
+    """Every (frame, closing axis i, approach axis j, approach sign, slide ``dx``) not
+    approaching from below."""
+    F, sizes, shapes, upright, own = _frames(sq, None if plane is None else -plane[:3])
+    combos = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
+    f = np.repeat(np.arange(len(F)), len(combos))
+    i, j, s = (np.tile(combos[:, c], len(F)) for c in range(3))
+    y = F[f, :, i]
+    z = s[:, None] * F[f, :, j]
+    keep = np.ones(len(f), bool) if plane is None else z @ plane[:3] <= 0.1
+    x = _cross(y[keep], z[keep])
+    R_grasp = np.stack([x, y[keep], z[keep]], axis=2)
+    f, i, j, s = f[keep], i[keep], j[keep], s[keep]
+    c = {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i, "j": j, "k": 3 - i - j, "s": s,
+         "R": R_grasp, "upright": upright[f], "dx": np.zeros(len(f)), "pose": np.arange(len(f))}
+    # In the object's own frame, also slide along the grasp's x axis (to take one end of a long
+    # object, say, clear of what the model leaves out): halfway and all the way to either end.
+    reach = np.maximum(0.0, c["sizes"][np.arange(len(f)), c["k"]] - gripper.finger_width / 2)
+    slides = [c]
+    for fraction in _SLIDES:
+        slides_here = own[f] & (reach > 0.1 * c["sizes"].max(axis=1))
+        moved = _take(c, np.flatnonzero(slides_here))
+        moved["dx"] = fraction * reach[slides_here]
+        slides.append(moved)
+    c = {key: np.concatenate([part[key] for part in slides]) for key in c}
+    c["id"] = np.arange(len(c["dx"]))
+    return c
+
+
+def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, length: float):
+    """The hull's evidence for each candidate.
+
+    Returns, along the approach from the model's centre, the nearest hull point towards
+    the palm within the palm's footprint, and within the column between the fingers (n,)
+    each (``+inf`` with no points, ``-inf`` for the column without points); and the hull
+    points the model leaves unexplained (more than two length errors outside it) in each
+    candidate's axes about the model's centre, shape (U, n, 3).
+    """
+    n = len(c["i"])
+    if points is None or len(points) == 0:
+        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
+    centre = sq.T_world_object[:3, 3]
+    # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
+    local = ((points - centre) @ c["R"].transpose(1, 0, 2).reshape(3, 3 * n)).reshape(len(points), n, 3)
+    reach = gripper.max_opening / 2 + gripper.finger_thickness
+    inside = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.palm_width / 2)
+              & (np.abs(local[:, :, 1]) <= reach))
+    nearest = np.where(inside, local[:, :, 2], np.inf).min(axis=0)
+    between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
+               & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
+    column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
+    F = inside_outside(points, sq)
+    outside = np.linalg.norm(points - centre, axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
+    return nearest, column, local[outside > 2 * length]
+
+
+def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
+    """Closed-form checks of every candidate at its depths.
+
+    Returns the passing (candidate, depth) pairs with their reach ``e`` past the
+    model's near side, the offset ``dz`` of the grasp origin from the centre along
+    the approach, the half-width ``half`` between the pads, and ``first``, a score
+    from the nominal margins to pick the pairs worth checking under perturbation.
+    """
+    g = gripper
+    length, angle = error
+    hull_near, column, unexplained = hull
+    n = len(c["i"])
+    rows = np.arange(n)
+    # The model's near side between the fingers (where they slid to), and across the palm.
+    u = np.zeros((n, 3))
+    u[rows, c["k"]] = np.maximum(0.0, np.abs(c["dx"]) - g.finger_width / 2)
+    s_j = np.nan_to_num(_half_chord(c["sizes"], c["shape"], c["j"], u)[0], nan=-np.inf)
+    near = np.minimum(-c["sizes"][rows, c["j"]], hull_near)  # the hull's, if nearer
+    clear = _PALM_CLEARANCE * g.finger_length
+    deepest = np.minimum(g.finger_length - clear + s_j + near, 2 * s_j + g.pad_length / 2)
+    clearance = _TABLE_CLEARANCE * g.finger_length
+    if plane is not None:
+        normal_grasp = np.einsum("nab,a->nb", c["R"], plane[:3])  # the plane's normal in each grasp frame
+        lowest = (normal_grasp @ g.corners().T).min(axis=1)
+        height = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
+        nz = normal_grasp[:, 2]
+        # The lowest corner at reach e: height + (e - pad/2 - s_j) nz + lowest >= clearance.
+        going_down = nz < -1e-9
+        table_limit = np.full(n, np.inf)
+        table_limit[going_down] = ((height[going_down] + lowest[going_down] - clearance) / -nz[going_down]
+                                   + g.pad_length / 2 + s_j[going_down])
+        deepest = np.minimum(deepest, table_limit)
+    # The grasp's origin (the pads' centre) lies inside the object, with a margin.
+    shallowest = np.full(n, g.pad_length / 2 + length)
+    equator = s_j + g.pad_length / 2  # the pads centred on the model's widest section
+    depth = np.stack([shallowest, (shallowest + deepest) / 2, deepest, np.clip(equator, shallowest, deepest)], 1)
+    pair = np.repeat(rows, depth.shape[1])
+    depth = depth.ravel()
+    cp = _take(c, pair)
+    s_j = s_j[pair]
+    dz = depth - g.pad_length / 2 - s_j
+    ok = (deepest[pair] >= shallowest[pair]) & (s_j > 0)
+    # The hull holds the object: between the fingers it must reach the model's near side
+    # (else the model claims more than the views saw), and past the pads' centre.
+    ok &= (column[pair] <= -s_j + 0.5 * length) & (column[pair] < dz)
+    if plane is not None:
+        ok &= height[pair] + dz * nz[pair] + lowest[pair] >= clearance * 0.999
+    if unexplained.shape[0]:
+        # What the hull has and the model lacks (a handle) must not be where an open finger is.
+        p = unexplained[:, pair] - np.stack([cp["dx"], np.zeros(len(pair)), dz], axis=1)
+        in_finger = ((np.abs(p[:, :, 0]) <= g.finger_width / 2) & (p[:, :, 2] >= g.palm) & (p[:, :, 2] <= g.tip)
+                     & (np.abs(p[:, :, 1]) >= g.max_opening / 2)
+                     & (np.abs(p[:, :, 1]) <= g.max_opening / 2 + g.finger_thickness))
+        ok &= ~in_finger.any(axis=0)
+    # The widest chord the fingers meet: nearest the centre, within their reach.
+    u = np.zeros((len(pair), 3))
+    index = np.arange(len(pair))
+    u[index, cp["j"]] = np.minimum(0.0, depth - s_j)
+    u[index, cp["k"]] = np.maximum(0.0, np.abs(cp["dx"]) - g.finger_width / 2)
+    half, normal = _half_chord(cp["sizes"], cp["shape"], cp["i"], u)
+    tilt = np.arctan2(np.abs(normal[index, cp["j"]]), normal[index, cp["i"]])
+    palm = depth - s_j - g.finger_length  # along the approach from the centre
+    margins = np.stack([(g.max_opening / 2 - half) / length, (near[pair] - palm) / length,
+                        (depth - g.pad_length / 2) / length, (math.atan(g.friction) - tilt) / angle], axis=1)
+    margins = np.nan_to_num(margins, nan=-1.0)
+    ok &= np.all(margins > 0, axis=1)
+    keep = np.flatnonzero(ok)
+    out = _take(cp, keep)
+    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
+               first=np.prod(ndtr(margins[keep]), axis=1))
+    return out
+
+
+# Fixed draws of the model's error, in standard errors: semi-axes along the grasp
+# x, y, z (3), centre (3), rotation vector (3), the exponents (1).
+_DRAWS = np.random.default_rng(20171).standard_normal((_ERROR_DRAWS, 10))
+
+
+def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp: np.ndarray,
+                   upright: np.ndarray, plane: np.ndarray | None):
+    """The model's error drawn ``_ERROR_DRAWS`` times (fixed draws, so planning is repeatable).
+
+    Sizes along the grasp axes (half an error smaller on average) and the centre move
+    by the length error. The
+    rotation is drawn in the world: about the plane's normal by the angle error,
+    about the two horizontal axes by it too, or by ``_TILT_ERROR`` for a frame set
+    upright; without a plane, about each grasp axis by the angle error.
+
+    Returns variant (P,): 0 nominal exponents, 1 rounder, 2 boxier (each a third of the
+    draws); scale (P, M, 3) of the semi-axes along the grasp axes; rotation (P, M, 3, 3)
+    in each grasp frame; shift (P, 3).
+    """
+    length, angle = error
+    draws = _DRAWS
+    # A hull only errs outward, and fits of it mostly do too: the semi-axes are drawn
+    # half a standard error smaller on average.
+    scale = np.maximum(0.3, 1 + (draws[:, None, 0:3] - _SIZE_BIAS) * length / sizes_grasp[None, :, :])
+    shift = draws[:, 3:6] * length
+    if plane is None:
+        rotation = np.broadcast_to(_rotations(draws[:, None, 6:9] * angle), (len(draws), len(R_grasp), 3, 3))
+    else:
+        normal = plane[:3]
+        side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
+        side /= np.linalg.norm(side)
+        basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
+        # World rotations of a free frame and of an upright one, then in each grasp's axes.
+        world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
+                                     draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
+        W = world[upright.astype(np.intp)]  # (M, P, 3, 3)
+        rotation = np.swapaxes(np.swapaxes(R_grasp, 1, 2)[:, None] @ W @ R_grasp[:, None], 0, 1)
+    variant = np.where(draws[:, 9] > 0.43, 1, np.where(draws[:, 9] < -0.43, 2, 0))
+    return variant.astype(np.int_), np.ascontiguousarray(scale), np.ascontiguousarray(rotation), shift
+
+
+def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray | None):
+    """How often each (candidate, depth) pair holds on the model perturbed by its error.
+
+    Returns the score (M,): the mean over the draws of a smoothed "holds" (the
+    product over the checks of the normal CDF of four times the margin in
+    standard errors).
+    """
+    g = gripper
+    length, angle = error
+    m = len(c["i"])
+    rows = np.arange(m)
+    nk, nw = _SAMPLES
+    s_i, s_j, s_k = (c["sizes"][rows, c[key]] for key in ("i", "j", "k"))
+    # Sample the surface facing the fingers, a little beyond their reach (the draws move it).
+    slack = np.minimum(2 * length, g.finger_width / 2)
+    across = np.linspace(-1, 1, nk) * (g.finger_width / 2 + slack)
+    near = -s_j * (1 - 1e-6)
+    far = np.minimum(s_j * (1 - 1e-6), c["e"] - s_j + 2 * length)
+    along = near[:, None] + np.linspace(0, 1, nw)[None, :] * (far - near)[:, None]
+    n = nk * nw
+    u = np.zeros((m, n, 3))
+    # Frame coordinate k is +-x of the grasp: sample across the finger where it slid to.
+    sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][rows, :, c["k"]])
+    u[rows, :, c["k"]] = sign_k[:, None] * (c["dx"][:, None] + np.repeat(across, nw)[None, :])
+    u[rows, :, c["j"]] = c["s"][:, None] * np.tile(along, (1, nk))
+    variants = [c["shape"]] + [np.clip(c["shape"] + change, *_SHAPE_LIMITS) for change in _SHAPE_ERROR]
+    V = len(variants)
+    half, normal = _half_chord(np.tile(np.repeat(c["sizes"], n, axis=0), (V, 1)),
+                               np.concatenate([np.repeat(shape, n, axis=0) for shape in variants]),
+                               np.tile(np.repeat(c["i"], n), V), np.tile(u.reshape(-1, 3), (V, 1)))
+    half, normal = half.reshape(V, m, n), normal.reshape(V, m, n, 3)
+    up = np.broadcast_to(u, (V, m, n, 3)).copy()
+    up[:, rows, :, c["i"]] = np.nan_to_num(half).transpose(1, 0, 2)  # advanced indices go first
+    flip = np.ones((m, 1, 3))
+    flip[rows, 0, c["i"]] = -1
+    points = np.concatenate([up, up * flip], axis=2)
+    normals = np.concatenate([normal, normal * flip], axis=2)
+    valid = np.isfinite(np.concatenate([half, half], axis=2)).astype(np.uint8)
+    # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
+    M = np.ascontiguousarray(np.einsum("mab,mac->mbc", c["R"], c["F"]))
+    centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
+
+    variant, scale, rotation, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
+                                                     c["upright"], plane)
+    out = np.empty((m, len(variant), 4))
+    _perturbed_margins(points, normals, valid, variant, M, scale, rotation, shift, centre,
+                       g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, _COMPLIANCE * g.pad_length,
+                       math.atan(g.friction), np.empty((2 * n, 4)), out)
+    # The perturbed model's nearest point towards the palm, from its support function in
+    # direction M^T D R^T e_z (frame coordinates); the hull does not move.
+    w = np.einsum("mba,pmb->pma", M, scale * rotation[:, :, 2, :])
+    nearest = centre[None, :, 2] + shift[:, None, 2] - _support(c["sizes"][None], np.stack(variants)[variant], w)
+    nearest = np.minimum(nearest, (c["hull"] - c["dz"])[None, :])
+    touches = out[:, :, 2].T > 0
+    margins = np.stack([np.where(touches, out[:, :, 0].T / length, -1.0),  # open jaws clear
+                        (nearest - g.palm) / length,  # palm clear
+                        np.minimum(-out[:, :, 3].T / length, 10.0),  # the pads' centre line meets the object
+                        np.where(touches, out[:, :, 1].T / angle, -1.0)], axis=2)  # antipodal
+    return ndtr(4 * margins).prod(axis=2).mean(axis=0)
+
+
+def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
+    """Indices of the ``_ROBUST_KEEP`` pairs to check under perturbation: by their first score
+    (within 0.05, approaches from above first), the best of each orientation before the
+    second best of any (slides and depths of one orientation are much alike)."""
+    order = np.lexsort((preference, -np.round(pairs["first"] / _SCORE_STEP)))
+    rank = np.empty(len(order), dtype=np.intp)
+    seen: dict[int, int] = {}
+    for position, index in enumerate(order):
+        rank[index] = seen.get(pairs["pose"][index], 0)
+        seen[pairs["pose"][index]] = rank[index] + 1
+    return order[np.argsort(rank[order], kind="stable")][:_ROBUST_KEEP]
+
+
+def _same_grasp(a: np.ndarray, b: np.ndarray, tolerance: float) -> bool:
+    """Two grasps alike but for their depth (the gripper is symmetric under a half turn about z)."""
+    apart = a[:3, 3] - b[:3, 3]
+    return (a[:3, 2] @ b[:3, 2] > math.cos(math.radians(3)) and abs(a[:3, 1] @ b[:3, 1]) > math.cos(math.radians(3))
+            and np.linalg.norm(apart - (apart @ a[:3, 2]) * a[:3, 2]) < tolerance)
+
+
+def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *,
+                residual: float = 0.0, silhouette_iou=None, points=None, max_grasps: int = 10,
+                min_score: float = _MIN_SCORE) -> list[Grasp]:
+    """Parallel-jaw grasps of a superquadric, best first (see the module docstring).
+
+    Parameters
+    ----------
+    superquadric : Superquadric
+        The model, convex (exponents below 2).
+    support_plane : (4,) array_like, optional
+        ``[nx, ny, nz, d]``: the object stands where ``n . x + d >= 0``; no part
+        of the gripper may come near the other side, and no approach comes from it.
+    gripper : Gripper
+    residual : float
+        The fit's residual (bundle units): how far the hull's points lie from the model.
+    silhouette_iou : sequence of float, optional
+        How well the model covers each view's silhouette.
+    points : (N, 3) array_like, optional
+        The carved hull's points. The hull holds the whole object, also what
+        the superquadric leaves out (a mug's handle): the palm keeps clear of
+        them too.
+    max_grasps : int
+        At most this many grasps.
+    min_score : float
+        Grasps less likely to hold than this are left out.
+
+    Returns
+    -------
+    list of Grasp
+        Best first; empty when no grasp of this gripper is likely to hold.
+
+    Raises
+    ------
+    CoreError
+        If an argument is malformed, or the superquadric is not convex.
+
+    Examples
+    --------
+    A 4 x 6 x 5 cm box on the table is taken across its 4 cm side, from above:
+
+    >>> T = np.eye(4); T[2, 3] = 0.025
+    >>> box = Superquadric([0.03, 0.02, 0.025], [0.1, 0.1], T)
+    >>> best = plan_grasps(box, [0, 0, 1, 0])[0]
+    >>> best.approach, round(best.width, 3), best.T_world_grasp[:3, 1].round(3).tolist()
+    ('top', 0.04, [0.0, 1.0, 0.0])
+    """
+    if not isinstance(superquadric, Superquadric):
+        raise CoreError(f"superquadric must be a Superquadric, got {type(superquadric).__name__}")
+    if not isinstance(gripper, Gripper):
+        raise CoreError(f"gripper must be a Gripper, got {type(gripper).__name__}")
+    if np.any(superquadric.shape >= 2):
+        raise CoreError(f"grasps need a convex superquadric (exponents below 2), got {superquadric.shape}")
+    if not (isinstance(max_grasps, numbers.Integral) and max_grasps >= 1):
+        raise CoreError(f"max_grasps must be a positive integer, got {max_grasps!r}")
+    if not (isinstance(min_score, numbers.Real) and 0 <= min_score <= 1):
+        raise CoreError(f"min_score must be a number in [0, 1], got {min_score!r}")
+    if not (isinstance(residual, numbers.Real) and math.isfinite(residual) and residual >= 0):
+        raise CoreError(f"residual must be a finite number >= 0, got {residual!r}")
+    if silhouette_iou is not None:
+        silhouette_iou = np.asarray(silhouette_iou, dtype=np.float64).ravel()
+        if not np.all((silhouette_iou >= 0) & (silhouette_iou <= 1)):
+            raise CoreError(f"silhouette_iou must lie in [0, 1], got {silhouette_iou.tolist()}")
+    if points is not None:
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+            raise CoreError(f"points must be an (N, 3) array of finite numbers, got shape {points.shape}")
+        points = points[:: max(1, len(points) // _HULL_POINTS)]
+    plane = _check_plane(support_plane)
+    error = model_error(superquadric, residual, silhouette_iou)
+    centre = superquadric.T_world_object[:3, 3]
+
+    candidates = _candidates(superquadric, plane, gripper)
+    pairs = _nominal(candidates, centre, plane, gripper, error,
+                     _hull(candidates, points, superquadric, gripper, error[0]))
+    if len(pairs["i"]) == 0:
+        return []
+    preference = _approach_preference(pairs["R"][:, :, 2], plane)
+    kinds = np.array(_APPROACH_ORDER)[preference]
+    keep = _diverse(pairs, preference)
+    pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
+    score = _robust(pairs, gripper, error, plane)
+    # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
+    order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
+    grasps: list[Grasp] = []
+    taken = set()
+    for index in order:
+        if score[index] < min_score or len(grasps) == max_grasps:
+            break
+        if pairs["id"][index] in taken:  # the same candidate at another depth, ranked higher
+            continue
+        taken.add(pairs["id"][index])
+        T = np.eye(4)
+        T[:3, :3] = pairs["R"][index]
+        T[:3, 3] = centre + pairs["R"][index] @ [pairs["dx"][index], 0.0, pairs["dz"][index]]
+        if any(_same_grasp(T, other.T_world_grasp, 0.05 * gripper.finger_length) for other in grasps):
+            continue
+        grasps.append(Grasp(T, float(2 * pairs["half"][index]), float(score[index]), str(kinds[index])))
+    return grasps
+
+
+def _approach_preference(approach: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
+    """Index into ``_APPROACH_ORDER`` of each approach (N, 3): "top" within 30 degrees of
+    straight down the plane's normal, "side" within 30 degrees of level, else "tilted"."""
+    if plane is None:
+        return np.full(len(approach), 2)
+    down = -approach @ plane[:3]
+    return np.where(down >= math.cos(math.radians(30)), 0, np.where(np.abs(down) <= 0.5, 1, 2))

@@ -1,0 +1,328 @@
+"""Does a parallel-jaw grasp hold the true object? The DESIGN.md §3 "holds" test.
+
+Written apart from the planner (core_cy.grasp) on purpose: it imports nothing
+from core_cy, and computes the true object's geometry its own way, by
+bisection along lines, not by closed forms. A benchmark that judged grasps
+with the planner's own checks would only measure that the planner agrees
+with itself.
+
+The object is a union of superquadric parts (``truth.json``: one superquadric,
+or ``{"parts": [...]}``). The gripper (DESIGN.md §3) in the grasp frame:
+z approach, y closing, x = y × z; pads' centre at the origin; fingertips at
+``z = pad_length/2``, palm at ``z_palm = pad_length/2 - finger_length``. Each
+finger is a box ``|x| <= finger_width/2``, ``z_palm <= z <= tip``, from the
+inner face ``|y| = gap/2`` to ``gap/2 + finger_thickness``. The palm, and the
+gripper body behind it, is everything at ``z <= z_palm`` over the footprint
+``|x| <= palm_width/2``, ``|y| <= max_opening/2 + finger_thickness``.
+
+A grasp holds when, closing from ``max_opening``:
+
+1. no finger corner (open) and no palm corner is below the support plane;
+2. the open fingers do not cut the object (it lies between the open jaws);
+3. the palm (and the body behind it) does not cut the object;
+4. both fingers touch it: the object reaches between the fingers;
+5. the contacts are antipodal within the friction cone (Nguyen): with
+   ``c1, c2`` the contact points and ``n1, n2`` the object's outward normals
+   there, ``angle(n1, c1 - c2)`` and ``angle(n2, c2 - c1)`` are both at most
+   ``atan(mu)``.
+
+The pads are a little soft: a finger's contact is the patch of the object
+within ``compliance`` (default ``pad_length / 20``, 1 mm for the default
+gripper) of the finger's first touch, inside the finger's reach; the contact
+point is the patch's centroid and its normal the patch's mean normal. With
+perfectly hard pads a face touched a hair off parallel would make a point
+contact at its far corner, which no real pad does.
+
+Geometry is sampled on a grid of lines: along y through the fingers' inner
+face (the fingers' contacts and their first touch), along z through the palm's
+footprint. On each line the extent of each part is found by bisection of its
+inside-outside function.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Part", "JudgeGripper", "Verdict", "parts_from_truth", "judge", "judge_many"]
+
+_GOLDEN = (math.sqrt(5) - 1) / 2
+_ITERATIONS = 48  # golden section and bisection: interval / 2^48 ~ 1e-15 of its length
+# Lines across the finger's inner face (x, z) and over the palm's footprint (x, y).
+_FINGER_GRID = (9, 19)
+_PALM_GRID = (9, 13)
+
+
+@dataclass(frozen=True)
+class Part:
+    """One superquadric of the true object: semi-axes, exponents (e1, e2), object-to-world pose."""
+
+    size: np.ndarray
+    shape: np.ndarray
+    T_world_part: np.ndarray
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Part:
+        return cls(np.asarray(d["size"], float).reshape(3), np.asarray(d["shape"], float).reshape(2),
+                   np.asarray(d["T_world_object"], float).reshape(4, 4))
+
+
+def parts_from_truth(truth: dict) -> list[Part]:
+    """The parts of a ``truth.json``: a superquadric, or ``{"parts": [...]}`` (their union)."""
+    if "parts" in truth:
+        return [Part.from_dict(p) for p in truth["parts"]]
+    return [Part.from_dict(truth)]
+
+
+@dataclass(frozen=True)
+class JudgeGripper:
+    """The gripper of DESIGN.md §3, read here independently of core_cy.grasp."""
+
+    max_opening: float = 0.085
+    finger_length: float = 0.045
+    finger_width: float = 0.02
+    finger_thickness: float = 0.008
+    pad_length: float = 0.02
+    palm_width: float = 0.06
+
+    @classmethod
+    def from_dict(cls, d: dict) -> JudgeGripper:
+        return cls(**{name: float(d[name]) for name in cls.__dataclass_fields__})
+
+    @property
+    def tip(self) -> float:
+        return self.pad_length / 2
+
+    @property
+    def palm(self) -> float:
+        return self.pad_length / 2 - self.finger_length
+
+    def corners(self) -> np.ndarray:
+        """(20, 3) grasp-frame corners: both fingers, open, and the palm."""
+        g, t, w = self.max_opening / 2, self.finger_thickness, self.finger_width / 2
+        fingers = [(x, s * y, z) for x in (-w, w) for s in (-1, 1) for y in (g, g + t)
+                   for z in (self.palm, self.tip)]
+        p = self.palm_width / 2
+        palm = [(x, y, self.palm) for x in (-p, p) for y in (-(g + t), g + t)]
+        return np.array(fingers + palm)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """``holds``; else ``reason`` names the first test failed. ``width``: gap at closure, or NaN."""
+
+    holds: bool
+    reason: str
+    width: float
+
+
+def _gauge(q: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """F^(e1/2) of points q (..., 3) already divided by the sizes: convex, degree 1."""
+    e1, e2 = shape
+    a = np.abs(q)
+    xy = a[..., 0] ** (2 / e2) + a[..., 1] ** (2 / e2)
+    return (xy ** (e2 / e1) + a[..., 2] ** (2 / e1)) ** (e1 / 2)
+
+
+def _normal(q: np.ndarray, part: Part) -> np.ndarray:
+    """World unit outward normals at points q (N, 3) given in the part's scaled frame."""
+    e1, e2 = part.shape
+    a = np.abs(q)
+    xy = a[:, 0] ** (2 / e2) + a[:, 1] ** (2 / e2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        common = np.where(xy > 0, xy ** (e2 / e1 - 1), 0.0)
+        g = np.stack([common * a[:, 0] ** (2 / e2 - 1), common * a[:, 1] ** (2 / e2 - 1),
+                      a[:, 2] ** (2 / e1 - 1)], axis=1)
+    g = np.nan_to_num(g) * np.sign(q) / part.size
+    n = g @ part.T_world_part[:3, :3].T
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _chords(origins: np.ndarray, direction: np.ndarray, part: Part):
+    """Where lines ``origins + t * direction`` (N lines, one direction each) enter and leave a part.
+
+    Returns t_in, t_out (N,) with NaN where a line misses, and the scaled-frame points
+    of entry and exit. The gauge is convex along a line: its minimum by golden section,
+    then each crossing of 1 by bisection.
+    """
+    R, t = part.T_world_part[:3, :3], part.T_world_part[:3, 3]
+    q0 = (origins - t) @ R / part.size
+    v = (direction @ R) / part.size
+    vv = np.einsum("ij,ij->i", v, v)
+    centre_t = -np.einsum("ij,ij->i", q0, v) / vv
+    # The part lies inside |q| <= sqrt(3) (the unit cube's corners): search only there.
+    closest = q0 + centre_t[:, None] * v
+    reach2 = (3.0 - np.einsum("ij,ij->i", closest, closest)) / vv
+    n = len(origins)
+    t_in, t_out = np.full(n, np.nan), np.full(n, np.nan)
+    hit = reach2 > 0
+    if not hit.any():
+        return t_in, t_out, q0, v
+    q0h, vh, ch = q0[hit], v[hit], centre_t[hit]
+    reach = np.sqrt(reach2[hit])
+    lo, hi = ch - reach, ch + reach
+
+    def gauge(tt):
+        return _gauge(q0h + tt[:, None] * vh, part.shape)
+
+    a, b = lo.copy(), hi.copy()
+    for _ in range(_ITERATIONS):
+        c1, c2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+        left = gauge(c1) < gauge(c2)
+        b = np.where(left, c2, b)
+        a = np.where(left, a, c1)
+    t_min = (a + b) / 2
+    inside = gauge(t_min) < 1.0
+
+    def crossing(outer, inner):
+        o, i = outer.copy(), inner.copy()
+        for _ in range(_ITERATIONS):
+            m = (o + i) / 2
+            is_inside = gauge(m) < 1.0
+            i = np.where(is_inside, m, i)
+            o = np.where(is_inside, o, m)
+        return (o + i) / 2
+
+    enter, leave = crossing(lo, t_min), crossing(hi, t_min)
+    index = np.flatnonzero(hit)[inside]
+    t_in[index], t_out[index] = enter[inside], leave[inside]
+    return t_in, t_out, q0, v
+
+
+def _grid(lo: float, hi: float, n: int) -> np.ndarray:
+    return np.linspace(lo, hi, n)
+
+
+def judge(T_world_grasp, parts: list[Part], gripper: JudgeGripper, support_plane=None, *,
+          mu: float = 0.5, compliance: float | None = None, contacts: str = "patch") -> Verdict:
+    """Judge one grasp against the true object; see the module docstring for the test.
+
+    Parameters
+    ----------
+    T_world_grasp : (4, 4) array_like, grasp-to-world.
+    parts : list of Part, the true object (their union).
+    gripper : JudgeGripper
+    support_plane : (4,) array_like or None, ``n . x + d >= 0`` is free space.
+    mu : float, friction coefficient.
+    compliance : float or None, how far the pads give (default ``pad_length / 20``).
+    contacts : "patch" (the module docstring's test) or "centre-line": the other common
+        reading, where the contacts are where the line through the pads' centres (the
+        grasp's y axis) meets the object, as in Dex-Net; tests 1-4 are the same.
+    """
+    T = np.asarray(T_world_grasp, float)
+    R, o = T[:3, :3], T[:3, 3]
+    g = gripper
+    delta = g.pad_length / 20 if compliance is None else compliance
+    half_open = g.max_opening / 2
+    outer = half_open + g.finger_thickness
+
+    # 1. The support plane, against the open fingers' and the palm's corners.
+    if support_plane is not None:
+        plane = np.asarray(support_plane, float)
+        plane = plane / np.linalg.norm(plane[:3])
+        corners = g.corners() @ R.T + o
+        if np.min(corners @ plane[:3] + plane[3]) < 0:
+            return Verdict(False, "a finger or palm corner is below the support plane", math.nan)
+
+    # 2, 4, 5. Lines along y through the fingers' inner face.
+    xs = _grid(-g.finger_width / 2, g.finger_width / 2, _FINGER_GRID[0])
+    zs = _grid(g.palm, g.tip, _FINGER_GRID[1])
+    X, Z = np.meshgrid(xs, zs, indexing="ij")
+    local = np.stack([X.ravel(), np.zeros(X.size), Z.ravel()], axis=1)
+    origins = local @ R.T + o
+    y_axis = R[:, 1]
+    n_lines = len(origins)
+    top = np.full(n_lines, -np.inf)  # highest y of the object between the jaws, per line
+    bottom = np.full(n_lines, np.inf)
+    top_part = np.full(n_lines, -1)
+    bottom_part = np.full(n_lines, -1)
+    top_q, bottom_q = np.zeros((n_lines, 3)), np.zeros((n_lines, 3))
+    for k, part in enumerate(parts):
+        t_in, t_out, q0, v = _chords(origins, np.broadcast_to(y_axis, origins.shape), part)
+        hit = ~np.isnan(t_in)
+        # Any piece of the object inside the open fingers' slabs: the fingers cut it.
+        cuts = hit & (((t_out >= half_open) & (t_in <= outer)) | ((t_in <= -half_open) & (t_out >= -outer)))
+        if cuts.any():
+            return Verdict(False, "an open finger cuts the object", math.nan)
+        between = hit & (t_in > -half_open) & (t_out < half_open)
+        higher = between & (t_out > top)
+        top[higher], top_part[higher] = t_out[higher], k
+        top_q[higher] = q0[higher] + t_out[higher, None] * v[higher]
+        lower = between & (t_in < bottom)
+        bottom[lower], bottom_part[lower] = t_in[lower], k
+        bottom_q[lower] = q0[lower] + t_in[lower, None] * v[lower]
+
+    # 3. Lines along z over the palm's footprint: nothing of the object at or behind the palm.
+    px = _grid(-g.palm_width / 2, g.palm_width / 2, _PALM_GRID[0])
+    py = _grid(-outer, outer, _PALM_GRID[1])
+    PX, PY = np.meshgrid(px, py, indexing="ij")
+    palm_local = np.stack([PX.ravel(), PY.ravel(), np.full(PX.size, g.palm)], axis=1)
+    palm_origins = palm_local @ R.T + o
+    for part in parts:
+        t_in, _, _, _ = _chords(palm_origins, np.broadcast_to(R[:, 2], palm_origins.shape), part)
+        if np.any(t_in <= 0):  # t is measured from the palm along +z: entering at or behind it
+            return Verdict(False, "the palm cuts the object", math.nan)
+
+    touched = np.isfinite(top)
+    if not touched.any():
+        return Verdict(False, "the fingers close on nothing", math.nan)
+    y_top, y_bottom = top[touched].max(), bottom[touched].min()
+    width = float(y_top - y_bottom)
+
+    # 5. Contact patches, their centroids and mean normals; Nguyen's antipodal test.
+    def contact(values, extreme, sign, part_of, q):
+        patch = np.flatnonzero(touched & (sign * (values - extreme) >= -delta))
+        normals = np.empty((len(patch), 3))
+        for k, part in enumerate(parts):
+            mine = part_of[patch] == k
+            if mine.any():
+                normals[mine] = _normal(q[patch[mine]], part)
+        normal = normals.mean(axis=0)
+        points = origins[patch] + values[patch, None] * y_axis
+        return points.mean(axis=0), normal / np.linalg.norm(normal)
+
+    if contacts == "centre-line":
+        found = _centre_line_contacts(o, y_axis, parts, half_open)
+        if found is None:
+            return Verdict(False, "the pads' centre line misses the object", width)
+        c1, n1, c2, n2 = found
+    else:
+        c1, n1 = contact(top, y_top, 1.0, top_part, top_q)
+        c2, n2 = contact(bottom, y_bottom, -1.0, bottom_part, bottom_q)
+    line = c1 - c2
+    length = np.linalg.norm(line)
+    if length == 0:
+        return Verdict(False, "the fingers close on nothing", math.nan)
+    line /= length
+    cone = math.atan(mu)
+    angle1 = math.acos(float(np.clip(n1 @ line, -1, 1)))
+    angle2 = math.acos(float(np.clip(-n2 @ line, -1, 1)))
+    if max(angle1, angle2) > cone:
+        return Verdict(False, f"contacts not antipodal ({math.degrees(max(angle1, angle2)):.0f} degrees "
+                              f"off, friction cone {math.degrees(cone):.0f})", width)
+    return Verdict(True, "holds", width)
+
+
+def _centre_line_contacts(origin, y_axis, parts: list[Part], half_open: float):
+    """Where the line through the pads' centres enters and leaves the object between the jaws:
+    (c1, n1, c2, n2) on the +y and -y sides, or None if it misses."""
+    top, bottom = None, None  # (t, scaled point, part) where the line leaves (+y) and enters (-y)
+    for part in parts:
+        t_in, t_out, q0, v = _chords(origin[None, :], y_axis[None, :], part)
+        if np.isnan(t_in[0]) or t_in[0] <= -half_open or t_out[0] >= half_open:
+            continue
+        if top is None or t_out[0] > top[0]:
+            top = (t_out[0], q0 + t_out[0] * v, part)
+        if bottom is None or t_in[0] < bottom[0]:
+            bottom = (t_in[0], q0 + t_in[0] * v, part)
+    if top is None:
+        return None
+    return (origin + top[0] * y_axis, _normal(top[1], top[2])[0],
+            origin + bottom[0] * y_axis, _normal(bottom[1], bottom[2])[0])
+
+
+def judge_many(grasps, parts: list[Part], gripper: JudgeGripper, support_plane=None, **kwargs) -> list[Verdict]:
+    """:func:`judge` for each (4, 4) pose of ``grasps``."""
+    return [judge(T, parts, gripper, support_plane, **kwargs) for T in grasps]
