@@ -116,9 +116,9 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
     try:
         return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id)
     except ValidationError as exc:
-        errors = field_errors(exc).split("; ")
-        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-        raise ValueError(f"{args.poses}: {errors[0]}{more}") from None
+        first = field_errors(exc, at_most=1).split("; ")[0]
+        others = len(exc.errors()) - 1
+        raise ValueError(f"{args.poses}: {first}{f' (and {others} more)' if others else ''}") from None
 
 
 async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:

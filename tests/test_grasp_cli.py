@@ -28,7 +28,7 @@ def bundles(tmp_path_factory):
     cylinder = SuperquadricObject.on_table("cylinder", (0.02, 0.02, 0.05), (0.6, 0.0), 70.0, lying=True)
     paths = [make_spec(name, obj, seed=seed).write(out) for name, obj, seed in
              (("box", box, 3), ("cylinder", cylinder, 5))]
-    process = robocell("sim", "--out", out, "--shape", "mug", "--seed", 4)
+    process = robocell("sim", "scans", "--out", out, "--shape", "mug", "--seed", 4)
     assert process.returncode == 0, process.stderr
     return [*paths, Path(process.stdout.split()[0])]
 

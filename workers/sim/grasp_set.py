@@ -61,7 +61,7 @@ def grasp_object(family: str, seed: int, fit: float = 0.07, too_big: float = 0.1
     Examples
     --------
     >>> plate = grasp_object("plate", 3)
-    >>> 0.005 <= 2 * min(plate.size) <= 0.015
+    >>> bool(0.005 <= 2 * min(plate.size) <= 0.015)
     True
     """
     rng = np.random.default_rng([seed, GRASPABLE.index(family) if family in GRASPABLE else 99])
