@@ -290,7 +290,8 @@ class Gripper(Step):
         if self.close:
             pick.held, pick.reason, pick.width = grip.holding, grip.reason, grip.width
             verdict = {True: "holds it", False: "missed it", None: "closed (the gripper cannot tell what it holds)"}
-            cell.note(job, f"the gripper {verdict[grip.holding]}{': ' + grip.reason if grip.reason else ''}")
+            why = f": {grip.reason}" if grip.reason and grip.holding is not True else ""
+            cell.note(job, f"the gripper {verdict[grip.holding]}{why}")
         pick.placed = pick.placed or self.places
 
 

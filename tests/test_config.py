@@ -162,3 +162,17 @@ def test_roles_without_a_users_dictionary_are_refused():
 
 def test_the_roles_table_has_a_field_for_every_role():
     assert set(Roles.model_fields) - {"cells"} == set(ROLES)
+
+
+@pytest.mark.parametrize("gripper, message", [
+    ({"max_opening": 0}, "gripper: Value error, gripper max_opening must be positive, got 0.0"),
+    ({"pad_length": 0.1}, "gripper: Value error, gripper pad_length (0.1) is longer than finger_length (0.045)"),
+    ({"friction": -0.5}, "gripper: Value error, gripper friction must be positive, got -0.5"),
+    ({"finger_length": "long"}, "gripper.finger_length: Input should be a valid number"),
+])
+def test_a_gripper_that_cannot_be_is_one_line_naming_the_field(tmp_path, gripper, message):
+    path = tmp_path / "cell.toml"
+    path.write_text("[gripper]\n" + "".join(f"{k} = {v!r}\n".replace("'", '"') for k, v in gripper.items()))
+    with pytest.raises(ConfigError) as error:
+        load_config(path)
+    assert message in str(error.value) and "\n" not in str(error.value)

@@ -35,11 +35,13 @@ from wire import keys
 from wire.bundle import core_segmentation
 from wire.config import CellConfig
 from wire.errors import TransportError
-from wire.messages import (POINTS_ENCODING, Blob, Reconstruction, ReconstructReply, ReconstructRequest, Superquadric,
-                           WorkerLoad, parse)
+from wire.messages import (POINTS_ENCODING, Blob, Grasp, Reconstruction, ReconstructReply, ReconstructRequest,
+                           Superquadric, WorkerLoad, parse)
 from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
+from core_cy.grasp import plan_grasps
+from core_cy.gripper import Gripper
 from core_cy.images import check_calibrated_size, checked_size
 from core_cy.reconstruct import Options, View, reconstruct
 from wire.process import open_transport, run_until_stopped
@@ -75,15 +77,28 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
     except (CoreError, ValueError) as exc:
         return ReconstructReply(job_id=request.job_id, error=str(exc), error_kind=type(exc).__name__, worker=worker,
                                 ticket=request.ticket).model_dump_json(), b""
+    grasps = []
+    summary = result.to_dict()
+    if request.gripper is not None:
+        began = time.perf_counter()
+        try:
+            planned = plan_grasps(result.superquadric, request.support_plane, Gripper.from_dict(request.gripper),
+                                  residual=result.residual, silhouette_iou=result.silhouette_iou, points=result.points,
+                                  max_grasps=request.max_grasps)
+        except CoreError as exc:
+            return ReconstructReply(job_id=request.job_id, error=f"grasps: {exc}", error_kind=type(exc).__name__,
+                                    worker=worker, ticket=request.ticket).model_dump_json(), b""
+        grasps = [Grasp(T_world_grasp=g.T_world_grasp.tolist(), width=g.width, score=g.score, approach=g.approach)
+                  for g in planned]
+        summary["timings_ms"]["grasp"] = round(1000 * (time.perf_counter() - began), 3)
     silhouettes = [cv2.imencode(".png", s)[1].tobytes() for s in result.silhouettes]
     points = np.ascontiguousarray(result.points, dtype="<f4").tobytes()
-    summary = result.to_dict()
     reply = ReconstructReply(
         job_id=request.job_id, worker=worker, ticket=request.ticket,
         result=Reconstruction(superquadric=Superquadric.model_validate(summary["superquadric"]),
                               silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
                               timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
-                              radius=float(result.radius)),
+                              radius=float(result.radius), grasps=grasps),
         silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
         points=Blob(encoding=POINTS_ENCODING, length=len(points)))
     return reply.model_dump_json(), b"".join(silhouettes) + points

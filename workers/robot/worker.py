@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from wire import keys
-from wire.backends import KukaRobotConfig, RobotConfig
+from wire.backends import KukaRobotConfig
 from wire.config import CellConfig
 from wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
 from wire.process import open_transport, run_until_stopped
@@ -27,15 +27,20 @@ __all__ = ["make_backend", "serve_robot", "main"]
 log = logging.getLogger(__name__)
 
 
-def make_backend(config: RobotConfig) -> RobotBackend:
-    """The backend of the ``[robot]`` section, not yet opened."""
-    if isinstance(config, KukaRobotConfig):
+def make_backend(config: CellConfig) -> RobotBackend:
+    """The backend of the ``[robot]`` section, not yet opened; the simulated robot's gripper judges
+    its grasps against the ``[sim]`` scene."""
+    robot = config.robot
+    if isinstance(robot, KukaRobotConfig):
         from .kuka.backend import KukaBackend
 
-        return KukaBackend.from_config(config.kuka, config.workspace)
+        return KukaBackend.from_config(robot.kuka, robot.workspace)
     from workers.sim.robot import SimRobot
+    from workers.sim.scene import scene_from_config
 
-    return SimRobot(config)
+    return SimRobot(robot, truth=[obj.truth() for obj in scene_from_config(config.sim)],
+                    gripper=config.gripper.dimensions(), T_flange_grasp=config.gripper.T_flange_grasp,
+                    support_plane=config.support_plane, friction=config.gripper.friction)
 
 
 def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend) -> None:
@@ -93,7 +98,7 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
 
 def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
-        backend = make_backend(config.robot)
+        backend = make_backend(config)
         await backend.open()
         try:
             transport = await open_transport(config)

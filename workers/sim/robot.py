@@ -1,4 +1,5 @@
-"""The simulated robot: a ``RobotBackend`` whose moves take time, and nothing else."""
+"""The simulated robot: a ``RobotBackend`` whose moves take time, and whose gripper, when it
+closes, judges the grasp against the simulated scene's true object (``workers.sim.judge``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import numpy as np
 
 from wire.backends import SimRobotConfig
 from workers.robot.backend import Grip, ProgressCallback, RobotBackend
+
+from .judge import JudgeGripper, Part, judge, parts_from_truth
 
 __all__ = ["SimRobot"]
 
@@ -23,10 +26,18 @@ class SimRobot(RobotBackend):
     """A robot whose moves take distance / speed (or angle / rotation speed, if longer),
     or ``move_time_s`` each if that is configured."""
 
-    def __init__(self, config: SimRobotConfig) -> None:
+    def __init__(self, config: SimRobotConfig, *, truth: list[dict] = (), gripper: dict | None = None,
+                 T_flange_grasp=None, support_plane=None, friction: float = 0.5) -> None:
+        """``truth``: the scene's objects as ``truth.json`` has them; ``gripper`` the DESIGN.md §3
+        dimensions, mounted at ``T_flange_grasp``: with both, closing judges the grasp."""
         self._config = config
         self._pose = np.asarray(config.home, dtype=np.float64)
         self._closed = False
+        self._parts: list[Part] = [part for obj in truth for part in parts_from_truth(obj)]
+        self._gripper = JudgeGripper.from_dict(gripper) if gripper is not None else None
+        self._flange_grasp = np.eye(4) if T_flange_grasp is None else np.asarray(T_flange_grasp, dtype=np.float64)
+        self._plane = support_plane
+        self._friction = friction
 
     async def open(self) -> None:
         pass
@@ -64,6 +75,11 @@ class SimRobot(RobotBackend):
         return self.pose()
 
     async def grip(self, close: bool) -> Grip:
-        """The simulated gripper closes or opens at once; it cannot tell whether it holds."""
+        """Open at once; or close, and say whether the gripper holds the true object where it is."""
         self._closed = close
-        return Grip(closed=close)
+        if not close or self._gripper is None or not self._parts:
+            return Grip(closed=close)
+        verdict = judge(self._pose @ self._flange_grasp, self._parts, self._gripper, self._plane, mu=self._friction)
+        width = verdict.width if np.isfinite(verdict.width) else 0.0
+        return Grip(closed=True, holding=verdict.holds, width=width,
+                    reason="held" if verdict.holds else verdict.reason)

@@ -1,0 +1,84 @@
+"""A pick in the simulated cell, end to end: scan, plan grasps, approach, close, lift, place.
+
+The simulated robot's gripper judges each grasp against the scene's true object
+(``workers.sim.judge``, written apart from the planner), so "held" is the truth's verdict.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wire.client import JobFailed
+from wire.messages import JobState, PickRequest, ScanRequest
+from workers.sim.scene import target_from_config
+
+from tests.cell_fixtures import cell_config, running_cell
+
+PLACE = [[1.0, 0.0, 0.0, 0.55], [0.0, -1.0, 0.0, 0.25], [0.0, 0.0, -1.0, 0.08], [0.0, 0.0, 0.0, 1.0]]
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    config = cell_config(tmp_path_factory.mktemp("pick"), cell_id="pick",
+                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20})
+    with running_cell(config) as running:
+        yield running
+
+
+def moves_of(cell, job_id: str) -> int:
+    return sum("moved in" in line and f"for job {job_id}" in line for line in cell.log("robot").splitlines())
+
+
+def test_a_box_is_picked_held_and_placed(cell):
+    request = ScanRequest(target=target_from_config(cell.config.sim), pick=PickRequest(place=PLACE))
+    result = cell.client.scan(request, timeout=120)
+    assert result.grasps, "a box 5 cm across has grasps"
+    pick = result.pick
+    assert pick is not None and pick.held is True and pick.reason == "held" and pick.placed
+    chosen = np.asarray(result.grasps[pick.grasp].T_world_grasp)
+    flange = np.asarray(pick.T_base_flange)
+    expected = chosen @ np.linalg.inv(np.asarray(cell.config.gripper.T_flange_grasp))
+    assert np.allclose(flange[:3, 3], expected[:3, 3], atol=1e-6)   # the grasp frame where the plan put it
+    events = [(e.state.value, e.message) for e in cell.events(result.job_id)]
+    picking = [message for state, message in events if state == "picking" and not message.startswith("the gripper")]
+    assert picking == ["choosing a grasp", "opening the gripper", "moving above the grasp", "approaching",
+                       "closing the gripper", "lifting", "carrying it over", "putting it down", "letting go",
+                       "backing away"]
+    assert any("the gripper holds it" in message for _, message in events)
+    assert moves_of(cell, result.job_id) == 3 + 6  # the views, and the pick's six moves
+    grips = [line for line in cell.log("robot").splitlines() if f"for job {result.job_id}" in line and "gripper" in line]
+    assert [line.split("gripper ")[1].split()[0] for line in grips] == ["open", "closed", "open"]
+    assert "held" in events[-1][1] and events[-1][0] == "succeeded"
+
+
+def test_a_scan_without_a_pick_still_carries_its_grasps_and_moves_only_for_its_views(cell):
+    result = cell.client.scan(cell.scan_request(label="scan only"), timeout=120)
+    assert result.grasps and result.pick is None
+    assert moves_of(cell, result.job_id) == 3
+    assert result.timings_ms["grasp"] > 0
+
+
+def test_a_place_outside_the_workspace_is_refused_at_submit(cell):
+    far = [row[:] for row in PLACE]
+    far[0][3] = 2.0
+    with pytest.raises(Exception, match=r"pick.place: the above place pose is outside the workspace: x = 2 m"):
+        cell.client.submit(ScanRequest(target=target_from_config(cell.config.sim), pick=PickRequest(place=far)))
+
+
+@pytest.fixture(scope="module")
+def big(tmp_path_factory):
+    config = cell_config(tmp_path_factory.mktemp("pick-big"), cell_id="bigball",
+                         sim={"shape": "ellipsoid", "size": [0.08, 0.08, 0.05], "position": [0.6, 0.0]})
+    with running_cell(config) as running:
+        yield running
+
+
+def test_an_object_no_grasp_holds_fails_the_pick_and_the_arm_stays_put(big):
+    request = ScanRequest(target=target_from_config(big.config.sim), pick=PickRequest())
+    with pytest.raises(JobFailed, match="choosing a grasp: no grasp holds this object") as failed:
+        big.client.scan(request, timeout=120)
+    assert failed.value.kind == "NoGrasp"
+    job_id = failed.value.status.job_id
+    assert moves_of(big, job_id) == 3  # the views; no move of the pick
+    assert big.client.status(job_id).state is JobState.FAILED
