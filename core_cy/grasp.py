@@ -511,8 +511,8 @@ def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
 def _same_grasp(a: np.ndarray, b: np.ndarray, tolerance: float) -> bool:
     """Two grasps alike but for their depth (the gripper is symmetric under a half turn about z)."""
     apart = a[:3, 3] - b[:3, 3]
-    return bool((a[:3, 2] @ b[:3, 2] > math.cos(math.radians(3)) and abs(a[:3, 1] @ b[:3, 1]) > math.cos(math.radians(3)))
-            and np.linalg.norm(apart - (apart @ a[:3, 2]) * a[:3, 2]) < tolerance)
+    return bool(a[:3, 2] @ b[:3, 2] > math.cos(math.radians(3)) and abs(a[:3, 1] @ b[:3, 1]) > math.cos(math.radians(3))
+                and np.linalg.norm(apart - (apart @ a[:3, 2]) * a[:3, 2]) < tolerance)
 
 
 def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *,
