@@ -63,7 +63,7 @@ async def _demo(run_dir: Path) -> int:
     from core_cy.superquadric import Superquadric
     from wire.client import AsyncCellClient
     from wire.errors import CellError
-    from wire.messages import ScanRequest
+    from wire.messages import PickRequest, ScanRequest
     from workers.sim.scene import truth_from_config
 
     from .jobs import print_event
@@ -78,8 +78,13 @@ async def _demo(run_dir: Path) -> int:
     try:
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
-            result = await client.scan(ScanRequest(target=target.tolist(), label="demo"), timeout=120,
-                                       on_event=print_event)
+            # Scan it, then pick it up and put it down 15 cm to the side.
+            place = truth.T_world_object.copy()
+            place[:3, :3] = np.diag([1.0, -1.0, -1.0])  # approached from above
+            place[1, 3] += 0.15
+            place[2, 3] = truth.T_world_object[2, 3] + 0.01
+            request = ScanRequest(target=target.tolist(), label="demo", pick=PickRequest(place=place.tolist()))
+            result = await client.scan(request, timeout=120, on_event=print_event)
     except CellError as exc:
         print(f"robocell demo: {exc}", file=sys.stderr)
         return 1
@@ -97,6 +102,17 @@ async def _demo(run_dir: Path) -> int:
           f"{', '.join(f'{v:.3f}' for v in result.silhouette_iou)}")
     print(f"  reconstruction {result.timings_ms['total']:.1f} ms (" +
           ", ".join(f"{k} {v:.1f}" for k, v in result.timings_ms.items() if k != "total") + ")")
+    print(f"\ngrasps of the cell's gripper (opening {config.gripper.max_opening * 100:.1f} cm), best first:")
+    for index, grasp in enumerate(result.grasps[:5]):
+        T = np.asarray(grasp.T_world_grasp)
+        print(f"  {index}  {grasp.approach:<6} closing across {grasp.width * 100:5.2f} cm at "
+              f"{np.round(T[:3, 3], 3).tolist()} m, score {grasp.score:.2f}"
+              + ("   <- picked with" if result.pick is not None and result.pick.grasp == index else ""))
+    if result.pick is not None:
+        verdict = {True: "held it", False: "missed it", None: "cannot tell"}[result.pick.held]
+        print(f"  the pick, judged against the true object: {verdict}"
+              + (f" ({result.pick.reason})" if result.pick.reason and not result.pick.held else "")
+              + (", and put it down 15 cm to the side" if result.pick.placed else ""))
     print(f"\nrecording: {result.recording}\nreplay it:  .venv/bin/robocell replay {result.recording}"
           f"   (or --web for the web viewer)")
     return 0

@@ -6,6 +6,8 @@ The simulated robot's gripper judges each grasp against the scene's true object
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,9 @@ from wire.client import JobFailed
 from wire.messages import JobState, PickRequest, ScanRequest
 from workers.sim.scene import target_from_config
 
-from tests.cell_fixtures import cell_config, running_cell
+from cell.recording import recording_summary
+
+from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 
 PLACE = [[1.0, 0.0, 0.0, 0.55], [0.0, -1.0, 0.0, 0.25], [0.0, 0.0, -1.0, 0.08], [0.0, 0.0, 0.0, 1.0]]
 
@@ -50,6 +54,12 @@ def test_a_box_is_picked_held_and_placed(cell):
     grips = [line for line in cell.log("robot").splitlines() if f"for job {result.job_id}" in line and "gripper" in line]
     assert [line.split("gripper ")[1].split()[0] for line in grips] == ["open", "closed", "open"]
     assert "held" in events[-1][1] and events[-1][0] == "succeeded"
+    # The recording shows the grippers of the grasps, the chosen one apart, and the pick's motion.
+    wait_for_footer(Path(result.recording), timeout=20)
+    entities = recording_summary(result.recording)
+    grippers = [entity for entity in entities if entity.startswith("/world/grasps/")]
+    assert "/world/grasps/chosen" in grippers and len(grippers) == len(result.grasps)
+    assert "Boxes3D" in entities["/world/grasps/chosen"]
 
 
 def test_a_scan_without_a_pick_still_carries_its_grasps_and_moves_only_for_its_views(cell):
