@@ -53,7 +53,7 @@ from .pool import ReconstructorPool
 from .presence import Absent, Presence
 from .recorder import Recorder
 from .pictures import Pictures
-from .steps import PLACE_POSES, Step, StepFailed, job_steps, pick_poses
+from .steps import Step, StepFailed, job_steps
 from .store import JobStore, queued_event
 
 __all__ = ["CellDaemon"]
@@ -450,12 +450,12 @@ class CellDaemon:
             violation = workspace_violation(pose, self.config.robot.workspace)
             if violation:
                 raise RequestError(f"view {view} is outside the workspace: {violation}")
-        if scan.pick is not None and scan.pick.place is not None:  # the grasp waits for the scan; the place need not
-            placing = pick_poses(np.asarray(scan.pick.place), scan.pick, self.config)
-            for name in PLACE_POSES:
-                violation = workspace_violation(placing[name], self.config.robot.workspace)
-                if violation:
-                    raise RequestError(f"pick.place: the {name} pose is outside the workspace: {violation}")
+        if scan.pick is not None and scan.pick.place is not None:  # the poses wait for the grasp; the spot need not
+            workspace = self.config.robot.workspace
+            for axis, (value, low, high) in enumerate(zip(scan.pick.place, workspace.min, workspace.max)):
+                if not low <= value <= high:
+                    raise RequestError(f"pick.place: {'xy'[axis]} = {value:g} m is outside the workspace's "
+                                       f"{low:g} to {high:g} m")
         if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
             known = await self._db.call(self._jobs.find_request, scan.request_id)
             if known is not None:

@@ -324,8 +324,9 @@ def pick_poses(T_world_grasp: np.ndarray, pick: PickRequest, config: CellConfig,
         return moved
 
     grasps = {"above": back(grasp, pick.approach_m), "grasp": grasp, "lift": up(grasp, pick.lift_m)}
-    if pick.place is not None:
-        place = np.asarray(pick.place)
+    if pick.place is not None:  # set down as it stood: the grasp moved across the table
+        place = grasp.copy()
+        place[:2, 3] = pick.place
         grasps |= {"above place": up(place, pick.lift_m), "place": place, "away": back(place, pick.approach_m)}
     return {name: T @ flange_from_grasp for name, T in grasps.items()}
 

@@ -78,12 +78,9 @@ async def _demo(run_dir: Path) -> int:
     try:
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
-            # Scan it, then pick it up and put it down 15 cm to the side.
-            place = truth.T_world_object.copy()
-            place[:3, :3] = np.diag([1.0, -1.0, -1.0])  # approached from above
-            place[1, 3] += 0.15
-            place[2, 3] = truth.T_world_object[2, 3] + 0.01
-            request = ScanRequest(target=target.tolist(), label="demo", pick=PickRequest(place=place.tolist()))
+            # Scan it, then pick it up and set it down 15 cm to the side.
+            place = [float(target[0]), float(target[1]) + 0.15]
+            request = ScanRequest(target=target.tolist(), label="demo", pick=PickRequest(place=place))
             result = await client.scan(request, timeout=120, on_event=print_event)
     except CellError as exc:
         print(f"robocell demo: {exc}", file=sys.stderr)

@@ -30,6 +30,10 @@ def register(commands: Commands) -> None:
     views.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="point to look at, robot base frame, metres (views from the configured plan)")
     views.add_argument("--poses", metavar="FILE", help=_POSES_SHAPE)
+    scan.add_argument("--pick", action="store_true",
+                      help="after the scan, pick the object up with the best grasp the robot can reach, and lift it")
+    scan.add_argument("--place", nargs=2, type=float, metavar=("X", "Y"),
+                      help="with --pick: then set it down here on the table, as it stood (base frame, metres)")
     scan.add_argument("--label", default="", help="free text stored with the job")
     scan.add_argument("--request-id", help="client-chosen id: submitting it again returns the same job")
     scan.add_argument("--timeout", type=float, default=300.0, help="seconds to wait (default %(default)s)")
@@ -97,10 +101,13 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
     import numpy as np
     from pydantic import ValidationError
 
-    from wire.messages import ScanRequest, field_errors
+    from wire.messages import PickRequest, ScanRequest, field_errors
 
+    if args.place is not None and not args.pick:
+        raise ValueError("--place goes with --pick")
+    pick = PickRequest(place=args.place) if args.pick else None
     if args.poses is None:
-        return ScanRequest(target=args.target, label=args.label, request_id=args.request_id)
+        return ScanRequest(target=args.target, label=args.label, request_id=args.request_id, pick=pick)
     try:
         with open(args.poses, encoding="utf-8") as file:
             poses = json.load(file)
@@ -114,7 +121,7 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
         got = "not an array of numbers" if shape is None else f"an array of shape {shape}"
         raise ValueError(f"{args.poses}: expected {_POSES_SHAPE}, got {got}")
     try:
-        return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id)
+        return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id, pick=pick)
     except ValidationError as exc:
         first = field_errors(exc, at_most=1).split("; ")[0]
         others = len(exc.errors()) - 1
@@ -137,6 +144,8 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     result = await client.result(final.job_id)
     print(json.dumps({"job_id": result.job_id, "superquadric": result.superquadric.model_dump(),
                       "silhouette_iou": result.silhouette_iou, "timings_ms": result.timings_ms,
+                      "grasps": [grasp.model_dump() for grasp in result.grasps[:3]],
+                      "pick": None if result.pick is None else result.pick.model_dump(),
                       "recording": result.recording}))
     return 0
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from wire.client import JobFailed
+from wire.errors import RemoteError
 from wire.messages import JobState, PickRequest, ScanRequest
 from workers.sim.scene import target_from_config
 
@@ -19,7 +20,7 @@ from cell.recording import recording_summary
 
 from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 
-PLACE = [[1.0, 0.0, 0.0, 0.55], [0.0, -1.0, 0.0, 0.25], [0.0, 0.0, -1.0, 0.08], [0.0, 0.0, 0.0, 1.0]]
+PLACE = [0.55, 0.25]
 
 
 @pytest.fixture(scope="module")
@@ -70,9 +71,8 @@ def test_a_scan_without_a_pick_still_carries_its_grasps_and_moves_only_for_its_v
 
 
 def test_a_place_outside_the_workspace_is_refused_at_submit(cell):
-    far = [row[:] for row in PLACE]
-    far[0][3] = 2.0
-    with pytest.raises(Exception, match=r"pick.place: the above place pose is outside the workspace: x = 2 m"):
+    far = [2.0, 0.0]
+    with pytest.raises(RemoteError, match=r"pick.place: x = 2 m is outside the workspace's 0.1 to 1 m"):
         cell.client.submit(ScanRequest(target=target_from_config(cell.config.sim), pick=PickRequest(place=far)))
 
 

@@ -289,3 +289,10 @@ def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_ends_
             os.killpg(process.pid, signal.SIGKILL)
             process.communicate(timeout=30)
     assert process.returncode == 0 and "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
+
+
+def test_scan_place_goes_with_pick(capsys):
+    """Checked before anything is sent."""
+    assert main(["scan", "--target", "0.6", "0", "0.05", "--place", "0.6", "0.2"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == "robocell scan: --place goes with --pick\n"

@@ -116,14 +116,15 @@ class PickRequest(BaseModel):
     """After the scan, pick the object up with the best grasp the robot can reach.
 
     The gripper opens, moves ``approach_m`` back from the grasp along its approach, goes in,
-    closes, and lifts the object ``lift_m`` straight up; with ``place`` (the grasp frame's pose
-    there, grasp-to-base) it then carries it over, lowers it there, opens, and backs away.
+    closes, and lifts the object ``lift_m`` straight up; with ``place`` (x, y on the table, base
+    frame, metres) it then carries it over, sets it down there as it stood (the grasp moved
+    across, at its height and turn), opens, and backs away.
     """
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     approach_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
     lift_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
-    place: Pose | None = None
+    place: Annotated[list[float], Field(min_length=2, max_length=2)] | None = None
 
 
 class ScanRequest(Message):
