@@ -40,6 +40,9 @@ shape = "cylinder"
 
 [timeouts]
 move_s = 12.5
+
+[gripper]
+max_opening = 0.11
 """
 
 
@@ -58,6 +61,7 @@ def test_a_file_sets_every_section(tmp_path):
     assert (config.scan.table_height, config.scan.plan.standoff, config.scan.plan.azimuths_deg) == (0.02, 0.4, [0, 180])
     assert (config.reconstruct.processes, config.sim.shape, config.timeouts.move_s) == (4, "cylinder", 12.5)
     assert config.timeouts.capture_s == default.timeouts.capture_s
+    assert (config.gripper.max_opening, config.gripper.friction) == (0.11, default.gripper.friction)
 
 
 @pytest.mark.parametrize("text, named", [

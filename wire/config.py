@@ -170,6 +170,10 @@ class SimConfig(Section):
     position: Annotated[list[float], Field(min_length=2, max_length=2)] = [0.6, 0.0]
     yaw_deg: float = 20.0
     seed: int = 0
+    #: Instead of the object above: a scene of the grasp benchmark (``workers/sim/grasp_set.py``), a
+    #: family (box, cylinder, ellipsoid, rounded-box, plate, lying-cylinder, cups, mug,
+    #: box-and-ball, l-boxes, too-big) drawn from ``seed``.
+    grasp_scene: str | None = None
 
 
 class Timeouts(Section):

@@ -26,11 +26,17 @@ def scene_from_config(sim: SimConfig) -> list[SimObject]:
         If the size does not make a valid object of that shape.
     """
     try:
+        if sim.grasp_scene is not None:
+            from .grasp_set import grasp_object
+
+            return [grasp_object(sim.grasp_scene, sim.seed)]
         if sim.shape == "cup-stack":
             return [CupStack(sim.position, *sim.size)]
         if sim.shape == "lumpy":
             return [LumpyFigure(sim.position, sim.size, seed=sim.seed)]
         return [SuperquadricObject.on_table(sim.shape, sim.size, sim.position, sim.yaw_deg)]
+    except KeyError:
+        raise ConfigError(f"sim: no grasp scene {sim.grasp_scene!r}") from None
     except ValueError as exc:
         raise ConfigError(f"sim: size {sim.size} does not make a {sim.shape}: {exc}") from exc
 
@@ -41,5 +47,10 @@ def truth_from_config(sim: SimConfig) -> dict[str, Any]:
 
 
 def target_from_config(sim: SimConfig) -> list[float]:
-    """The centre of the ``[sim]`` section's object (base frame, metres): where a scan of it looks."""
-    return Superquadric.from_dict(truth_from_config(sim)).T_world_object[:3, 3].tolist()
+    """The centre of the ``[sim]`` section's object (base frame, metres): where a scan of it looks
+    (for an object of several parts, the middle of its bounding box)."""
+    truth = truth_from_config(sim)
+    if "parts" not in truth:
+        return Superquadric.from_dict(truth).T_world_object[:3, 3].tolist()
+    vertices = scene_from_config(sim)[0].mesh()[0]
+    return ((vertices.min(axis=0) + vertices.max(axis=0)) / 2).tolist()
