@@ -5,9 +5,10 @@ superquadric (sizes, exponents, pose) on a support plane:
 
 1. **Candidates.** Frames of the object: its own axes and, around an axis
    whose cross-section is round, that frame turned in 30-degree steps from the
-   one whose approach comes straight from above. A frame within 25 degrees of
-   upright is set upright: an object at rest on a plane has a principal axis
-   along its normal, so the fit's tilt is its error. In each frame the jaws
+   one whose approach comes straight from above. A fit within 25 degrees of
+   upright is set upright first: an object at rest on a plane has a principal
+   axis along its normal, so the fit's tilt is its error (a fit tilted more,
+   as a single superquadric of an L may be, is tried both ways). In each frame the jaws
    close along one axis and approach along another, from either side (not
    from below the plane); in the object's own frame they also slide along the
    third axis, halfway and all the way to either end. Each is tried at four
@@ -17,7 +18,8 @@ superquadric (sizes, exponents, pose) on a support plane:
    axes, so the widest chord the fingers meet and the normal there follow from
    the inside-outside function): the object fits the open jaws, the palm stays
    clear, the pads' centre line meets the object, the contact normals lie
-   within the friction cone, and no finger or palm corner comes within a
+   within the friction cone (held 3 degrees inside it, for what a fit rounder
+   than the object hides), and no finger or palm corner comes within a
    clearance of the support plane. With the carved hull's points: the palm
    also stays clear of the hull (which holds the whole object, also what the
    superquadric leaves out, like a mug's handle), the hull reaches past the
@@ -25,7 +27,8 @@ superquadric (sizes, exponents, pose) on a support plane:
    unexplained lies where an open finger goes.
 3. **Robustness.** The best candidates are checked again on the model moved by
    its own error, drawn 24 times (fixed draws, so planning is repeatable):
-   semi-axes and centre by the length error, the orientation by the angle
+   semi-axes (half an error shorter on average: a hull errs outward, and so
+   mostly do fits of it) and centre by the length error, the orientation by the angle
    error (mostly about the vertical for an upright frame), the exponents
    rounder or boxier. The errors come from the fit's evidence, its residual
    and how well it covers the silhouettes (:func:`model_error`). Each draw is
