@@ -8,6 +8,32 @@ cdef inline double _clip_unit(double v) noexcept nogil:
     return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
 
 
+cdef inline double _chord(const double* s, double e1, double e2, int k, double* p, double* g) noexcept nogil:
+    """Half-chord along axis k (scaled by s[k]) of the superquadric with semi-axes s at the
+    point p (absolute values divided by the sizes; p[k] ignored, then set); NaN where the
+    line misses, else g is the outward normal (unnormalised, first octant)."""
+    cdef double S, B, h, common
+    cdef int other
+    if k == 2:
+        S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
+        B = 1 - pow(S, e2 / e1) if S < 1 else -1.0
+        h = pow(B, e1 / 2) if B > 0 else NAN
+    else:
+        other = 1 - k
+        S = pow(p[2], 2 / e1)
+        B = pow(1 - S, e1 / e2) - pow(p[other], 2 / e2) if S < 1 else -1.0
+        h = pow(B, e2 / 2) if B > 0 else NAN
+    if h != h:
+        return NAN
+    p[k] = h
+    S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
+    common = pow(S, e2 / e1 - 1) if S > 0 else 0.0
+    g[0] = common * pow(p[0], 2 / e2 - 1) / s[0]
+    g[1] = common * pow(p[1], 2 / e2 - 1) / s[1]
+    g[2] = pow(p[2], 2 / e1 - 1) / s[2]
+    return h * s[k]
+
+
 def half_chords(const double[:, ::1] sizes not None, const double[:, ::1] shape not None,
                 const long[::1] axis not None, const double[:, ::1] u not None,
                 double[::1] half not None, double[:, ::1] normal not None):
@@ -22,40 +48,78 @@ def half_chords(const double[:, ::1] sizes not None, const double[:, ::1] shape 
     cdef double s[3]
     cdef double p[3]
     cdef double g[3]
-    cdef double e1, e2, S, B, common, length, h
-    cdef int k, other
+    cdef double h, length
+    cdef int k
     with nogil:
         for row in range(n):
+            k = <int>axis[row]
             for c in range(3):
                 s[c] = sizes[row, c]
                 p[c] = fabs(u[row, c]) / s[c]
-            e1, e2, k = shape[row, 0], shape[row, 1], <int>axis[row]
-            if k == 2:
-                S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
-                B = 1 - pow(S, e2 / e1) if S < 1 else -1.0
-                h = pow(B, e1 / 2) if B > 0 else NAN
-            else:
-                other = 1 - k
-                S = pow(p[2], 2 / e1)
-                B = pow(1 - S, e1 / e2) - pow(p[other], 2 / e2) if S < 1 else -1.0
-                h = pow(B, e2 / 2) if B > 0 else NAN
+            h = _chord(s, shape[row, 0], shape[row, 1], k, p, g)
+            half[row] = h
             if h != h:
-                half[row] = NAN
                 normal[row, 0], normal[row, 1], normal[row, 2] = 0.0, 0.0, 0.0
                 continue
-            half[row] = h * s[k]
-            p[k] = h
-            S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
-            common = pow(S, e2 / e1 - 1) if S > 0 else 0.0
-            g[0] = common * pow(p[0], 2 / e2 - 1) / s[0]
-            g[1] = common * pow(p[1], 2 / e2 - 1) / s[1]
-            g[2] = pow(p[2], 2 / e1 - 1) / s[2]
             for c in range(3):
                 if c != k and u[row, c] < 0:
                     g[c] = -g[c]
             length = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
             for c in range(3):
                 normal[row, c] = g[c] / length if length > 0 else 0.0
+
+
+def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1] shapes not None,
+                    const long[:, ::1] axes not None, const double[:, ::1] across not None,
+                    const double[:, ::1] along not None,
+                    double[:, :, :, ::1] points not None, double[:, :, :, ::1] normals not None,
+                    unsigned char[:, :, ::1] valid not None):
+    """The surface facing each finger, sampled on a grid, in the model's frame.
+
+    sizes (M, 3); shapes (V, M, 2) the exponent variants; axes (M, 3) the frame axes of
+    closing, approach and across; across (M, A) and along (M, W) the grid's frame
+    coordinates on the across and approach axes. Writes points and unit normals
+    (V, M, 2N, 3), N = A W: the first N on the +closing side, the last N mirrored; valid
+    (V, M, 2N) 1 where the closing line meets the model.
+    """
+    cdef Py_ssize_t V = shapes.shape[0], M = sizes.shape[0], A = across.shape[1], W = along.shape[1]
+    cdef Py_ssize_t N = A * W, v, m, a, w, n, c
+    cdef double s[3]
+    cdef double p[3]
+    cdef double g[3]
+    cdef double q[3]
+    cdef double h, length
+    cdef int i, j, k
+    with nogil:
+        for v in range(V):
+            for m in range(M):
+                i, j, k = <int>axes[m, 0], <int>axes[m, 1], <int>axes[m, 2]
+                for c in range(3):
+                    s[c] = sizes[m, c]
+                for a in range(A):
+                    for w in range(W):
+                        n = a * W + w
+                        q[i], q[j], q[k] = 0.0, along[m, w], across[m, a]
+                        for c in range(3):
+                            p[c] = fabs(q[c]) / s[c]
+                        h = _chord(s, shapes[v, m, 0], shapes[v, m, 1], i, p, g)
+                        if h != h:
+                            valid[v, m, n], valid[v, m, N + n] = 0, 0
+                            for c in range(3):
+                                points[v, m, n, c], points[v, m, N + n, c] = 0.0, 0.0
+                                normals[v, m, n, c], normals[v, m, N + n, c] = 0.0, 0.0
+                            continue
+                        q[i] = h
+                        for c in range(3):
+                            if c != i and q[c] < 0:
+                                g[c] = -g[c]
+                        length = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+                        for c in range(3):
+                            points[v, m, n, c] = q[c]
+                            points[v, m, N + n, c] = -q[c] if c == i else q[c]
+                            normals[v, m, n, c] = g[c] / length
+                            normals[v, m, N + n, c] = -g[c] / length if c == i else g[c] / length
+                        valid[v, m, n], valid[v, m, N + n] = 1, 1
 
 
 def perturbed_margins(const double[:, :, :, ::1] points not None,
@@ -70,6 +134,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                       double half_width, double palm, double tip, double half_open,
                       double compliance, double cone,
                       double[:, ::1] work not None,
+                      double[:, :, ::1] turned not None,
                       double[:, :, ::1] out not None):
     """Open-jaw and friction margins of each grasp under each perturbation of its model.
 
@@ -82,7 +147,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
         the model about its centre along the grasp axes; rotation (P, M, 3, 3) about
         the centre, in each grasp's frame; shift (P, 3).
     centre : (M, 3) the model's centre in each grasp frame.
-    work : (2N, 4) scratch.
+    work : (2N, 4) and turned : (V, 2N, 6) scratch.
     out : (M, P, 4) written: open-jaw margin (half_open minus the farthest touch),
         friction margin (cone minus the contacts' worst angle off antipodal, radians),
         1.0 if both fingers reach the object else 0.0 (the margins are then 0), and the
@@ -91,7 +156,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     cdef Py_ssize_t n_grasps = points.shape[1], n_samples = points.shape[2], half = n_samples // 2
     cdef Py_ssize_t n_perturbations = variant.shape[0]
     cdef Py_ssize_t a, b, k, v, side
-    cdef double dx, dy, dz, qx, qy, qz, sx, sy, sz, ext, ux, uy, uz
+    cdef double dx, dy, dz, qx, qy, qz, sx, sy, sz, ext
     cdef double top, bottom, near, nx, ny, nz, length, line_x, line_y, line_z
     cdef double cx[2]
     cdef double cy[2]
@@ -101,25 +166,40 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     cdef double mz[2]
     cdef double count[2]
     cdef double angle1, angle2
+    cdef double r[3][3]
+    cdef double ox, oy, oz
     cdef bint reached_up, reached_down
+    cdef Py_ssize_t n_variants = points.shape[0], i, c
     with nogil:
         for a in range(n_grasps):
+            # The samples and their normals in the grasp's axes, once per grasp.
+            for v in range(n_variants):
+                for k in range(n_samples):
+                    if not valid[v, a, k]:
+                        continue
+                    for c in range(3):
+                        turned[v, k, c] = (frame[a, c, 0] * points[v, a, k, 0] + frame[a, c, 1] * points[v, a, k, 1]
+                                           + frame[a, c, 2] * points[v, a, k, 2])
+                        turned[v, k, 3 + c] = (frame[a, c, 0] * normals[v, a, k, 0]
+                                               + frame[a, c, 1] * normals[v, a, k, 1]
+                                               + frame[a, c, 2] * normals[v, a, k, 2])
             for b in range(n_perturbations):
                 v = variant[b]
                 sx, sy, sz = scale[b, a, 0], scale[b, a, 1], scale[b, a, 2]
+                for i in range(3):
+                    for c in range(3):
+                        r[i][c] = rotation[b, a, i, c]
+                ox, oy, oz = centre[a, 0] + shift[b, 0], centre[a, 1] + shift[b, 1], centre[a, 2] + shift[b, 2]
                 top, bottom, near = -INFINITY, -INFINITY, INFINITY
                 reached_up, reached_down = False, False
                 for k in range(n_samples):
                     work[k, 3] = 0.0
                     if not valid[v, a, k]:
                         continue
-                    ux, uy, uz = points[v, a, k, 0], points[v, a, k, 1], points[v, a, k, 2]
-                    dx = (frame[a, 0, 0] * ux + frame[a, 0, 1] * uy + frame[a, 0, 2] * uz) * sx
-                    dy = (frame[a, 1, 0] * ux + frame[a, 1, 1] * uy + frame[a, 1, 2] * uz) * sy
-                    dz = (frame[a, 2, 0] * ux + frame[a, 2, 1] * uy + frame[a, 2, 2] * uz) * sz
-                    qx = centre[a, 0] + shift[b, 0] + rotation[b, a, 0, 0] * dx + rotation[b, a, 0, 1] * dy + rotation[b, a, 0, 2] * dz
-                    qy = centre[a, 1] + shift[b, 1] + rotation[b, a, 1, 0] * dx + rotation[b, a, 1, 1] * dy + rotation[b, a, 1, 2] * dz
-                    qz = centre[a, 2] + shift[b, 2] + rotation[b, a, 2, 0] * dx + rotation[b, a, 2, 1] * dy + rotation[b, a, 2, 2] * dz
+                    dx, dy, dz = turned[v, k, 0] * sx, turned[v, k, 1] * sy, turned[v, k, 2] * sz
+                    qx = ox + r[0][0] * dx + r[0][1] * dy + r[0][2] * dz
+                    qy = oy + r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
+                    qz = oz + r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
                     if fabs(qx) > half_width:
                         continue
                     if qz < near:
@@ -151,13 +231,10 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                     if ext > compliance:
                         continue
                     # The normal: inverse-stretched, turned, normalised.
-                    ux, uy, uz = normals[v, a, k, 0], normals[v, a, k, 1], normals[v, a, k, 2]
-                    dx = (frame[a, 0, 0] * ux + frame[a, 0, 1] * uy + frame[a, 0, 2] * uz) / sx
-                    dy = (frame[a, 1, 0] * ux + frame[a, 1, 1] * uy + frame[a, 1, 2] * uz) / sy
-                    dz = (frame[a, 2, 0] * ux + frame[a, 2, 1] * uy + frame[a, 2, 2] * uz) / sz
-                    nx = rotation[b, a, 0, 0] * dx + rotation[b, a, 0, 1] * dy + rotation[b, a, 0, 2] * dz
-                    ny = rotation[b, a, 1, 0] * dx + rotation[b, a, 1, 1] * dy + rotation[b, a, 1, 2] * dz
-                    nz = rotation[b, a, 2, 0] * dx + rotation[b, a, 2, 1] * dy + rotation[b, a, 2, 2] * dz
+                    dx, dy, dz = turned[v, k, 3] / sx, turned[v, k, 4] / sy, turned[v, k, 5] / sz
+                    nx = r[0][0] * dx + r[0][1] * dy + r[0][2] * dz
+                    ny = r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
+                    nz = r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
                     length = sqrt(nx * nx + ny * ny + nz * nz)
                     if length > 0:
                         mx[side] += nx / length

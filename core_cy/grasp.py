@@ -5,9 +5,10 @@ superquadric (sizes, exponents, pose) on a support plane:
 
 1. **Candidates.** Frames of the object: its own axes and, around an axis
    whose cross-section is round, that frame turned in 30-degree steps from the
-   one whose approach comes straight from above. A frame within 25 degrees of
-   upright is set upright: an object at rest on a plane has a principal axis
-   along its normal, so the fit's tilt is its error. In each frame the jaws
+   one whose approach comes straight from above. A fit within 25 degrees of
+   upright is set upright first: an object at rest on a plane has a principal
+   axis along its normal, so the fit's tilt is its error (a fit tilted more,
+   as a single superquadric of an L may be, is tried both ways). In each frame the jaws
    close along one axis and approach along another, from either side (not
    from below the plane); in the object's own frame they also slide along the
    third axis, halfway and all the way to either end. Each is tried at four
@@ -17,7 +18,8 @@ superquadric (sizes, exponents, pose) on a support plane:
    axes, so the widest chord the fingers meet and the normal there follow from
    the inside-outside function): the object fits the open jaws, the palm stays
    clear, the pads' centre line meets the object, the contact normals lie
-   within the friction cone, and no finger or palm corner comes within a
+   within the friction cone (held 3 degrees inside it, for what a fit rounder
+   than the object hides), and no finger or palm corner comes within a
    clearance of the support plane. With the carved hull's points: the palm
    also stays clear of the hull (which holds the whole object, also what the
    superquadric leaves out, like a mug's handle), the hull reaches past the
@@ -25,7 +27,8 @@ superquadric (sizes, exponents, pose) on a support plane:
    unexplained lies where an open finger goes.
 3. **Robustness.** The best candidates are checked again on the model moved by
    its own error, drawn 24 times (fixed draws, so planning is repeatable):
-   semi-axes and centre by the length error, the orientation by the angle
+   semi-axes (half an error shorter on average: a hull errs outward, and so
+   mostly do fits of it) and centre by the length error, the orientation by the angle
    error (mostly about the vertical for an upright frame), the exponents
    rounder or boxier. The errors come from the fit's evidence, its residual
    and how well it covers the silhouettes (:func:`model_error`). Each draw is
@@ -52,6 +55,7 @@ from scipy.special import ndtr
 
 from ._grasp_cy import half_chords as _half_chords
 from ._grasp_cy import perturbed_margins as _perturbed_margins
+from ._grasp_cy import surface_samples as _surface_samples
 from .errors import CoreError
 from .gripper import DEFAULT_GRIPPER, Grasp, Gripper, grasps_to_json
 from .superquadric import Superquadric, inside_outside
@@ -78,6 +82,7 @@ _SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its en
 # The exponents' error: rounder, and boxier (fits of boxes come out rounder than they are).
 _SHAPE_ERROR = (0.2, -0.3)
 _SHAPE_LIMITS = (0.1, 1.9)
+_CONE_MARGIN = math.radians(3.0)
 _SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too long
 # Sample grid of the surface facing each finger: across the finger, along the approach.
 _SAMPLES = (5, 7)
@@ -107,6 +112,12 @@ def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_io
     length = max(0.65 * residual, 1.3 * miss * mean_size, 0.02 * mean_size)
     angle = math.radians(2.0) + 1.2 * miss
     return length, angle
+
+
+def _cone(gripper: Gripper) -> float:
+    """The friction cone's half angle the planner holds contacts to: ``_CONE_MARGIN`` inside
+    the gripper's, for what the sampled model cannot show (a face flatter than fitted)."""
+    return math.atan(gripper.friction) - _CONE_MARGIN
 
 
 def _half_chord(sizes, shape, axis, u):
@@ -383,7 +394,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     tilt = np.arctan2(np.abs(normal[index, cp["j"]]), normal[index, cp["i"]])
     palm = depth - s_j - g.finger_length  # along the approach from the centre
     margins = np.stack([(g.max_opening / 2 - half) / length, (near[pair] - palm) / length,
-                        (depth - g.pad_length / 2) / length, (math.atan(g.friction) - tilt) / angle], axis=1)
+                        (depth - g.pad_length / 2) / length, (_cone(g) - tilt) / angle], axis=1)
     margins = np.nan_to_num(margins, nan=-1.0)
     ok &= np.all(margins > 0, axis=1)
     keep = np.flatnonzero(ok)
@@ -454,24 +465,15 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     far = np.minimum(s_j * (1 - 1e-6), c["e"] - s_j + 2 * length)
     along = near[:, None] + np.linspace(0, 1, nw)[None, :] * (far - near)[:, None]
     n = nk * nw
-    u = np.zeros((m, n, 3))
     # Frame coordinate k is +-x of the grasp: sample across the finger where it slid to.
     sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][rows, :, c["k"]])
-    u[rows, :, c["k"]] = sign_k[:, None] * (c["dx"][:, None] + np.repeat(across, nw)[None, :])
-    u[rows, :, c["j"]] = c["s"][:, None] * np.tile(along, (1, nk))
-    variants = [c["shape"]] + [np.clip(c["shape"] + change, *_SHAPE_LIMITS) for change in _SHAPE_ERROR]
-    V = len(variants)
-    half, normal = _half_chord(np.tile(np.repeat(c["sizes"], n, axis=0), (V, 1)),
-                               np.concatenate([np.repeat(shape, n, axis=0) for shape in variants]),
-                               np.tile(np.repeat(c["i"], n), V), np.tile(u.reshape(-1, 3), (V, 1)))
-    half, normal = half.reshape(V, m, n), normal.reshape(V, m, n, 3)
-    up = np.broadcast_to(u, (V, m, n, 3)).copy()
-    up[:, rows, :, c["i"]] = np.nan_to_num(half).transpose(1, 0, 2)  # advanced indices go first
-    flip = np.ones((m, 1, 3))
-    flip[rows, 0, c["i"]] = -1
-    points = np.concatenate([up, up * flip], axis=2)
-    normals = np.concatenate([normal, normal * flip], axis=2)
-    valid = np.isfinite(np.concatenate([half, half], axis=2)).astype(np.uint8)
+    across = sign_k[:, None] * (c["dx"][:, None] + across[None, :])
+    variants = np.stack([c["shape"]] + [np.clip(c["shape"] + change, *_SHAPE_LIMITS) for change in _SHAPE_ERROR])
+    points, normals = np.empty((len(variants), m, 2 * n, 3)), np.empty((len(variants), m, 2 * n, 3))
+    valid = np.empty((len(variants), m, 2 * n), np.uint8)
+    _surface_samples(c["sizes"], variants, np.stack([c["i"], c["j"], c["k"]], 1).astype(np.int_),
+                     np.ascontiguousarray(across), np.ascontiguousarray(c["s"][:, None] * along),
+                     points, normals, valid)
     # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
     M = np.ascontiguousarray(np.einsum("mab,mac->mbc", c["R"], c["F"]))
     centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
@@ -481,11 +483,11 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     out = np.empty((m, len(variant), 4))
     _perturbed_margins(points, normals, valid, variant, M, scale, rotation, shift, centre,
                        g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, _COMPLIANCE * g.pad_length,
-                       math.atan(g.friction), np.empty((2 * n, 4)), out)
+                       _cone(g), np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), out)
     # The perturbed model's nearest point towards the palm, from its support function in
     # direction M^T D R^T e_z (frame coordinates); the hull does not move.
     w = np.einsum("mba,pmb->pma", M, scale * rotation[:, :, 2, :])
-    nearest = centre[None, :, 2] + shift[:, None, 2] - _support(c["sizes"][None], np.stack(variants)[variant], w)
+    nearest = centre[None, :, 2] + shift[:, None, 2] - _support(c["sizes"][None], variants[variant], w)
     nearest = np.minimum(nearest, (c["hull"] - c["dz"])[None, :])
     touches = out[:, :, 2].T > 0
     margins = np.stack([np.where(touches, out[:, :, 0].T / length, -1.0),  # open jaws clear
@@ -508,11 +510,15 @@ def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
     return order[np.argsort(rank[order], kind="stable")][:_ROBUST_KEEP]
 
 
-def _same_grasp(a: np.ndarray, b: np.ndarray, tolerance: float) -> bool:
-    """Two grasps alike but for their depth (the gripper is symmetric under a half turn about z)."""
-    apart = a[:3, 3] - b[:3, 3]
-    return bool(a[:3, 2] @ b[:3, 2] > math.cos(math.radians(3)) and abs(a[:3, 1] @ b[:3, 1]) > math.cos(math.radians(3))
-                and np.linalg.norm(apart - (apart @ a[:3, 2]) * a[:3, 2]) < tolerance)
+def _alike(R: np.ndarray, origin: np.ndarray, tolerance: float) -> np.ndarray:
+    """(M, M) True where two grasps differ only in depth: the same approach, the same closing
+    line (the gripper is symmetric under a half turn about z), origins apart along it alone."""
+    cos = math.cos(math.radians(3))
+    same = (R[:, :, 2] @ R[:, :, 2].T > cos) & (np.abs(R[:, :, 1] @ R[:, :, 1].T) > cos)
+    apart = origin[:, None, :] - origin[None, :, :]
+    along = np.einsum("nma,na->nm", apart, R[:, :, 2])
+    across = np.linalg.norm(apart - along[:, :, None] * R[:, None, :, 2], axis=2)
+    return same & (across < tolerance)
 
 
 def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *,
@@ -598,19 +604,19 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
     score = _robust(pairs, gripper, error, plane)
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
+    R = pairs["R"]
+    origin = centre + np.einsum("mab,mb->ma", R, np.stack([pairs["dx"], np.zeros(len(R)), pairs["dz"]], 1))
+    alike = _alike(R, origin, 0.05 * gripper.finger_length)
     grasps: list[Grasp] = []
-    taken = set()
+    chosen: list[int] = []
     for index in order:
         if score[index] < min_score or len(grasps) == max_grasps:
             break
-        if pairs["id"][index] in taken:  # the same candidate at another depth, ranked higher
+        if chosen and alike[index, chosen].any():  # the same grasp but for its depth, ranked higher
             continue
-        taken.add(pairs["id"][index])
+        chosen.append(index)
         T = np.eye(4)
-        T[:3, :3] = pairs["R"][index]
-        T[:3, 3] = centre + pairs["R"][index] @ [pairs["dx"][index], 0.0, pairs["dz"][index]]
-        if any(_same_grasp(T, other.T_world_grasp, 0.05 * gripper.finger_length) for other in grasps):
-            continue
+        T[:3, :3], T[:3, 3] = R[index], origin[index]
         grasps.append(Grasp(T, float(2 * pairs["half"][index]), float(score[index]), str(kinds[index])))
     return grasps
 
