@@ -58,7 +58,7 @@ def make_client(config: KukaConfig) -> KukaClient:
     if config.protocol == "kvp":
         from .kvp import KvpClient
         return KvpClient(config.host, config.resolved_port, **timeouts)
-    from .opc import OpcClient  # imports openopc2 and Pyro5 only when OPC is used
+    from .opc import OpcClient  # imports Pyro5 only when OPC is used
     return OpcClient(config.host, config.resolved_port, opc_server=config.opc_server, opc_host=config.opc_host,
                      item_prefix=config.opc_item_prefix, **timeouts)
 

@@ -16,8 +16,8 @@
         └── DrivesOff             the drives are not ready ($PERI_RDY is FALSE)
 
 Errors of the libraries underneath (``OSError`` from sockets, ``Pyro5.errors``,
-``openopc2.exceptions.OPCError``) are translated in one place per client:
-``kvp._translate`` and ``opc._translate``.
+the gateway's ``OPCError`` as ``opc.GatewayError``) are translated in one place per client:
+``KvpClient._translated`` and ``OpcClient._translated``.
 """
 
 from __future__ import annotations
