@@ -85,7 +85,10 @@ async def _demo(run_dir: Path) -> int:
           f"{', '.join(f'{v:.3f}' for v in result.silhouette_iou)}")
     print(f"  reconstruction {result.timings_ms['total']:.1f} ms (" +
           ", ".join(f"{k} {v:.1f}" for k, v in result.timings_ms.items() if k != "total") + ")")
-    print(f"\nrecording: {result.recording}\nreplay it:  .venv/bin/robocell replay {result.recording}"
+    robocell = Path(sys.executable).with_name("robocell")  # this venv's: .venv, or .venv-3.13 for another Python
+    if robocell.is_relative_to(Path.cwd()):
+        robocell = robocell.relative_to(Path.cwd())
+    print(f"\nrecording: {result.recording}\nreplay it:  {robocell} replay {result.recording}"
           f"   (or --web for the web viewer)")
     return 0
 
