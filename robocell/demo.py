@@ -110,7 +110,10 @@ async def _demo(run_dir: Path) -> int:
         print(f"  the pick, judged against the true object: {verdict}"
               + (f" ({result.pick.reason})" if result.pick.reason and not result.pick.held else "")
               + (", and put it down 15 cm to the side" if result.pick.placed else ""))
-    print(f"\nrecording: {result.recording}\nreplay it:  .venv/bin/robocell replay {result.recording}"
+    robocell = Path(sys.executable).with_name("robocell")  # this venv's: .venv, or .venv-3.13 for another Python
+    if robocell.is_relative_to(Path.cwd()):
+        robocell = robocell.relative_to(Path.cwd())
+    print(f"\nrecording: {result.recording}\nreplay it:  {robocell} replay {result.recording}"
           f"   (or --web for the web viewer)")
     return 0
 

@@ -1,4 +1,4 @@
-"""The KRL files declare exactly the variables and codes that workers/kuka/variables.py names."""
+"""The KRL files declare exactly the variables and codes that workers/robot/kuka/variables.py names."""
 
 import re
 from pathlib import Path

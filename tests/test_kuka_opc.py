@@ -1,17 +1,26 @@
-"""The OpenOPC-gateway client against the simulated gateway: a real Pyro5 daemon on loopback."""
+"""The OpenOPC-gateway client against the simulated gateway: a real Pyro5 daemon on loopback.
+
+Neither side uses openopc2 (it caps Python below 3.13): the client is a Pyro5
+proxy, and the simulator sends what openopc2's gateway sends.
+"""
 
 import asyncio
 import socket
+import subprocess
+import sys
+import textwrap
 import threading
 
+import Pyro5.client
+import Pyro5.serializers
 import pytest
-from openopc2.exceptions import OPCError
-from openopc2.gateway_proxy import OpenOpcGatewayProxy
+import serpent
 
+from workers.sim.kuka_opc import OPCError
 from workers.sim.kuka import SimKuka
 from wire.backends import SIM_OPC_SERVER
 from workers.robot.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
-from workers.robot.kuka.opc import OpcClient
+from workers.robot.kuka.opc import GatewayError, OpcClient
 
 
 def run(coroutine, limit: float = 20.0):
@@ -26,14 +35,22 @@ def client_for(sim: SimKuka, **options) -> OpcClient:
     return OpcClient("127.0.0.1", sim.port, **options)
 
 
-def test_the_gateway_answers_openopc2s_own_proxy():
-    """openopc2's proxy, as its CLI uses it: the object id, connect, read, write and OPCError all fit."""
+def test_the_simulators_error_is_on_the_wire_what_openopc2s_gateway_sends():
+    """openopc2 0.1.19's OPCError.class_to_dict: the instance's attributes and a fixed class name, no args."""
+    error = OPCError("Connect: Invalid class string (KUKA.Wrong)")
+    error._pyroTraceback = ["Traceback ...\n"]  # what the daemon adds before it sends an error
+    wire = serpent.loads(Pyro5.serializers.serializers["serpent"].dumps(error))
+    assert wire == {"__class__": "exceptions.OPCError", "custom_message": "Connect: Invalid class string (KUKA.Wrong)",
+                    "_pyroTraceback": ["Traceback ...\n"]}
+
+
+def test_the_gateway_answers_a_bare_pyro5_proxy_as_openopc2s_does():
+    """openopc2's OpenOpcGatewayProxy is this proxy: the object id, connect, read, write and OPCError all fit."""
     def session(port: int):
-        proxy = OpenOpcGatewayProxy("127.0.0.1", port).get_opc_da_client_proxy()
-        try:
-            with pytest.raises(OPCError):
-                proxy.read("RC_CMD", sync=True)  # not connected yet
-            with pytest.raises(OPCError):
+        with Pyro5.client.Proxy(f"PYRO:OpcDaClient@127.0.0.1:{port}") as proxy:
+            with pytest.raises(GatewayError, match="read: not connected"):
+                proxy.read("RC_CMD", sync=True)
+            with pytest.raises(GatewayError, match=r"Invalid class string \(No.Such.Server\)"):
                 proxy.connect("No.Such.Server", "localhost")
             proxy.connect(SIM_OPC_SERVER, "localhost")
             assert proxy.write(("RC_OVERRIDE", 12)) == ["Success"]
@@ -43,8 +60,9 @@ def test_the_gateway_answers_openopc2s_own_proxy():
             assert proxy.write([("RC_CMD_ID", 3), ("$POS_ACT", "{X 0}")]) == [("RC_CMD_ID", "Success"),
                                                                            ("$POS_ACT", "Error")]
             proxy.close()
-        finally:
-            proxy._pyroRelease()
+        with Pyro5.client.Proxy(f"PYRO:OpcDaClient@127.0.0.1:{port}") as proxy:  # a new connection, a new instance
+            with pytest.raises(GatewayError, match="not connected"):
+                proxy.read("RC_CMD", sync=True)
 
     async def scenario():
         async with SimKuka("opc") as sim:
@@ -52,6 +70,36 @@ def test_the_gateway_answers_openopc2s_own_proxy():
             assert sim.controller.writes == [("RC_OVERRIDE", "12"), ("RC_CMD_ID", "3")]
 
     run(scenario())
+
+
+def test_the_client_and_the_simulator_need_no_openopc2():
+    """In a process where openopc2 cannot be imported, as on Python 3.13: reads, writes and the gateway's errors."""
+    script = textwrap.dedent(f"""
+        import asyncio, sys
+        sys.modules["openopc2"] = None  # any import of it now fails, installed or not
+        from workers.sim.kuka import SimKuka
+        from workers.robot.kuka.errors import KukaConnectionError
+        from workers.robot.kuka.opc import OpcClient
+
+        async def main():
+            async with SimKuka("opc") as sim:
+                async with OpcClient("127.0.0.1", sim.port, opc_server={SIM_OPC_SERVER!r}) as client:
+                    await client.write([("RC_OVERRIDE", "7")])
+                    print(await client.read(["RC_OVERRIDE", "$PERI_RDY"]))
+                try:
+                    await OpcClient("127.0.0.1", sim.port, opc_server="KUKA.Wrong").open()
+                except KukaConnectionError as exc:
+                    print(str(exc).replace(str(sim.port), "PORT"))
+
+        asyncio.run(asyncio.wait_for(main(), 20))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "{'RC_OVERRIDE': '7', '$PERI_RDY': 'TRUE'}",
+        "connecting: the gateway could not connect to OPC server 'KUKA.Wrong' through the OpenOPC gateway at "
+        "127.0.0.1:PORT: Connect: Invalid class string (KUKA.Wrong)",
+    ]
 
 
 def test_read_and_write_as_krl_text():

@@ -1,4 +1,4 @@
-"""Tests of the simulator (cell.sim): objects, rendering, cameras, bundles, CLI.
+"""Tests of the simulator (workers.sim): objects, rendering, cameras, bundles, CLI.
 
 Answers are worked out independently of the code under test where possible:
 a sphere's image is an ellipse with a closed form, a superquadric's volume is

@@ -5,7 +5,9 @@ instance per connection, like the real gateway's). Method names, signatures and
 return shapes follow ``openopc2.da_client.OpcDaClient``: a single tag reads as
 ``(value, quality, time)``, a list as ``[(tag, value, quality, time), ...]``;
 unknown tags read as ``(tag, None, "Error", None)`` and write as ``"Error"``.
-Errors are ``openopc2.exceptions.OPCError``, serialised as the gateway does.
+Errors are :class:`OPCError`, on the wire as the gateway sends openopc2's own.
+Nothing here imports openopc2: it caps Python below 3.13, and the wire is all
+a client sees.
 """
 
 from __future__ import annotations
@@ -17,16 +19,32 @@ from typing import TYPE_CHECKING
 import Pyro5.callcontext
 import Pyro5.server
 from Pyro5.api import register_class_to_dict
-from openopc2.exceptions import OPCError
 
 from workers.robot.kuka.variables import ALL
 
 if TYPE_CHECKING:
     from .kuka import OpcGateway
 
-__all__ = ["make_daemon"]
+__all__ = ["make_daemon", "OPCError"]
 
 _HANG_LIMIT_S = 30.0
+
+
+class OPCError(Exception):
+    """The gateway's error (``openopc2.exceptions.OPCError``): its message is ``custom_message``."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.custom_message = message
+
+    def to_wire(self) -> dict:
+        """openopc2 0.1.19's ``OPCError.class_to_dict``: the attributes (Pyro5 adds ``_pyroTraceback``) and a fixed
+        class name, whatever module raised it."""
+        return {**vars(self), "__class__": "exceptions.OPCError"}
+
+
+# As the real gateway does, so that its errors reach a client as openopc2's OPCError.
+register_class_to_dict(OPCError, OPCError.to_wire)
 
 
 @Pyro5.server.expose
@@ -115,8 +133,6 @@ class SimOpcDaClient:
 
 def make_daemon(gateway: "OpcGateway", host: str, port: int) -> Pyro5.server.Daemon:
     """A Pyro5 daemon with the gateway's two objects, not yet serving."""
-    # As the real gateway does, so that its errors reach openopc2's client as OPCError.
-    register_class_to_dict(OPCError, OPCError.class_to_dict)
     daemon = Pyro5.server.Daemon(host=host, port=port)
     server = SimGatewayServer(gateway)
     daemon.register(server, objectId="OpenOpcGatewayServer")

@@ -34,7 +34,9 @@ log = logging.getLogger(__name__)
 Motion = Literal["ptp", "lin"]
 _COMMANDS = {"ptp": v.Command.PTP, "lin": v.Command.LIN}
 # Read RC_DONE_ID before RC_STATUS and RC_ERROR: the program writes it after them (see variables).
-_POLLED = [v.RC_DONE_ID.name, v.RC_STATUS.name, v.RC_ERROR.name, v.STOPMESS.name, v.PERI_RDY.name,
+# Read $PERI_RDY before $STOPMESS: a stop sets the message and drops the drives, and KukaVarProxy reads one
+# variable at a time, so a stop that falls between the two reads shows as the stop, not as drives off.
+_POLLED = [v.RC_DONE_ID.name, v.RC_STATUS.name, v.RC_ERROR.name, v.PERI_RDY.name, v.STOPMESS.name,
            v.POS_ACT.name]
 
 
@@ -58,7 +60,7 @@ def make_client(config: KukaConfig) -> KukaClient:
     if isinstance(config, KukaKvpConfig):
         from .kvp import KvpClient
         return KvpClient(config.host, config.port, **timeouts)
-    from .opc import OpcClient  # imports openopc2 and Pyro5 only when OPC is used
+    from .opc import OpcClient  # imports Pyro5 only when OPC is used
     return OpcClient(config.host, config.port, opc_server=config.opc_server, opc_host=config.opc_host,
                      item_prefix=config.opc_item_prefix, **timeouts)
 
@@ -181,7 +183,7 @@ class KukaBackend(RobotBackend):
         return reached.copy()
 
     async def _preflight(self) -> int:
-        values = await self.client.read([v.RC_CMD.name, v.RC_DONE_ID.name, v.STOPMESS.name, v.PERI_RDY.name])
+        values = await self.client.read([v.RC_CMD.name, v.RC_DONE_ID.name, v.PERI_RDY.name, v.STOPMESS.name])
         self._raise_if_stopped(values, "before the move")
         if _int(values, v.RC_CMD) != v.Command.NONE:
             raise ControllerBusy(f"{self.client.address}: RC_CMD is {values[v.RC_CMD.name]}, not 0: the program "

@@ -19,8 +19,8 @@
 
 The robot errors every robot shares are ``wire.errors``' own, so that they keep their
 class across the wire; the rest are the bridge's. Errors of the libraries underneath
-(``OSError`` from sockets, ``Pyro5.errors``, ``openopc2.exceptions.OPCError``) are
-translated in one place per client: ``kvp._translate`` and ``opc._translate``.
+(``OSError`` from sockets, ``Pyro5.errors``, the gateway's ``OPCError`` as ``opc.GatewayError``)
+are translated in one place per client: ``KvpClient._translated`` and ``OpcClient._translated``.
 """
 
 from __future__ import annotations

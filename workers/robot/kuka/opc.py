@@ -1,11 +1,15 @@
-"""A client of the OpenOPC gateway (openopc2, Pyro5 on port 7766) in front of a KUKA OPC DA server.
+"""A client of the OpenOPC gateway (Pyro5 on port 7766) in front of a KUKA OPC DA server.
 
-The gateway registers two Pyro5 objects: ``OpenOpcGatewayServer`` and the
-class ``OpcDaClient``, one instance per connection. openopc2's
-``OpenOpcGatewayProxy.get_opc_da_client_proxy()`` gives a proxy of the latter;
-on it we call ``connect(opc_server, opc_host)``, then ``read(items, sync=True)``
+The gateway (openopc2's ``gateway_server``, on a Windows machine) registers two
+Pyro5 objects: ``OpenOpcGatewayServer`` and the class ``OpcDaClient``, one
+instance per connection. A plain Pyro5 proxy of ``PYRO:OpcDaClient@host:port``
+is all of openopc2's own client (``OpenOpcGatewayProxy``), so this module speaks
+Pyro5 itself and needs no openopc2 (which caps Python below 3.13). On that
+proxy we call ``connect(opc_server, opc_host)``, then ``read(items, sync=True)``
 (rows of ``(item, value, quality, time)``) and ``write([(item, value), ...])``
-(rows of ``(item, "Success" | "Error")``).
+(rows of ``(item, "Success" | "Error")``). The gateway sends its
+``OPCError`` as ``{"__class__": "exceptions.OPCError", "custom_message": ...}``;
+importing this module teaches Pyro5 to read that as a :class:`GatewayError`.
 
 A Pyro5 proxy belongs to the thread that made it, so every proxy call runs on
 one dedicated thread (a single-worker executor) and asyncio awaits it. A lost
@@ -21,17 +25,30 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
+import Pyro5.client
 import Pyro5.errors
-from openopc2.exceptions import OPCError
-from openopc2.gateway_proxy import OpenOpcGatewayProxy
+from Pyro5.api import register_dict_to_class
 
 from .errors import KukaConnectionError, KukaError, KukaProtocolError, KukaTimeout, KukaVariableError
 from .variables import BY_NAME, from_krl_text, krl_text
 
-__all__ = ["OpcClient"]
+__all__ = ["OpcClient", "GatewayError"]
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
+
+
+class GatewayError(Exception):
+    """openopc2's ``OPCError``, raised on the gateway, as it arrives here; :class:`OpcClient` makes it a KukaError."""
+
+
+def _gateway_error(classname: str, data: dict) -> GatewayError:
+    # openopc2's OPCError.dict_to_class reads the same key, with the same fallback.
+    return GatewayError(data.get("custom_message", "No message"))
+
+
+# The name openopc2's OPCError.class_to_dict gives it on the wire, whatever module the gateway runs it from.
+register_dict_to_class("exceptions.OPCError", _gateway_error)
 
 
 class OpcClient:
@@ -116,7 +133,8 @@ class OpcClient:
 
     def _ensure(self):
         if self._proxy is None:
-            proxy = OpenOpcGatewayProxy(self.host, self.port).get_opc_da_client_proxy()
+            host = f"[{self.host}]" if ":" in self.host else self.host  # an IPv6 address
+            proxy = Pyro5.client.Proxy(f"PYRO:OpcDaClient@{host}:{self.port}")
             proxy._pyroTimeout = self.connect_timeout
             try:
                 proxy.connect(self.opc_server, self.opc_host)
@@ -162,7 +180,7 @@ class OpcClient:
                 raise KukaVariableError(f"{self.address} refused to write {item} = {value!r}", name=name)
 
     def _translated(self, function: Callable[[], T], what: str) -> Callable[[], T]:
-        """The one place where Pyro5 and openopc2 errors become KukaErrors (runs on the thread)."""
+        """The one place where Pyro5 and gateway errors become KukaErrors (runs on the thread)."""
 
         def run() -> T:
             try:
@@ -182,8 +200,8 @@ class OpcClient:
                 self._drop()
                 raise KukaConnectionError(f"{what}: {self.host}:{self.port} is not an OpenOPC gateway "
                                           f"that serves OpcDaClient: {exc}") from exc
-            except OPCError as exc:
-                message = getattr(exc, "custom_message", None) or str(exc)
+            except GatewayError as exc:
+                message = str(exc)
                 if self._proxy is None:  # failed inside connect(): the OPC server is the problem
                     raise KukaConnectionError(f"{what}: the gateway could not connect to {self.address}: "
                                               f"{message}") from exc
