@@ -280,7 +280,7 @@ def test_write_scan_bundle(tmp_path: Path, kind: str):
     scan = json.loads((out / "scan.json").read_text())
     assert set(scan) == {"views", "segmentation", "support_plane"}
     assert scan["segmentation"] == HSV_SEGMENTATION
-    assert HSV_SEGMENTATION == {"method": "hsv", "lower": [170, 90, 40], "upper": [10, 255, 255]}
+    assert HSV_SEGMENTATION == {"method": "hsv", "lower": [170, 90, 20], "upper": [10, 255, 255]}
     assert scan["support_plane"] == [0, 0, 1, 0]
     assert len(scan["views"]) == 3
     for i, view in enumerate(scan["views"]):
