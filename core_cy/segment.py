@@ -46,7 +46,7 @@ class Segmentation:
     """
 
     method: Literal["hsv", "threshold"] = "hsv"
-    lower: tuple[int, int, int] = (170, 90, 40)
+    lower: tuple[int, int, int] = (170, 90, 20)
     upper: tuple[int, int, int] = (10, 255, 255)
     value: int = 128
     invert: bool = False

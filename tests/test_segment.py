@@ -49,7 +49,7 @@ def test_largest_component_with_its_holes_filled():
 
 
 def test_empty_silhouette_names_the_view_and_the_segmentation():
-    with pytest.raises(SilhouetteError, match=r"^view 1: the silhouette is empty.*hsv lower=\[170, 90, 40\]"):
+    with pytest.raises(SilhouetteError, match=r"^view 1: the silhouette is empty.*hsv lower=\[170, 90, 20\]"):
         segment(np.full((50, 50, 3), 128, np.uint8), view=1)
 
 
