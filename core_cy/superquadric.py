@@ -30,6 +30,7 @@ __all__ = [
     "SuperquadricFit",
     "fit_superquadric",
     "inside_outside",
+    "start_superquadrics",
     "mesh",
     "surface_points",
 ]
@@ -355,16 +356,12 @@ def _starts(points: np.ndarray, search: np.ndarray) -> list[tuple[int, np.ndarra
     return starts
 
 
-def _check_options(inside_weight, outside_loss, cauchy_scale, shape_bounds, max_iterations,
-                   subsample) -> None:
+def _check_options(inside_weight, outside_loss, cauchy_scale, max_iterations, subsample) -> None:
     for name, value in (("inside_weight", inside_weight), ("cauchy_scale", cauchy_scale)):
         if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
             raise FitError(f"{name} must be a positive number, got {value!r}")
     if outside_loss not in ("cauchy", "squared"):
         raise FitError(f"outside_loss must be 'cauchy' or 'squared', got {outside_loss!r}")
-    low, high = _vector(shape_bounds, 2, "shape_bounds", FitError)
-    if not 0 < low <= high < 2:
-        raise FitError(f"shape_bounds must satisfy 0 < low <= high < 2, got {shape_bounds!r}")
     if not (isinstance(max_iterations, numbers.Integral) and max_iterations >= 1):
         raise FitError(f"max_iterations must be a positive integer, got {max_iterations!r}")
     if subsample is not None and not (isinstance(subsample, numbers.Integral) and subsample >= 11):
@@ -375,6 +372,97 @@ def _strided(points: np.ndarray, count: int) -> np.ndarray:
     if count >= len(points):
         return points
     return np.ascontiguousarray(points[np.linspace(0, len(points) - 1, count).round().astype(int)])
+
+
+class _Search:
+    """The start search shared by :func:`fit_superquadric` and :func:`start_superquadrics`.
+
+    Normalises the points (centroid at 0, RMS distance 1), and runs each start
+    of :func:`_starts` for a few iterations of the plain Jaklic cost on a few
+    points; ``tried`` holds (result, axis order, R0), lowest cost first.
+    """
+
+    def __init__(self, points, support_plane, shape_bounds, subsample):
+        points = _points(points, error=FitError)
+        if len(points) < 11:
+            raise FitError(f"need at least 11 points (one per parameter) to fit, got {len(points)}")
+        if not np.all(np.isfinite(points)):
+            raise FitError("points contain NaN or infinity")
+        low, high = _vector(shape_bounds, 2, "shape_bounds", FitError)
+        if not 0 < low <= high < 2:
+            raise FitError(f"shape_bounds must satisfy 0 < low <= high < 2, got {shape_bounds!r}")
+        self.points = points
+        self.centroid = points.mean(axis=0)
+        self.scale = math.sqrt(np.mean(np.sum((points - self.centroid) ** 2, axis=1)))
+        if not self.scale > 0:
+            raise FitError("all points coincide: nothing to fit")
+        normalised = (points - self.centroid) / self.scale
+        self.plane = None
+        if support_plane is not None:
+            plane = _vector(support_plane, 4, "support_plane", FitError)
+            length = np.linalg.norm(plane[:3])
+            if length == 0:
+                raise FitError("support_plane's normal (nx, ny, nz) must not be zero")
+            self.plane = np.append(plane[:3], (plane[:3] @ self.centroid + plane[3]) / self.scale) / length
+        self.refine = _strided(normalised, subsample or len(points))
+        search = _strided(self.refine, _SEARCH_POINTS)
+        limits = np.array([_SIZE_BOUNDS] * 3 + [(low, high)] * 2
+                          + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
+                          + [(-np.pi, np.pi)] * 3) / _STEP_SCALE
+        self.bounds = Bounds(limits[:, 0], limits[:, 1])
+        plain_jaklic = (1.0, False, 1.0)
+        self.tried = sorted(((self.run(search, R0, x0 / _STEP_SCALE, plain_jaklic, _SEARCH_ITERATIONS), k, R0)
+                             for k, R0, x0 in _starts(normalised, search)), key=lambda item: item[0].fun)
+
+    def run(self, cloud, R0, y0, weights, iterations):
+        objective = _Objective(cloud, R0, *weights, self.plane, _STEP_SCALE)
+        y0 = np.clip(y0, self.bounds.lb, self.bounds.ub)  # L-BFGS-B would clip silently
+        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=self.bounds,
+                        options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
+
+    def superquadric(self, R0, y) -> Superquadric:
+        """The world superquadric of parameters y (as the optimiser sees them) about the frame R0."""
+        x = y * _STEP_SCALE
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = _rotation(R0, x[8:11]), self.centroid + self.scale * x[5:8]
+        return Superquadric(x[0:3] * self.scale, x[3:5], T)
+
+
+def start_superquadrics(points, *, support_plane=None, shape_bounds=(0.1, 1.9)) -> list[Superquadric]:
+    """The starts that :func:`fit_superquadric` searches, each after its few search iterations.
+
+    One per start (each principal axis of the points as the object's z axis,
+    and the 45-degree turns), lowest plain Jaklic cost first: the candidates a
+    fit to other evidence (the silhouettes) can choose from.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like of float64
+        N >= 11, in any units.
+    support_plane : (4,) array_like, optional
+        As for :func:`fit_superquadric`.
+    shape_bounds : (2,) array_like
+        Bounds of both exponents.
+
+    Returns
+    -------
+    list of Superquadric
+
+    Raises
+    ------
+    FitError
+        As :func:`fit_superquadric`.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> d = rng.normal(size=(500, 3))
+    >>> starts = start_superquadrics(d / np.linalg.norm(d, axis=1, keepdims=True) * [3.0, 2.0, 1.0])
+    >>> len(starts), np.sort(starts[0].size).round(1)
+    (3, array([1., 2., 3.]))
+    """
+    search = _Search(points, support_plane, shape_bounds, None)
+    return [search.superquadric(R0, result.x) for result, _, R0 in search.tried]
 
 
 def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str = "cauchy",
@@ -442,49 +530,13 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     >>> np.sort(fit.superquadric.size).round(2), fit.superquadric.shape.round(1)
     (array([1., 2., 3.]), array([1., 1.]))
     """
-    points = _points(points, error=FitError)
-    if len(points) < 11:
-        raise FitError(f"need at least 11 points (one per parameter) to fit, got {len(points)}")
-    if not np.all(np.isfinite(points)):
-        raise FitError("points contain NaN or infinity")
-    _check_options(inside_weight, outside_loss, cauchy_scale, shape_bounds, max_iterations,
-                   subsample)
-    centroid = points.mean(axis=0)
-    scale = math.sqrt(np.mean(np.sum((points - centroid) ** 2, axis=1)))
-    if not scale > 0:
-        raise FitError("all points coincide: nothing to fit")
-    normalised = (points - centroid) / scale
-    plane = None
-    if support_plane is not None:
-        plane = _vector(support_plane, 4, "support_plane", FitError)
-        length = np.linalg.norm(plane[:3])
-        if length == 0:
-            raise FitError("support_plane's normal (nx, ny, nz) must not be zero")
-        plane = np.append(plane[:3], (plane[:3] @ centroid + plane[3]) / scale) / length
-    refine = _strided(normalised, subsample or len(points))
-    search = _strided(refine, _SEARCH_POINTS)
-    limits = np.array([_SIZE_BOUNDS] * 3 + [tuple(shape_bounds)] * 2
-                      + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
-                      + [(-np.pi, np.pi)] * 3) / _STEP_SCALE
-    bounds = Bounds(limits[:, 0], limits[:, 1])
+    _check_options(inside_weight, outside_loss, cauchy_scale, max_iterations, subsample)
+    search = _Search(points, support_plane, shape_bounds, subsample)
+    searched, axis_order, R0 = search.tried[0]
     loss = (inside_weight, outside_loss == "cauchy", cauchy_scale)
-
-    def run(cloud, R0, y0, weights, iterations):
-        objective = _Objective(cloud, R0, *weights, plane, _STEP_SCALE)
-        y0 = np.clip(y0, bounds.lb, bounds.ub)  # L-BFGS-B would clip silently
-        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=bounds,
-                        options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
-
-    plain_jaklic = (1.0, False, 1.0)
-    tried = [(run(search, R0, x0 / _STEP_SCALE, plain_jaklic, _SEARCH_ITERATIONS), k, R0)
-             for k, R0, x0 in _starts(normalised, search)]
-    searched, axis_order, R0 = min(tried, key=lambda item: item[0].fun)
-    result = run(refine, R0, searched.x, loss, max_iterations)
+    result = search.run(search.refine, R0, searched.x, loss, max_iterations)
     iterations = searched.nit + result.nit
-    x = result.x * _STEP_SCALE
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = _rotation(R0, x[8:11]), centroid + scale * x[5:8]
-    sq = Superquadric(x[0:3] * scale, x[3:5], T)
-    F = inside_outside(points, sq)
+    sq = search.superquadric(R0, result.x)
+    F = inside_outside(search.points, sq)
     residual = math.sqrt(np.prod(sq.size)) * np.sqrt(np.mean((F ** sq.shape[0] - 1) ** 2))
     return SuperquadricFit(sq, float(residual), float(result.fun), int(iterations), axis_order)
