@@ -35,6 +35,54 @@ cdef inline void _bilinear(const unsigned char[:, :, ::1] image, double u, doubl
                   + fv * ((1.0 - fu) * image[row + 1, col, k] + fu * image[row + 1, col + 1, k]))
 
 
+cdef bint _crossing(const unsigned char[:, :, ::1] image, double px, double py, double nx, double ny,
+                    double reach, double step, Py_ssize_t samples, Py_ssize_t ends, double min_contrast,
+                    double* crossing) noexcept nogil:
+    """The crossing of the profile through (px, py) along (nx, ny) (see :func:`edge_crossings`)."""
+    cdef Py_ssize_t channels = image.shape[2], j, k
+    cdef double inner[MAX_CHANNELS]
+    cdef double outer[MAX_CHANNELS]
+    cdef double colour[MAX_CHANNELS]
+    cdef double difference[MAX_CHANNELS]
+    cdef double contrast2, t, a, previous, previous_t, best, candidate
+    for k in range(channels):
+        inner[k] = 0.0
+        outer[k] = 0.0
+    for j in range(ends):
+        _bilinear(image, px - (reach - j * step) * nx, py - (reach - j * step) * ny, colour)
+        for k in range(channels):
+            inner[k] += colour[k] / ends
+        _bilinear(image, px + (reach - j * step) * nx, py + (reach - j * step) * ny, colour)
+        for k in range(channels):
+            outer[k] += colour[k] / ends
+    contrast2 = 0.0
+    for k in range(channels):
+        difference[k] = inner[k] - outer[k]
+        contrast2 += difference[k] * difference[k]
+    if contrast2 < min_contrast * min_contrast:
+        return False
+    best = 1e300
+    previous = 1.0
+    previous_t = -reach
+    for j in range(samples):
+        t = -reach + j * step
+        _bilinear(image, px + t * nx, py + t * ny, colour)
+        a = 0.0
+        for k in range(channels):
+            a += (colour[k] - outer[k]) * difference[k]
+        a /= contrast2
+        if j > 0 and previous >= 0.5 and a < 0.5:
+            candidate = previous_t + (previous - 0.5) / (previous - a) * (t - previous_t)
+            if (candidate if candidate >= 0 else -candidate) < (best if best >= 0 else -best):
+                best = candidate
+        previous = a
+        previous_t = t
+    if best >= 1e300:
+        return False
+    crossing[0] = best
+    return True
+
+
 def edge_crossings(const unsigned char[:, :, ::1] image not None, const double[:, ::1] points not None,
                    const double[:, ::1] normals not None, double reach, double step, double min_contrast,
                    double[::1] shift not None, unsigned char[::1] found not None):
@@ -45,18 +93,15 @@ def edge_crossings(const unsigned char[:, :, ::1] image not None, const double[:
     are the colours of the edge's two sides, and each sample is placed between
     them by projection onto their difference (1 = the ``-reach`` side, 0 = the
     other), so the normal may point either way. ``shift[i]`` is the crossing
-    of 1/2 nearest the point, linearly interpolated; ``found[i]`` is 0 where
-    the ends differ by less than ``min_contrast`` grey levels or no crossing
-    exists (``shift`` is then 0). Works for any number of channels up to 4 (a
-    mask is a one-channel image).
+    of 1/2 nearest the point, linearly interpolated, and found once more on a
+    profile centred there if it lay more than 0.05 px away; ``found[i]`` is
+    0 where the ends differ by less than ``min_contrast`` grey levels or no
+    crossing exists (``shift`` is then 0). Works for any number of channels
+    up to 4 (a mask is a one-channel image).
     """
-    cdef Py_ssize_t n = points.shape[0], i, j, k, samples, ends
+    cdef Py_ssize_t n = points.shape[0], i, samples, ends, attempt
     cdef Py_ssize_t channels = image.shape[2]
-    cdef double inner[MAX_CHANNELS]
-    cdef double outer[MAX_CHANNELS]
-    cdef double colour[MAX_CHANNELS]
-    cdef double difference[MAX_CHANNELS]
-    cdef double contrast2, t, a, previous, previous_t, best, candidate
+    cdef double moved = 0.0
     if points.shape[1] != 2 or normals.shape[0] != n or normals.shape[1] != 2:
         raise ValueError("points and normals must be (N, 2) arrays of the same length")
     if shift.shape[0] != n or found.shape[0] != n:
@@ -75,40 +120,14 @@ def edge_crossings(const unsigned char[:, :, ::1] image not None, const double[:
         for i in range(n):
             shift[i] = 0.0
             found[i] = 0
-            for k in range(channels):
-                inner[k] = 0.0
-                outer[k] = 0.0
-            for j in range(ends):
-                _bilinear(image, points[i, 0] - (reach - j * step) * normals[i, 0],
-                          points[i, 1] - (reach - j * step) * normals[i, 1], colour)
-                for k in range(channels):
-                    inner[k] += colour[k] / ends
-                _bilinear(image, points[i, 0] + (reach - j * step) * normals[i, 0],
-                          points[i, 1] + (reach - j * step) * normals[i, 1], colour)
-                for k in range(channels):
-                    outer[k] += colour[k] / ends
-            contrast2 = 0.0
-            for k in range(channels):
-                difference[k] = inner[k] - outer[k]
-                contrast2 += difference[k] * difference[k]
-            if contrast2 < min_contrast * min_contrast:
-                continue
-            best = 1e300
-            previous = 1.0
-            previous_t = -reach
-            for j in range(samples):
-                t = -reach + j * step
-                _bilinear(image, points[i, 0] + t * normals[i, 0], points[i, 1] + t * normals[i, 1], colour)
-                a = 0.0
-                for k in range(channels):
-                    a += (colour[k] - outer[k]) * difference[k]
-                a /= contrast2
-                if j > 0 and previous >= 0.5 and a < 0.5:
-                    candidate = previous_t + (previous - 0.5) / (previous - a) * (t - previous_t)
-                    if (candidate if candidate >= 0 else -candidate) < (best if best >= 0 else -best):
-                        best = candidate
-                previous = a
-                previous_t = t
-            if best < 1e300:
-                shift[i] = best
+            # Twice: the ends of a profile centred off the edge lie unevenly deep in the edge's blur,
+            # which pulls the crossing; centred on the first crossing, they lie evenly.
+            for attempt in range(2):
+                if not _crossing(image, points[i, 0] + shift[i] * normals[i, 0],
+                                 points[i, 1] + shift[i] * normals[i, 1], normals[i, 0], normals[i, 1],
+                                 reach, step, samples, ends, min_contrast, &moved):
+                    break
+                shift[i] += moved
                 found[i] = 1
+                if moved < 0.05 and moved > -0.05:
+                    break

@@ -13,7 +13,7 @@ import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
 
-from ._superquadric_cy cimport _rotation, _support
+from ._superquadric_cy cimport _rotation, _support, _support_value
 
 cdef double _TINY = 1e-300
 
@@ -25,56 +25,110 @@ cdef inline double _signed_power(double c, double e) noexcept nogil:
     return exp(e * log(m)) if c > 0 else -exp(e * log(m))
 
 
-def surface(const double[::1] size not None, const double[::1] shape not None,
-            const double[:, ::1] R not None, const double[::1] t not None,
-            const double[::1] eta not None, const double[::1] omega not None, double[:, ::1] out not None):
-    """World points of the surface on the grid ``eta`` x ``omega`` (signed-power parametrisation),
-    then its two poles: ``out`` is ``(len(eta) * len(omega) + 2, 3)``."""
-    cdef Py_ssize_t n_eta = eta.shape[0], n_omega = omega.shape[0], i, j, k, row
-    cdef double ce, se
-    cdef double p[3]
+def outline_points(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
+                   double scale, const double[::1] eta not None, const double[::1] omega not None,
+                   const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
+                   double[:, ::1] grid not None, float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None):
+    """Pixels of the surface points that may lie on each view's outline; False if any is behind a camera.
+
+    The surface is sampled on ``eta`` x ``omega`` (signed-power
+    parametrisation) and at its poles; a point may lie on the outline where the
+    view ray grazes the surface, i.e. where its normal turns from facing the
+    camera to facing away between it and a grid neighbour (the poles always
+    count). For view v, ``uv[v, :counts[v]]`` gets those points' pixels, whose
+    convex hull is the outline. ``grid`` (len(eta) * len(omega) + 2, 6) is
+    scratch space (object-frame points and normals). ``x`` as in
+    :func:`normal_equations`.
+    """
+    cdef Py_ssize_t n_eta = eta.shape[0], n_omega = omega.shape[0], n_grid = n_eta * n_omega
+    cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double a[3]
+    cdef double t[3]
+    cdef double c[3]
+    cdef double w[3]
+    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz, g
     cdef double[::1] co = np.empty(n_omega), so = np.empty(n_omega)
-    if out.shape[0] != n_eta * n_omega + 2 or out.shape[1] != 3:
-        raise ValueError("out must be (len(eta) * len(omega) + 2, 3)")
+    cdef double[::1] nco = np.empty(n_omega), nso = np.empty(n_omega)
+    cdef double[::1] facing = np.empty(n_grid + 2)
+    cdef bint in_front = True, candidate
+    if grid.shape[0] != n_grid + 2 or grid.shape[1] != 6:
+        raise ValueError("grid must be (len(eta) * len(omega) + 2, 6)")
+    if (projections.shape[1] != 3 or projections.shape[2] != 4 or centres.shape[0] != n_views
+            or centres.shape[1] != 3 or uv.shape[0] != n_views or uv.shape[1] < n_grid + 2
+            or uv.shape[2] != 2 or counts.shape[0] != n_views):
+        raise ValueError("need (V, 3, 4) projections, (V, 3) centres, (V, >= grid, 2) uv and (V,) counts")
     with nogil:
-        for j in range(n_omega):
-            co[j] = size[0] * _signed_power(cos(omega[j]), shape[1])
-            so[j] = size[1] * _signed_power(sin(omega[j]), shape[1])
-        for i in range(n_eta):
-            ce = _signed_power(cos(eta[i]), shape[0])
-            se = size[2] * _signed_power(sin(eta[i]), shape[0])
-            for j in range(n_omega):
-                p[0] = ce * co[j]
-                p[1] = ce * so[j]
-                row = i * n_omega + j
-                for k in range(3):
-                    out[row, k] = t[k] + R[k, 0] * p[0] + R[k, 1] * p[1] + R[k, 2] * se
+        _rotation(R0, x[8], x[9], x[10], R, dR)
         for k in range(3):
-            out[n_eta * n_omega, k] = t[k] - R[k, 2] * size[2]
-            out[n_eta * n_omega + 1, k] = t[k] + R[k, 2] * size[2]
-
-
-def project(const double[:, ::1] points not None, const double[:, ::1] projection not None,
-            float[:, ::1] out not None):
-    """Pixel coordinates of world points through a (3, 4) projection; False if any lies behind the camera."""
-    cdef Py_ssize_t n = points.shape[0], i
-    cdef double hx, hy, hz
-    cdef bint in_front = True
-    if out.shape[0] != n or out.shape[1] != 2 or points.shape[1] != 3:
-        raise ValueError("points must be (N, 3) and out (N, 2)")
-    with nogil:
-        for i in range(n):
-            hz = (projection[2, 0] * points[i, 0] + projection[2, 1] * points[i, 1]
-                  + projection[2, 2] * points[i, 2] + projection[2, 3])
-            if hz <= 1e-12:
-                in_front = False
+            a[k] = exp(x[k])
+            t[k] = t0[k] + scale * x[5 + k]
+        # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
+        for j in range(n_omega):
+            co[j] = _signed_power(cos(omega[j]), e2)
+            so[j] = _signed_power(sin(omega[j]), e2)
+            nco[j] = _signed_power(cos(omega[j]), 2.0 - e2)
+            nso[j] = _signed_power(sin(omega[j]), 2.0 - e2)
+        for i in range(n_eta):
+            ce = _signed_power(cos(eta[i]), e1)
+            se = _signed_power(sin(eta[i]), e1)
+            ne = _signed_power(cos(eta[i]), 2.0 - e1)
+            nz = _signed_power(sin(eta[i]), 2.0 - e1) / a[2]
+            for j in range(n_omega):
+                row = i * n_omega + j
+                grid[row, 0] = a[0] * ce * co[j]
+                grid[row, 1] = a[1] * ce * so[j]
+                grid[row, 2] = a[2] * se
+                grid[row, 3] = ne * nco[j] / a[0]
+                grid[row, 4] = ne * nso[j] / a[1]
+                grid[row, 5] = nz
+        for k in range(2):  # the poles
+            grid[n_grid + k, 0] = 0.0
+            grid[n_grid + k, 1] = 0.0
+            grid[n_grid + k, 2] = -a[2] if k == 0 else a[2]
+            grid[n_grid + k, 3] = 0.0
+            grid[n_grid + k, 4] = 0.0
+            grid[n_grid + k, 5] = -1.0 if k == 0 else 1.0
+        for v in range(n_views):
+            for k in range(3):  # the camera centre in the object frame
+                c[k] = (R[0][k] * (centres[v, 0] - t[0]) + R[1][k] * (centres[v, 1] - t[1])
+                        + R[2][k] * (centres[v, 2] - t[2]))
+            for row in range(n_grid + 2):
+                facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
+                               + grid[row, 5] * (grid[row, 2] - c[2]))
+            count = 0
+            for row in range(n_grid + 2):
+                if row >= n_grid:
+                    candidate = True
+                else:
+                    i = row // n_omega
+                    j = row % n_omega
+                    g = facing[row]
+                    other = i * n_omega + (j + 1) % n_omega
+                    candidate = (g > 0) != (facing[other] > 0)
+                    other = i * n_omega + (j + n_omega - 1) % n_omega
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                    other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                    other = (i - 1) * n_omega + j if i > 0 else n_grid
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                if not candidate:
+                    continue
+                for k in range(3):
+                    w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
+                hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
+                if hz <= 1e-12:
+                    in_front = False
+                    break
+                hx = projections[v, 0, 0] * w[0] + projections[v, 0, 1] * w[1] + projections[v, 0, 2] * w[2] + projections[v, 0, 3]
+                hy = projections[v, 1, 0] * w[0] + projections[v, 1, 1] * w[1] + projections[v, 1, 2] * w[2] + projections[v, 1, 3]
+                uv[v, count, 0] = <float>(hx / hz)
+                uv[v, count, 1] = <float>(hy / hz)
+                count += 1
+            counts[v] = count
+            if not in_front:
                 break
-            hx = (projection[0, 0] * points[i, 0] + projection[0, 1] * points[i, 1]
-                  + projection[0, 2] * points[i, 2] + projection[0, 3])
-            hy = (projection[1, 0] * points[i, 0] + projection[1, 1] * points[i, 1]
-                  + projection[1, 2] * points[i, 2] + projection[1, 3])
-            out[i, 0] = <float>(hx / hz)
-            out[i, 1] = <float>(hy / hz)
     return in_front
 
 
@@ -95,10 +149,10 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     Where the sample lies outside a vertex of the outline, the normal points
     from the vertex to the sample.
     """
-    cdef Py_ssize_t h = hull.shape[0], n = samples.shape[0], i, j, best_j
-    cdef double ax, ay, ex, ey, length2, tau, qx, qy, dx, dy, d2, best, sign, area
-    cdef double nx, ny, best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
-    cdef bint outside
+    cdef Py_ssize_t h = hull.shape[0], n = samples.shape[0], i, j
+    cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area
+    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
+    cdef double[:, ::1] edges = np.empty((h, 5))  # e_x, e_y, 1 / |e|^2, outward unit normal
     if hull.shape[1] != 2 or h < 3:
         raise ValueError("hull must be (H, 2) with H >= 3")
     if samples.shape[1] != 2 or planes.shape[0] != n or planes.shape[1] != 9:
@@ -110,44 +164,41 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
         # Outward normal of edge (e_x, e_y): (e_y, -e_x) when the polygon runs clockwise on screen
         # (a positive shoelace area in these y-down coordinates), (-e_y, e_x) otherwise.
         sign = 1.0 if area > 0 else -1.0
+        for j in range(h):
+            ex = hull[(j + 1) % h, 0] - hull[j, 0]
+            ey = hull[(j + 1) % h, 1] - hull[j, 1]
+            d2 = ex * ex + ey * ey
+            edges[j, 0] = ex
+            edges[j, 1] = ey
+            edges[j, 2] = 1.0 / d2 if d2 > 0 else 0.0
+            norm = sqrt(d2) if d2 > 0 else 1.0
+            edges[j, 3] = sign * ey / norm
+            edges[j, 4] = -sign * ex / norm
         for i in range(n):
             px = samples[i, 0]
             py = samples[i, 1]
             best = 1e300
             best_nx = 0.0
             best_ny = 0.0
-            best_j = 0
             for j in range(h):
-                ax = hull[j, 0]
-                ay = hull[j, 1]
-                ex = hull[(j + 1) % h, 0] - ax
-                ey = hull[(j + 1) % h, 1] - ay
-                length2 = ex * ex + ey * ey
-                if length2 <= 0:
-                    continue
-                tau = ((px - ax) * ex + (py - ay) * ey) / length2
+                ax = px - hull[j, 0]
+                ay = py - hull[j, 1]
+                tau = (ax * edges[j, 0] + ay * edges[j, 1]) * edges[j, 2]
                 if tau < 0:
                     tau = 0.0
                 elif tau > 1:
                     tau = 1.0
-                qx = ax + tau * ex
-                qy = ay + tau * ey
-                dx = px - qx
-                dy = py - qy
+                dx = ax - tau * edges[j, 0]
+                dy = ay - tau * edges[j, 1]
                 d2 = dx * dx + dy * dy
                 if d2 < best:
                     best = d2
-                    best_j = j
-                    norm = sqrt(length2)
-                    nx = sign * ey / norm
-                    ny = -sign * ex / norm
-                    outside = nx * dx + ny * dy > 0
-                    if (tau == 0.0 or tau == 1.0) and outside and d2 > 1e-12:
+                    best_nx = edges[j, 3]
+                    best_ny = edges[j, 4]
+                    if (tau == 0.0 or tau == 1.0) and best_nx * dx + best_ny * dy > 0 and d2 > 1e-12:
                         norm = sqrt(d2)
-                        nx = dx / norm
-                        ny = dy / norm
-                    best_nx = nx
-                    best_ny = ny
+                        best_nx = dx / norm
+                        best_ny = dy / norm
             # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
             s = best_nx * px + best_ny * py
             mc0 = K[0, 0] * best_nx
@@ -221,8 +272,9 @@ def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not N
     cdef double dh_dv[3]
     cdef double t[3]
     cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, best_offset
-    cdef double psi, cs, sn, reach, best, r_minus, r_zero, r_plus, curvature
-    cdef double angles[3]
+    cdef double psi, cs, sn, reach, best, curvature
+    cdef double cosines[3]
+    cdef double sines[3]
     cdef double reaches[3]
     if x.shape[0] != 11 or JtJ.shape[0] != 11 or JtJ.shape[1] != 11 or Jtr.shape[0] != 11:
         raise ValueError("x and Jtr must have 11 entries, JtJ 11 x 11")
@@ -233,6 +285,12 @@ def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not N
         for k in range(3):
             a[k] = exp(x[k])
             t[k] = t0[k] + scale * x[5 + k]
+        cosines[0] = cos(tilt)
+        cosines[1] = 1.0
+        cosines[2] = cosines[0]
+        sines[0] = -sin(tilt)
+        sines[1] = 0.0
+        sines[2] = -sines[0]
         if jacobian:
             for j in range(11):
                 Jtr[j] = 0.0
@@ -242,27 +300,26 @@ def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not N
         for i in range(rows):
             if i < n:
                 weight = planes[i, 4]
-                angles[0] = -tilt
-                angles[1] = 0.0
-                angles[2] = tilt
                 best = 1e300
                 for j in range(4):
                     if j < 3:
-                        psi = angles[j]
+                        cs = cosines[j]
+                        sn = sines[j]
                     else:  # the parabola's vertex, if it opens upwards, within the three
-                        r_minus, r_zero, r_plus = reaches[0], reaches[1], reaches[2]
-                        curvature = r_minus - 2.0 * r_zero + r_plus
+                        curvature = reaches[0] - 2.0 * reaches[1] + reaches[2]
                         if curvature <= 0 or tilt <= 0:
                             break
-                        psi = 0.5 * tilt * (r_minus - r_plus) / curvature
+                        psi = 0.5 * tilt * (reaches[0] - reaches[2]) / curvature
                         if psi < -tilt or psi > tilt:
                             break
-                    cs = cos(psi)
-                    sn = sin(psi)
+                        cs = cos(psi)
+                        sn = sin(psi)
                     for k in range(3):
                         m[k] = cs * planes[i, k] + sn * planes[i, 5 + k]
                     offset = cs * planes[i, 3] + sn * planes[i, 8]
-                    reach = _reach(a, &x[3], t, R, m, offset, v, dh_da, dh_de, dh_dv)
+                    for k in range(3):
+                        v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+                    reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, &x[3], v) - offset
                     if j < 3:
                         reaches[j] = reach
                     if reach < best:

@@ -70,3 +70,5 @@ cdef inline double _log_sum(double la, double lb, double* wa, double* wb) noexce
 
 cdef double _support(const double* a, const double* e, const double* v, double* dh_da,
                      double* dh_de, double* dh_dv) noexcept nogil
+
+cdef double _support_value(const double* a, const double* e, const double* v) noexcept nogil

@@ -47,6 +47,18 @@ cdef double _support(const double* a, const double* e, const double* v, double* 
     return h
 
 
+cdef double _support_value(const double* a, const double* e, const double* v) noexcept nogil:
+    """:func:`_support` without the derivatives."""
+    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1])
+    cdef double lT[3]
+    cdef double T, w1, w2
+    cdef int k
+    for k in range(3):
+        T = fabs(a[k] * v[k])
+        lT[k] = log(T if T > _TINY else _TINY)
+    return exp(_log_sum(q1 / q2 * _log_sum(q2 * lT[0], q2 * lT[1], &w1, &w2), q1 * lT[2], &w1, &w2) / q1)
+
+
 def support(const double[::1] size not None, const double[::1] shape not None,
             const double[::1] v not None):
     """Support (max of v . x) of the superquadric at the origin along object-frame v."""
@@ -210,3 +222,124 @@ def objective(const double[::1] params not None, const double[:, ::1] R0 not Non
                         grad[8 + m] += dcost * dh_dv[k] * (
                             dR[m][0][k] * down[0] + dR[m][1][k] * down[1] + dR[m][2][k] * down[2])
     return loss
+
+
+def jaklic_normal_equations(const double[::1] params not None, const double[:, ::1] R0 not None,
+                            const double[:, ::1] points not None, const double[::1] plane not None,
+                            double plane_weight, double[:, ::1] JtJ not None, double[::1] Jtr not None):
+    """The plain Jaklic cost and its Gauss-Newton normal equations, for Levenberg-Marquardt.
+
+    Residuals ``r_i / sqrt(n)``, ``r = sqrt(a1 a2 a3) (F^e1 - 1)``, plus, with
+    ``plane_weight > 0``, ``sqrt(plane_weight) * depth`` where the superquadric
+    reaches ``depth > 0`` below the plane (as in :func:`objective`); the cost
+    is half their sum of squares, the same as :func:`objective` with
+    ``inside_weight = 1`` and the squared loss, halved. ``params`` as there.
+    Fills ``JtJ`` (11, 11) and ``Jtr`` (11,), and returns the cost.
+    """
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double J[11]
+    cdef double a1 = params[0], a2 = params[1], a3 = params[2]
+    cdef double e1 = params[3], e2 = params[4]
+    cdef double t0 = params[5], t1 = params[6], t2 = params[7]
+    cdef double la1 = log(a1), la2 = log(a2), la3 = log(a3)
+    cdef double s = sqrt(a1 * a2 * a3)
+    cdef double p2e1 = 2.0 / e1, p2e2 = 2.0 / e2, e2e1 = e2 / e1, root_n = sqrt(<double>n)
+    cdef double qx, qy, qz, x, y, z, ax, ay, az, lu, lv, lw
+    cdef double wU, wV, wP, wQ, logA, logF, Fe, r, D, PU, PV, QW, gx, gy, gz
+    cdef double cost = 0.0, depth
+    cdef double down[3]
+    cdef double v[3]
+    cdef double dh_da[3]
+    cdef double dh_de[2]
+    cdef double dh_dv[3]
+    cdef int j, k, m
+    if params.shape[0] != 11 or JtJ.shape[0] != 11 or JtJ.shape[1] != 11 or Jtr.shape[0] != 11:
+        raise ValueError("params and Jtr must have 11 entries, JtJ 11 x 11")
+    if points.shape[1] != 3 or n < 1 or plane.shape[0] != 4:
+        raise ValueError("points must be (N, 3) with N >= 1, plane (4,)")
+    with nogil:
+        _rotation(R0, params[8], params[9], params[10], R, dR)
+        for j in range(11):
+            Jtr[j] = 0.0
+            for k in range(11):
+                JtJ[j, k] = 0.0
+        for i in range(n + 1):
+            if i < n:
+                qx = points[i, 0] - t0
+                qy = points[i, 1] - t1
+                qz = points[i, 2] - t2
+                x = R[0][0] * qx + R[1][0] * qy + R[2][0] * qz
+                y = R[0][1] * qx + R[1][1] * qy + R[2][1] * qz
+                z = R[0][2] * qx + R[1][2] * qy + R[2][2] * qz
+                ax = fabs(x)
+                ay = fabs(y)
+                az = fabs(z)
+                if ax < _TINY:
+                    ax = _TINY
+                if ay < _TINY:
+                    ay = _TINY
+                if az < _TINY:
+                    az = _TINY
+                lu = log(ax) - la1
+                lv = log(ay) - la2
+                lw = log(az) - la3
+                logA = _log_sum(p2e2 * lu, p2e2 * lv, &wU, &wV)
+                logF = _log_sum(e2e1 * logA, p2e1 * lw, &wP, &wQ)
+                Fe = exp(e1 * logF)
+                r = s * (Fe - 1.0)
+                # As in objective() with dl/dr = 1: D = s e1 F^e1, the share of each coordinate in F.
+                D = s * e1 * Fe
+                PU = p2e1 * D * wP * wU
+                PV = p2e1 * D * wP * wV
+                QW = p2e1 * D * wQ
+                J[0] = (0.5 * r - PU) / a1
+                J[1] = (0.5 * r - PV) / a2
+                J[2] = (0.5 * r - QW) / a3
+                J[3] = (e1 * s * Fe * logF - D * (e2e1 * logA * wP + p2e1 * lw * wQ)) / e1
+                J[4] = D * wP * (logA - p2e2 * (wU * lu + wV * lv)) / e1
+                gx = PU / copysign(ax, x)
+                gy = PV / copysign(ay, y)
+                gz = QW / copysign(az, z)
+                for j in range(3):
+                    J[5 + j] = -(R[j][0] * gx + R[j][1] * gy + R[j][2] * gz)
+                for m in range(3):
+                    J[8 + m] = (qx * (dR[m][0][0] * gx + dR[m][0][1] * gy + dR[m][0][2] * gz)
+                                + qy * (dR[m][1][0] * gx + dR[m][1][1] * gy + dR[m][1][2] * gz)
+                                + qz * (dR[m][2][0] * gx + dR[m][2][1] * gy + dR[m][2][2] * gz))
+                r /= root_n
+                for j in range(11):
+                    J[j] /= root_n
+            else:
+                if plane_weight <= 0.0:
+                    break
+                for j in range(3):
+                    down[j] = -plane[j]
+                for k in range(3):
+                    v[k] = R[0][k] * down[0] + R[1][k] * down[1] + R[2][k] * down[2]
+                depth = (_support(&params[0], &params[3], v, dh_da, dh_de, dh_dv)
+                         - (plane[0] * t0 + plane[1] * t1 + plane[2] * t2) - plane[3])
+                if depth <= 0.0:
+                    break
+                r = sqrt(plane_weight) * depth
+                for k in range(3):
+                    J[k] = sqrt(plane_weight) * dh_da[k]
+                    J[5 + k] = -sqrt(plane_weight) * plane[k]
+                J[3] = sqrt(plane_weight) * dh_de[0]
+                J[4] = sqrt(plane_weight) * dh_de[1]
+                for m in range(3):
+                    J[8 + m] = 0.0
+                    for k in range(3):
+                        J[8 + m] += dh_dv[k] * (dR[m][0][k] * down[0] + dR[m][1][k] * down[1]
+                                                + dR[m][2][k] * down[2])
+                    J[8 + m] *= sqrt(plane_weight)
+            cost += 0.5 * r * r
+            for j in range(11):
+                Jtr[j] += J[j] * r
+                for k in range(j, 11):
+                    JtJ[j, k] += J[j] * J[k]
+        for j in range(11):
+            for k in range(j):
+                JtJ[j, k] = JtJ[k, j]
+    return cost

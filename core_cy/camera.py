@@ -102,17 +102,23 @@ class Camera:
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "dist", dist)
+        # Derived once: every stage projects through them.
+        R = T[:3, :3]
+        centre = np.ascontiguousarray(T[:3, 3])
+        projection = K @ np.hstack([R.T, -(R.T @ centre)[:, None]])
+        for name, array in (("_centre", centre), ("_projection", projection)):
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
 
     @property
     def center(self) -> np.ndarray:
-        """(3,) camera centre in the world."""
-        return self.T_world_cam[:3, 3]
+        """(3,) camera centre in the world (read-only)."""
+        return self._centre
 
     @property
     def projection(self) -> np.ndarray:
-        """(3, 4) pinhole projection matrix ``K [R^T | -R^T c]`` (world to pixels)."""
-        R = self.T_world_cam[:3, :3]
-        return self.K @ np.hstack([R.T, -(R.T @ self.center)[:, None]])
+        """(3, 4) pinhole projection matrix ``K [R^T | -R^T c]`` (world to pixels; read-only)."""
+        return self._projection
 
     @property
     def focal_length(self) -> float:
@@ -137,7 +143,7 @@ class Camera:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must have shape (N, 3), got {points.shape}")
-        homogeneous = points @ self.projection[:, :3].T + self.projection[:, 3]
+        homogeneous = points @ self._projection[:, :3].T + self._projection[:, 3]
         depth = homogeneous[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = homogeneous[:, :2] / depth[:, None]

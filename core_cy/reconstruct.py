@@ -14,10 +14,10 @@ import numpy as np
 
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, occupancy
-from .edges import edge_samples, silhouette_outline
+from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .quality import radial_residual, silhouette_iou
-from .segment import RED_HSV, Segmentation, segment, silhouette_from_mask
+from .segment import RED_HSV, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric, start_superquadrics
@@ -191,27 +191,33 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         timings[stage] = timings.get(stage, 0.0) + (now - last) * 1e3
         last = now
 
-    silhouettes, edges = [], []
+    silhouettes, boxes, edges = [], [], []
     for index, view in enumerate(views):
         data, is_mask = _decoded(index, view)
         lap("decode")
         if is_mask:
-            silhouette = silhouette_from_mask(data, view=index)
+            silhouette, outline = mask_with_outline(data, view=index)
         else:
-            silhouette = segment(data, segmentation, view=index)
-        silhouettes.append(undistort_mask(silhouette, view.camera))
+            silhouette, outline = segment_with_outline(data, segmentation, view=index)
+        if view.camera.dist is None:
+            silhouettes.append(silhouette)
+            boxes.append(cv2.boundingRect(outline))
+        else:
+            silhouettes.append(undistort_mask(silhouette, view.camera))
+            boxes.append(cv2.boundingRect(silhouettes[-1]))
         lap("segment")
         if options.silhouette_fit:
-            edges.append(edge_samples(silhouette_outline(silhouette), silhouette, None if is_mask else data,
-                                      count=options.edge_samples, camera=view.camera))
+            edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
+                                      camera=view.camera))
             lap("edges")
     cameras = [view.camera for view in views]
-    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin)
+    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
     plane = None if support_plane is None else check_support_plane(support_plane, centre)
     lap("centroid")
 
     directions = fibonacci_sphere(options.n_points)
-    radii, observed = carve(directions, centre, radius, cameras, [occupancy(s) for s in silhouettes])
+    radii, observed = carve(directions, centre, radius, cameras,
+                            [occupancy(s, box) for s, box in zip(silhouettes, boxes)])
     if plane is not None:
         radii = clip_to_plane(directions, radii, centre, plane)
     # Points that no view saw, and directions in which no view saw the object, carry no evidence.
@@ -232,7 +238,7 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
                                         outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
                                         support_plane=plane).superquadric
         lap("fit")
-    ious = [silhouette_iou(superquadric, camera, s) for camera, s in zip(cameras, silhouettes)]
+    ious = [silhouette_iou(superquadric, camera, s, box) for camera, s, box in zip(cameras, silhouettes, boxes)]
     lap("quality")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3

@@ -27,27 +27,28 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._silhouette_fit_cy import normal_equations, project, surface, tangent_planes
-from .camera import Camera
+from ._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
 from .errors import FitError
+from .least_squares import Descent
 from .superquadric import Superquadric, _rotation
 
 __all__ = ["SilhouetteFit", "fit_to_silhouettes"]
 
-# The outline is the convex hull of the surface on this grid (signed powers put the points where
-# the surface bends, so a box's edges are as well drawn as an ellipsoid's rim).
+# The outline is the convex hull of the surface on this grid, of the points where it turns away from
+# the camera (signed powers put the points where the surface bends, so a box's edges are as well drawn
+# as an ellipsoid's rim).
 _ETA = -np.pi / 2 + np.pi * np.arange(1, 17) / 17
 _OMEGA = -np.pi + 2 * np.pi * np.arange(40) / 40
-_SHAPE_BOUNDS = (0.1, 1.9)
+# Exponents above 1 pinch the shape (a diamond, a star): no object a robot picks, and a square
+# section seen as a diamond turned 45 degrees is a false minimum on the way to the box.
+_SHAPE_BOUNDS = (0.1, 1.0)
 # The polygon outline's normals are off by up to half its angle between vertices (a few degrees):
 # the residual tries the plane turned about the ray by this much either way (radians).
 _TILT = 0.05
-# Levenberg-Marquardt: the damping, relative to the normal matrix's diagonal, starts here; the
-# fit stops when the next step promises to lower the cost by less than _RTOL of it.
-_DAMPING = 1e-3
-_RTOL = 1e-4
+# Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object.
+_LOG_SIZE_RANGE = 4.0
 # With several starts, each takes this many steps before the best goes on.
-_SEARCH_ITERATIONS = 4
+_SEARCH_ITERATIONS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +61,7 @@ class SilhouetteFit:
     rms_px : float
         RMS distance (pixels) of the edge samples from the superquadric's outlines.
     iterations : int
-        Levenberg-Marquardt steps tried.
+        Levenberg-Marquardt steps tried from the start that won.
     """
 
     superquadric: Superquadric
@@ -68,25 +69,58 @@ class SilhouetteFit:
     iterations: int
 
 
+@dataclass(frozen=True, eq=False)
+class _Views:
+    """The cameras and their edge samples, packed for the kernels."""
+
+    projections: np.ndarray  # (V, 3, 4)
+    centres: np.ndarray  # (V, 3)
+    cameras: list  # (K, R camera-to-world, centre, 1 / object depth) per view
+    samples: list  # (N_v, 2) per view
+    rows: list  # slices of the planes array, per view
+    count: int
+    pixel_scale: float  # the views' mean f / depth: pixels per world unit at the object
+
+    @classmethod
+    def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
+        projections, centres, packed, samples, rows, scales, row = [], [], [], [], [], [], 0
+        for camera, view_samples in zip(cameras, edges):
+            view_samples = np.ascontiguousarray(view_samples, dtype=np.float64).reshape(-1, 2)
+            (_, depth) = camera.project(reference[None])
+            if depth[0] <= 0:
+                raise FitError("the object lies behind the camera", view=camera.view)
+            scales.append(camera.focal_length / depth[0])
+            if not len(view_samples):
+                continue
+            projections.append(camera.projection)
+            centres.append(camera.center)
+            packed.append((camera.K, np.ascontiguousarray(camera.T_world_cam[:3, :3]),
+                           np.ascontiguousarray(camera.center), 1.0 / depth[0]))
+            samples.append(view_samples)
+            rows.append(slice(row, row + len(view_samples)))
+            row += len(view_samples)
+        return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
+                   packed, samples, rows, row, float(np.mean(scales)))
+
+
 class _Problem:
-    """The samples and cameras; turns parameters about a start into tangent planes and the normal equations.
+    """The silhouette fit about one start: parameters to tangent planes, cost and normal equations."""
 
-    ``depths`` are the object's depth in each view: they turn the planes'
-    gaps into pixels, the same for every start so that costs compare.
-    """
-
-    def __init__(self, start: Superquadric, views, samples: int, support_plane, plane_weight, loss_scale):
+    def __init__(self, start: Superquadric, views: _Views, support_plane, plane_weight, loss_scale):
         self.R0 = np.ascontiguousarray(start.T_world_object[:3, :3])
         self.t0 = start.T_world_object[:3, 3].copy()
         self.scale = float(np.mean(start.size))
-        self.views, self.samples = views, samples
-        self.support_plane, self.plane_weight, self.loss_scale = support_plane, plane_weight, loss_scale
-        self.surface = np.empty((len(_ETA) * len(_OMEGA) + 2, 3))
-        self.uv = np.empty((len(self.surface), 2), np.float32)
-        self.planes = np.empty((samples, 9))
-
-    def start(self, superquadric: Superquadric) -> np.ndarray:
-        return np.concatenate([np.log(superquadric.size), np.clip(superquadric.shape, *_SHAPE_BOUNDS), np.zeros(6)])
+        self.views, self.support_plane, self.plane_weight, self.loss_scale = (
+            views, support_plane, plane_weight, loss_scale)
+        grid = len(_ETA) * len(_OMEGA) + 2
+        self.grid = np.empty((grid, 6))
+        self.uv = np.empty((len(views.samples), grid, 2), np.float32)
+        self.counts = np.empty(len(views.samples), np.intp)
+        self.planes, self.trial_planes = np.empty((views.count, 9)), np.empty((views.count, 9))
+        self.x0 = np.concatenate([np.log(start.size), np.clip(start.shape, *_SHAPE_BOUNDS), np.zeros(6)])
+        self.low, self.high = np.full(11, -np.inf), np.full(11, np.inf)
+        self.low[3:5], self.high[3:5] = _SHAPE_BOUNDS
+        self.low[:3], self.high[:3] = self.x0[:3] - _LOG_SIZE_RANGE, self.x0[:3] + _LOG_SIZE_RANGE
 
     def superquadric(self, x: np.ndarray) -> Superquadric:
         T = np.eye(4)
@@ -94,78 +128,35 @@ class _Problem:
         T[:3, 3] = self.t0 + self.scale * x[5:8]
         return Superquadric(np.exp(x[:3]), x[3:5], T)
 
-    def planes_at(self, x: np.ndarray) -> bool:
-        """Tangent planes of every sample for the superquadric x; False if it reaches behind a camera."""
-        R = np.ascontiguousarray(_rotation(self.R0, x[8:11]))
-        surface(np.exp(x[:3]), np.ascontiguousarray(x[3:5]), R, self.t0 + self.scale * x[5:8], _ETA, _OMEGA,
-                self.surface)
-        row = 0
-        for projection, samples, K, R_cam, centre, pixels_per_unit in self.views:
-            if not project(self.surface, projection, self.uv):
-                return False
-            hull = cv2.convexHull(self.uv).reshape(-1, 2)
-            tangent_planes(hull, samples, K, R_cam, centre, pixels_per_unit, self.planes[row:row + len(samples)])
-            row += len(samples)
-        return True
+    def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
+        views, planes = self.views, self.trial_planes
+        if not outline_points(x, self.R0, self.t0, self.scale, _ETA, _OMEGA, views.projections, views.centres,
+                              self.grid, self.uv, self.counts):
+            return np.inf  # the superquadric reaches behind a camera
+        for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
+                zip(views.samples, views.rows, views.cameras)):
+            hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
+            if len(hull) < 3:
+                return np.inf
+            tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[rows])
+        return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
+                                self.plane_weight, _TILT, JtJ, Jtr)
 
-    def cost(self, x, JtJ, Jtr, jacobian=True) -> float:
-        return normal_equations(x, self.R0, self.t0, self.scale, self.planes, self.loss_scale,
-                                self.support_plane, self.plane_weight, _TILT, JtJ, Jtr, jacobian)
-
-
-class _Descent:
-    """Levenberg-Marquardt on one problem from one start; :meth:`run` continues where it stopped."""
-
-    def __init__(self, problem: _Problem, start: Superquadric):
-        self.problem = problem
-        self.x = problem.start(start)
-        self.JtJ, self.Jtr = np.empty((11, 11)), np.empty(11)
-        self.trial_JtJ, self.trial_Jtr = np.empty((11, 11)), np.empty(11)
-        self.cost = problem.cost(self.x, self.JtJ, self.Jtr) if problem.planes_at(self.x) else np.inf
-        self.damping, self.iterations, self.converged = _DAMPING, 0, not np.isfinite(self.cost)
-        self.low, self.high = np.full(11, -np.inf), np.full(11, np.inf)
-        self.low[3:5], self.high[3:5] = _SHAPE_BOUNDS
-        # Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object.
-        self.low[0:3], self.high[0:3] = self.x[0:3] - 4.0, self.x[0:3] + 4.0
-
-    def run(self, iterations: int) -> None:
-        problem, stop = self.problem, self.iterations + iterations
-        if not self.converged:
-            problem.planes_at(self.x)
-        while not self.converged and self.iterations < stop:
-            JtJ, Jtr = self.JtJ, self.Jtr
-            step = np.linalg.solve(JtJ + self.damping * np.diag(np.diag(JtJ) + 1e-12), -Jtr)
-            trial = np.clip(self.x + step, self.low, self.high)
-            step = trial - self.x
-            # Converged when even the Gauss-Newton model of the cost promises (almost) nothing.
-            if -(Jtr @ step + 0.5 * step @ JtJ @ step) < _RTOL * self.cost:
-                self.converged = True
-                break
-            self.iterations += 1
-            trial_cost = (problem.cost(trial, self.trial_JtJ, self.trial_Jtr) if problem.planes_at(trial)
-                          else np.inf)
-            if trial_cost < self.cost:
-                self.x, self.cost = trial, trial_cost
-                self.JtJ, self.trial_JtJ, self.Jtr, self.trial_Jtr = self.trial_JtJ, JtJ, self.trial_Jtr, Jtr
-                self.damping /= 3
-            else:
-                problem.planes_at(self.x)  # back to the planes of the kept parameters
-                self.damping *= 4
+    def keep(self, accepted: bool) -> None:
+        if accepted:
+            self.planes, self.trial_planes = self.trial_planes, self.planes
 
 
-def _views(cameras, edges, reference: np.ndarray):
-    """Per view with samples: (projection, samples, K, R, centre, 1 / depth of ``reference``)."""
-    views, scales = [], []
-    for camera, samples in zip(cameras, edges):
-        samples = np.ascontiguousarray(samples, dtype=np.float64).reshape(-1, 2)
-        (_, depth) = camera.project(reference[None])
-        if depth[0] <= 0:
-            raise FitError("the object lies behind the camera", view=camera.view)
-        scales.append(camera.focal_length / depth[0])
-        if len(samples):
-            views.append((camera.projection, samples, camera.K, np.ascontiguousarray(camera.T_world_cam[:3, :3]),
-                          np.ascontiguousarray(camera.center), 1.0 / depth[0]))
-    return views, float(np.mean(scales))
+def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
+    """The superquadric's frame turned so that its x, then its y axis becomes z (sizes and the two
+    exponents following: the profile across the new z had the old profile's exponent)."""
+    turned = []
+    R, e1, e2 = sq.T_world_object[:3, :3], sq.shape[0], sq.shape[1]
+    for order in ((1, 2, 0), (2, 0, 1)):
+        T = sq.T_world_object.copy()
+        T[:3, :3] = R[:, order]
+        turned.append(Superquadric(sq.size[list(order)], [e2, e1], T))
+    return turned
 
 
 def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
@@ -206,18 +197,23 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         raise FitError("need at least one start")
     if len(cameras) != len(edges):
         raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
-    views, pixel_scale = _views(cameras, edges, starts[0].T_world_object[:3, 3])
-    samples = sum(len(view[1]) for view in views)
-    if samples < 11:
-        raise FitError(f"need at least 11 edge samples (one per parameter), got {samples}")
+    views = _Views.pack(cameras, edges, starts[0].T_world_object[:3, 3])
+    if views.count < 11:
+        raise FitError(f"need at least 11 edge samples (one per parameter), got {views.count}")
     if support_plane is None:
         plane, plane_weight = np.zeros(4), 0.0
     else:
         # The support plane is as sure as a whole view's samples, each seen at the views' mean scale.
         plane = np.asarray(support_plane, dtype=np.float64)
-        plane_weight = pixel_scale * math.sqrt(samples / len(views))
-    descents = [_Descent(_Problem(start, views, samples, plane, plane_weight, float(loss_scale)), start)
-                for start in starts]
+        plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
+    # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
+    tolerance = 0.5 * 1e-4 * views.count
+
+    def descend_from(start: Superquadric) -> Descent:
+        problem = _Problem(start, views, plane, plane_weight, float(loss_scale))
+        return Descent(problem, problem.x0, problem.low, problem.high, tolerance)
+
+    descents = [descend_from(start) for start in starts]
     if len(descents) > 1:
         for descent in descents:
             descent.run(_SEARCH_ITERATIONS)
@@ -225,5 +221,12 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     if not np.isfinite(best.cost):
         raise FitError("every start reaches behind a camera")
     best.run(max_iterations)
-    rms = math.sqrt(2 * best.cost / samples) if best.cost > 0 else 0.0
+    # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
+    # with another of its axes as z can only be reached by a jump, so try both.
+    # Each goes on only if a few steps bring it below the best so far.
+    for turned in _other_axes_as_z(best.problem.superquadric(best.x)):
+        other = descend_from(turned).run(_SEARCH_ITERATIONS)
+        if other.cost < best.cost:
+            best = other.run(max_iterations)
+    rms = math.sqrt(2 * best.cost / views.count) if best.cost > 0 else 0.0
     return SilhouetteFit(best.problem.superquadric(best.x), rms, best.iterations)

@@ -21,9 +21,11 @@ from scipy.optimize import Bounds, minimize
 from scipy.special import beta as _beta
 
 from ._superquadric_cy import inside_outside as _inside_outside_kernel
+from ._superquadric_cy import jaklic_normal_equations
 from ._superquadric_cy import objective as _objective_kernel
 from ._superquadric_cy import support as _support_kernel
 from .errors import CoreError, FitError
+from .least_squares import Descent
 
 __all__ = [
     "Superquadric",
@@ -40,8 +42,8 @@ _ROTATION_TOLERANCE = 1e-5  # as core_cy.camera: JSON round trips keep ~9 digits
 _SIZE_BOUNDS = (0.01, 3.0)
 _TRANSLATION_BOUND = 2.0
 # Start search: a few iterations of each start on at most this many points.
-_SEARCH_POINTS = 120
-_SEARCH_ITERATIONS = 12
+_SEARCH_POINTS = 60
+_SEARCH_ITERATIONS = 6
 _START_SHAPE = (1.0, 1.0)  # an ellipsoid: from there e1 and e2 move either way
 # A start turned 45 degrees about z is added when the two principal spreads
 # across the z axis are closer than this ratio (their axes are then arbitrary).
@@ -374,12 +376,28 @@ def _strided(points: np.ndarray, count: int) -> np.ndarray:
     return np.ascontiguousarray(points[np.linspace(0, len(points) - 1, count).round().astype(int)])
 
 
+class _JaklicProblem:
+    """The plain Jaklic cost of points about a start frame R0, for :class:`Descent`."""
+
+    def __init__(self, points, R0, plane):
+        self.points, self.R0 = points, R0
+        self.plane = np.zeros(4) if plane is None else plane
+        self.plane_weight = 0.0 if plane is None else _PLANE_WEIGHT
+
+    def evaluate(self, x, JtJ, Jtr) -> float:
+        return jaklic_normal_equations(x, self.R0, self.points, self.plane, self.plane_weight, JtJ, Jtr)
+
+    def keep(self, accepted: bool) -> None:
+        pass
+
+
 class _Search:
     """The start search shared by :func:`fit_superquadric` and :func:`start_superquadrics`.
 
     Normalises the points (centroid at 0, RMS distance 1), and runs each start
-    of :func:`_starts` for a few iterations of the plain Jaklic cost on a few
-    points; ``tried`` holds (result, axis order, R0), lowest cost first.
+    of :func:`_starts` for a few Levenberg-Marquardt steps of the plain Jaklic
+    cost on a few points; ``tried`` holds (descent, axis order, R0), lowest
+    cost first.
     """
 
     def __init__(self, points, support_plane, shape_bounds, subsample):
@@ -408,11 +426,11 @@ class _Search:
         search = _strided(self.refine, _SEARCH_POINTS)
         limits = np.array([_SIZE_BOUNDS] * 3 + [(low, high)] * 2
                           + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
-                          + [(-np.pi, np.pi)] * 3) / _STEP_SCALE
-        self.bounds = Bounds(limits[:, 0], limits[:, 1])
-        plain_jaklic = (1.0, False, 1.0)
-        self.tried = sorted(((self.run(search, R0, x0 / _STEP_SCALE, plain_jaklic, _SEARCH_ITERATIONS), k, R0)
-                             for k, R0, x0 in _starts(normalised, search)), key=lambda item: item[0].fun)
+                          + [(-np.pi, np.pi)] * 3)
+        self.bounds = Bounds(limits[:, 0] / _STEP_SCALE, limits[:, 1] / _STEP_SCALE)
+        self.tried = sorted(((Descent(_JaklicProblem(search, R0, self.plane), x0, limits[:, 0], limits[:, 1])
+                              .run(_SEARCH_ITERATIONS), k, R0) for k, R0, x0 in _starts(normalised, search)),
+                            key=lambda item: item[0].cost)
 
     def run(self, cloud, R0, y0, weights, iterations):
         objective = _Objective(cloud, R0, *weights, self.plane, _STEP_SCALE)
@@ -420,9 +438,8 @@ class _Search:
         return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=self.bounds,
                         options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
 
-    def superquadric(self, R0, y) -> Superquadric:
-        """The world superquadric of parameters y (as the optimiser sees them) about the frame R0."""
-        x = y * _STEP_SCALE
+    def superquadric(self, R0, x) -> Superquadric:
+        """The world superquadric of normalised parameters x about the frame R0."""
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = _rotation(R0, x[8:11]), self.centroid + self.scale * x[5:8]
         return Superquadric(x[0:3] * self.scale, x[3:5], T)
@@ -462,7 +479,7 @@ def start_superquadrics(points, *, support_plane=None, shape_bounds=(0.1, 1.9)) 
     (3, array([1., 2., 3.]))
     """
     search = _Search(points, support_plane, shape_bounds, None)
-    return [search.superquadric(R0, result.x) for result, _, R0 in search.tried]
+    return [search.superquadric(R0, descent.x) for descent, _, R0 in search.tried]
 
 
 def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str = "cauchy",
@@ -486,8 +503,8 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     the start's frame, angles from 0). Starts: each principal axis of the
     points as the object's z axis (plus a 45-degree turn about it when the
     other two spreads are nearly equal), shape (1, 1), sizes from the spreads.
-    Each start runs 12 iterations of the plain Jaklic cost (its basin is
-    wider) on at most 120 evenly strided points; the start with the lowest
+    Each start takes 6 Levenberg-Marquardt steps of the plain Jaklic cost (its
+    basin is wider) on at most 60 evenly strided points; the start with the lowest
     cost then converges under the requested cost on all the points (or
     ``subsample`` of them).
 
@@ -507,7 +524,7 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     shape_bounds : (2,) array_like
         Bounds of both exponents, ``0 < low <= high < 2`` (convex shapes).
     max_iterations : int
-        Iteration limit of the convergence (the start search adds 12 per start).
+        Iteration limit of the convergence (the start search adds 6 per start).
     subsample : int, optional
         If smaller than N, refine on this many evenly strided points.
 
@@ -534,9 +551,9 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     search = _Search(points, support_plane, shape_bounds, subsample)
     searched, axis_order, R0 = search.tried[0]
     loss = (inside_weight, outside_loss == "cauchy", cauchy_scale)
-    result = search.run(search.refine, R0, searched.x, loss, max_iterations)
-    iterations = searched.nit + result.nit
-    sq = search.superquadric(R0, result.x)
+    result = search.run(search.refine, R0, searched.x / _STEP_SCALE, loss, max_iterations)
+    iterations = searched.iterations + result.nit
+    sq = search.superquadric(R0, result.x * _STEP_SCALE)
     F = inside_outside(search.points, sq)
     residual = math.sqrt(np.prod(sq.size)) * np.sqrt(np.mean((F ** sq.shape[0] - 1) ** 2))
     return SuperquadricFit(sq, float(residual), float(result.fun), int(iterations), axis_order)
