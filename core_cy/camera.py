@@ -74,12 +74,16 @@ class Camera:
     def __post_init__(self) -> None:
         view = self.view
         K = _matrix(self.K, (3, 3), "K", view)
-        if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0 or K[0, 0] <= 0 or K[1, 1] <= 0:
+        # Plain comparisons: np.allclose costs more than the rest of the checks together.
+        k = K.tolist()
+        if (abs(k[2][0]) > 1e-8 or abs(k[2][1]) > 1e-8 or abs(k[2][2] - 1.0) > 1.001e-5 or k[1][0] != 0.0
+                or k[0][0] <= 0 or k[1][1] <= 0):
             raise CameraError(
                 "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", view=view
             )
         T = _matrix(self.T_world_cam, (4, 4), "T_world_cam", view)
-        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+        last = T[3].tolist()
+        if abs(last[0]) > 1e-8 or abs(last[1]) > 1e-8 or abs(last[2]) > 1e-8 or abs(last[3] - 1.0) > 1.001e-5:
             raise CameraError("T_world_cam's last row must be [0, 0, 0, 1]", view=view)
         R = T[:3, :3]
         if np.abs(R.T @ R - np.eye(3)).max() > _ROTATION_TOLERANCE or np.linalg.det(R) < 0:

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ._least_squares_cy import damped_step
+from ._least_squares_cy import bounded_step
 
 __all__ = ["Problem", "Descent"]
 
@@ -45,11 +45,12 @@ class Descent:
 
     def __init__(self, problem: Problem, x, low, high, tolerance: float = 0.0):
         self.problem, self.tolerance = problem, float(tolerance)
-        self.low, self.high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+        self.low = np.ascontiguousarray(low, dtype=np.float64)
+        self.high = np.ascontiguousarray(high, dtype=np.float64)
         self.x = np.clip(np.asarray(x, dtype=np.float64), self.low, self.high)
         n = len(self.x)
         self.JtJ, self.Jtr = np.empty((n, n)), np.empty(n)
-        self._trial_JtJ, self._trial_Jtr, self._step = np.empty((n, n)), np.empty(n), np.empty(n)
+        self._trial_JtJ, self._trial_Jtr = np.empty((n, n)), np.empty(n)
         self.cost = problem.evaluate(self.x, self.JtJ, self.Jtr)
         problem.keep(True)
         self.damping, self.iterations = _DAMPING, 0
@@ -59,28 +60,10 @@ class Descent:
         """Take up to ``iterations`` more steps; returns self."""
         stop = self.iterations + iterations
         while not self.converged and self.iterations < stop:
-            JtJ, Jtr, step = self.JtJ, self.Jtr, self._step
-            if not damped_step(JtJ, Jtr, self.damping, step):
-                self.converged = True
-                break
-            # A parameter on a bound that the step would push beyond it stays there: solve without it.
-            pinned = ((self.x <= self.low) & (step < 0)) | ((self.x >= self.high) & (step > 0))
-            if pinned.any():
-                JtJ, Jtr = JtJ.copy(), Jtr.copy()
-                JtJ[pinned, :], JtJ[:, pinned], Jtr[pinned] = 0.0, 0.0, 0.0
-                JtJ[pinned, pinned] = 1.0
-                if not damped_step(JtJ, Jtr, self.damping, step):
-                    self.converged = True
-                    break
-            # Shortened, if need be, to end on the first bound it meets: along the step the model of
-            # the cost only falls, so what it promises stays a fair test of convergence.
-            with np.errstate(divide="ignore", invalid="ignore"):
-                room = np.where(step > 0, (self.high - self.x) / step, np.where(step < 0, (self.low - self.x) / step,
-                                                                                 np.inf))
-            step = step * min(1.0, float(room.min()))
-            trial = np.clip(self.x + step, self.low, self.high)
-            if -(Jtr @ step + 0.5 * step @ JtJ @ step) < _RELATIVE_DECREASE * self.cost + self.tolerance:
-                self.converged = True
+            trial = np.empty_like(self.x)
+            promise = bounded_step(self.JtJ, self.Jtr, self.damping, self.x, self.low, self.high, trial)
+            if promise < _RELATIVE_DECREASE * self.cost + self.tolerance:
+                self.converged = True  # no step promises (almost) anything, or none can be taken
                 break
             self.iterations += 1
             trial_cost = self.problem.evaluate(trial, self._trial_JtJ, self._trial_Jtr)
@@ -88,7 +71,8 @@ class Descent:
             self.problem.keep(accepted)
             if accepted:
                 self.x, self.cost = trial, trial_cost
-                self.JtJ, self._trial_JtJ, self.Jtr, self._trial_Jtr = self._trial_JtJ, JtJ, self._trial_Jtr, Jtr
+                self.JtJ, self._trial_JtJ = self._trial_JtJ, self.JtJ
+                self.Jtr, self._trial_Jtr = self._trial_Jtr, self.Jtr
                 self.damping /= 3
             else:
                 self.damping *= 4

@@ -17,8 +17,6 @@ import numbers
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import Bounds, minimize
-from scipy.special import beta as _beta
 
 from ._superquadric_cy import inside_outside as _inside_outside_kernel
 from ._superquadric_cy import jaklic_normal_equations
@@ -58,6 +56,11 @@ _MAXCOR = 20  # L-BFGS memory: 20 pairs took ~10 % fewer iterations than the def
 # data term's slope is small at a fit, so this already keeps the depth near
 # 1e-3; a stiffer penalty (1e3) tripled the iterations on simulated hulls.
 _PLANE_WEIGHT = 10.0
+
+
+def _beta(a: float, b: float) -> float:
+    """The Beta function, by log-gamma (scipy.special alone takes a fifth of a second to import)."""
+    return math.exp(math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b))
 
 
 def _vector(value, length: int, name: str, error=CoreError) -> np.ndarray:
@@ -240,23 +243,11 @@ def mesh(sq: Superquadric, n_eta: int = 24, n_omega: int = 48) -> tuple[np.ndarr
     >>> vertices.shape, triangles.shape
     ((10, 3), (16, 3))
     """
-    if not (isinstance(n_eta, numbers.Integral) and isinstance(n_omega, numbers.Integral)
-            and n_eta >= 1 and n_omega >= 3):
-        raise CoreError(f"need integers n_eta >= 1 and n_omega >= 3, got {n_eta!r} and {n_omega!r}")
+    vertices = surface_points(sq, n_eta, n_omega)
     n_eta, n_omega = int(n_eta), int(n_omega)
-    (a1, a2, a3), (e1, e2) = sq.size, sq.shape
-    eta = -np.pi / 2 + np.pi * np.arange(1, n_eta + 1) / (n_eta + 1)
-    omega = -np.pi + 2 * np.pi * np.arange(n_omega) / n_omega
-    ce, se = _signed_power(np.cos(eta), e1)[:, None], _signed_power(np.sin(eta), e1)[:, None]
-    co, so = _signed_power(np.cos(omega), e2), _signed_power(np.sin(omega), e2)
-    rings = np.stack([a1 * ce * co, a2 * ce * so, a3 * se * np.ones_like(co)], axis=-1)
-    local = np.concatenate([[[0, 0, -a3]], rings.reshape(-1, 3), [[0, 0, a3]]])
-    T = sq.T_world_object
-    vertices = local @ T[:3, :3].T + T[:3, 3]
-
     ring = 1 + np.arange(n_eta)[:, None] * n_omega + np.arange(n_omega)  # (n_eta, n_omega)
     after = np.roll(ring, -1, axis=1)
-    north = len(local) - 1
+    north = len(vertices) - 1
     south_fan = np.stack([np.zeros(n_omega, int), after[0], ring[0]], axis=1)
     north_fan = np.stack([np.full(n_omega, north), ring[-1], after[-1]], axis=1)
     a, b, c, d = ring[:-1], after[:-1], after[1:], ring[1:]
@@ -279,7 +270,19 @@ def surface_points(sq: Superquadric, n_eta: int = 24, n_omega: int = 48) -> np.n
     >>> surface_points(Superquadric([1, 1, 2], [1, 1], np.eye(4)), 3, 8).shape
     (26, 3)
     """
-    return mesh(sq, n_eta, n_omega)[0]
+    if not (isinstance(n_eta, numbers.Integral) and isinstance(n_omega, numbers.Integral)
+            and n_eta >= 1 and n_omega >= 3):
+        raise CoreError(f"need integers n_eta >= 1 and n_omega >= 3, got {n_eta!r} and {n_omega!r}")
+    n_eta, n_omega = int(n_eta), int(n_omega)
+    (a1, a2, a3), (e1, e2) = sq.size, sq.shape
+    eta = -np.pi / 2 + np.pi * np.arange(1, n_eta + 1) / (n_eta + 1)
+    omega = -np.pi + 2 * np.pi * np.arange(n_omega) / n_omega
+    ce, se = _signed_power(np.cos(eta), e1)[:, None], _signed_power(np.sin(eta), e1)[:, None]
+    co, so = _signed_power(np.cos(omega), e2), _signed_power(np.sin(omega), e2)
+    rings = np.stack([a1 * ce * co, a2 * ce * so, a3 * se * np.ones_like(co)], axis=-1)
+    local = np.concatenate([[[0, 0, -a3]], rings.reshape(-1, 3), [[0, 0, a3]]])
+    T = sq.T_world_object
+    return local @ T[:3, :3].T + T[:3, 3]
 
 
 @dataclass(frozen=True, eq=False)
@@ -427,15 +430,19 @@ class _Search:
         limits = np.array([_SIZE_BOUNDS] * 3 + [(low, high)] * 2
                           + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
                           + [(-np.pi, np.pi)] * 3)
-        self.bounds = Bounds(limits[:, 0] / _STEP_SCALE, limits[:, 1] / _STEP_SCALE)
+        self.low, self.high = limits[:, 0] / _STEP_SCALE, limits[:, 1] / _STEP_SCALE
         self.tried = sorted(((Descent(_JaklicProblem(search, R0, self.plane), x0, limits[:, 0], limits[:, 1])
                               .run(_SEARCH_ITERATIONS), k, R0) for k, R0, x0 in _starts(normalised, search)),
                             key=lambda item: item[0].cost)
 
     def run(self, cloud, R0, y0, weights, iterations):
         objective = _Objective(cloud, R0, *weights, self.plane, _STEP_SCALE)
-        y0 = np.clip(y0, self.bounds.lb, self.bounds.ub)  # L-BFGS-B would clip silently
-        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=self.bounds,
+        # Imported here: scipy.optimize takes most of a second to import on a slow machine, and
+        # only the point fit's refinement (not the default pipeline) needs it.
+        from scipy.optimize import Bounds, minimize
+
+        y0 = np.clip(y0, self.low, self.high)  # L-BFGS-B would clip silently
+        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=Bounds(self.low, self.high),
                         options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
 
     def superquadric(self, R0, x) -> Superquadric:

@@ -5,22 +5,36 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core_cy._least_squares_cy import damped_step
+from core_cy._least_squares_cy import bounded_step
 from core_cy.least_squares import Descent
 
 
-def test_the_damped_step_solves_the_damped_normal_equations():
+def test_the_step_solves_the_damped_normal_equations_within_bounds():
     rng = np.random.default_rng(0)
     J = rng.normal(size=(30, 11))
     JtJ, Jtr = J.T @ J, J.T @ rng.normal(size=30)
-    step = np.empty(11)
-    assert damped_step(JtJ, Jtr, 0.1, step)
-    np.testing.assert_allclose(step, np.linalg.solve(JtJ + 0.1 * np.diag(np.diag(JtJ) + 1e-12), -Jtr),
-                               rtol=1e-10)
-    indefinite = -np.eye(11)
-    assert not damped_step(indefinite, Jtr, 0.1, step)
+    x, low, high, trial = np.zeros(11), np.full(11, -1e9), np.full(11, 1e9), np.empty(11)
+    free = np.linalg.solve(JtJ + 0.1 * np.diag(np.diag(JtJ) + 1e-12), -Jtr)
+    promise = bounded_step(JtJ, Jtr, 0.1, x, low, high, trial)
+    np.testing.assert_allclose(trial, free, rtol=1e-10)
+    assert promise == pytest.approx(-(Jtr @ free + 0.5 * free @ JtJ @ free))
+    # A parameter on its bound, pushed beyond it, is held; the others solve without it.
+    k = int(np.argmax(np.abs(free)))
+    low[k] = high[k] = 0.0
+    bounded_step(JtJ, Jtr, 0.1, x, low, high, trial)
+    rest = [i for i in range(11) if i != k]
+    held = np.linalg.solve((JtJ + 0.1 * np.diag(np.diag(JtJ) + 1e-12))[np.ix_(rest, rest)], -Jtr[rest])
+    assert trial[k] == 0.0
+    np.testing.assert_allclose(trial[rest], held, rtol=1e-10)
+    # A far bound shortens the whole step to end on it.
+    low[k], high[k] = -1e9, 1e9
+    high[:] = np.where(free > 0, free / 2, 1e9)
+    low[:] = np.where(free < 0, free / 2, -1e9)
+    bounded_step(JtJ, Jtr, 0.1, x, low, high, trial)
+    np.testing.assert_allclose(trial, free / 2, rtol=1e-10)
+    assert bounded_step(-np.eye(11), Jtr, 0.1, x, low, high, trial) == -1.0  # not positive definite
     with pytest.raises(ValueError, match="n <= 16"):
-        damped_step(np.eye(17), np.zeros(17), 0.1, np.empty(17))
+        bounded_step(np.eye(17), np.zeros(17), 0.1, np.zeros(17), np.zeros(17), np.zeros(17), np.empty(17))
 
 
 class _Circle:
