@@ -134,7 +134,8 @@ def _demo_command(args: argparse.Namespace) -> int:
     return run_demo(args)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``robocell`` parser; with ``only="reconstruct"``, that command alone (see :func:`main`)."""
     defaults = Options()
     parser = argparse.ArgumentParser(
         prog="robocell", description="Graspable superquadric models of unknown objects, from a robot cell.")
@@ -155,6 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--cauchy-scale", type=float, default=defaults.cauchy_scale,
                      help="robust loss scale for points outside, in cloud radii (default %(default)s)")
     rec.set_defaults(run=_reconstruct_command)
+    if only == "reconstruct":
+        return parser
 
     sim = commands.add_parser(
         "sim", help="write simulated scan bundles; `sim camera`: a simulated Axis camera; "
@@ -207,8 +210,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command(argv: list[str]) -> str | None:
+    """The command word of a command line: its first argument that is neither an option nor --config's value."""
+    words = iter(argv)
+    for word in words:
+        if word == "--config":
+            next(words, None)
+        elif not word.startswith("-"):
+            return word
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # Building every command's options imports every command's modules (the KUKA simulator's scipy,
+    # the client's Zenoh): most of a second, more than a batch of reconstructions takes.
+    only = "reconstruct" if _command(argv) == "reconstruct" else None
+    args = build_parser(only).parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
