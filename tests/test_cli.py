@@ -107,3 +107,17 @@ def test_bad_bundles_fail_one_by_one(tmp_path, sphere_bundle_template):
         assert message in result["error"], (name, result["error"])
         assert "\n" not in result["error"]
     assert all(str(tmp_path / name) in process.stderr for name in BAD_BUNDLES)  # said to a person too
+
+
+def test_reconstruct_parses_alone_with_the_global_options():
+    """`robocell reconstruct` builds only its own parser; the options before it still work."""
+    from cell.cli import _command, build_parser
+
+    argv = ["-v", "--config", "cell.toml", "reconstruct", "--points", "scan"]
+    assert _command(argv) == "reconstruct"
+    assert _command(["--config", "reconstruct", "sim"]) == "sim"  # a config file named reconstruct
+    assert _command(["-v"]) is None
+    args = build_parser("reconstruct").parse_args(argv)
+    assert args.verbose and args.config == "cell.toml" and args.points and args.scan_dirs == ["scan"]
+    with pytest.raises(SystemExit):
+        build_parser("reconstruct").parse_args(["sim"])  # the others are not there
