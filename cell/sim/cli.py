@@ -11,11 +11,14 @@ import sys
 from pathlib import Path
 
 from .objects import FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject
-from .scans import make_spec, write_standard_set
+from .render import AMBIENT
+from .scans import broad_set, make_spec, write_standard_set
 
 __all__ = ["add_arguments", "run"]
 
-SHAPES = [*FAMILIES, "cup-stack", "lumpy"]
+# A flat box is a box thin along z; a plate, a thin cylinder standing on its rim.
+PRESETS = {"flat-box": ("box", False), "plate": ("cylinder", True)}
+SHAPES = [*FAMILIES, *PRESETS, "cup-stack", "lumpy"]
 # Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
 # radius, height of one cup; for a lumpy figure: the radii of its ellipsoid.
 DEFAULT_SIZE = {
@@ -23,10 +26,15 @@ DEFAULT_SIZE = {
     "cylinder": (0.03, 0.03, 0.06),
     "ellipsoid": (0.045, 0.035, 0.03),
     "rounded-box": (0.05, 0.035, 0.03),
+    "flat-box": (0.05, 0.04, 0.01),
+    "plate": (0.06, 0.06, 0.008),
     "cup-stack": (0.025, 0.038, 0.06),
     "lumpy": (0.05, 0.04, 0.045),
 }
-_SHAPE_ONLY = ("size", "yaw", "lying", "position", "count", "views", "distance", "elevation")
+_SHAPE_ONLY = ("size", "yaw", "lying", "position", "count", "views", "distance", "elevation", "jpeg_quality",
+               "noise", "ambient")
+_SETS = {"standard": write_standard_set,
+         "broad": lambda out, seed, write_masks: [spec.write(out, write_masks) for spec in broad_set(seed)]}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,8 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard"], dest="set_name",
-                       help="write a fixed benchmark set (the default when --shape is not given)")
+    which.add_argument("--set", choices=list(_SETS), dest="set_name",
+                       help="write a fixed benchmark set: standard (the default when --shape is not given; "
+                            "32 scans), or broad (126: seven families, 3, 4 and 6 views, see bench/bench_core.py)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
                         help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
@@ -52,6 +61,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--views", type=int, metavar="N", help="views per scan (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="seed for cameras, table and noise (default 0)")
     parser.add_argument("--masks", action="store_true", help="also write mask{i}.png (not named in scan.json)")
+    parser.add_argument("--supplied-masks", action="store_true",
+                        help="write mask{i}.png and name them in scan.json (a reconstruction then uses them)")
+    parser.add_argument("--jpeg-quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    parser.add_argument("--noise", type=float, metavar="SIGMA",
+                        help="sensor noise, standard deviation in grey levels (default 2)")
+    parser.add_argument("--ambient", type=float, metavar="A",
+                        help=f"light on the side turned from the lamp, 0-1: the lower, the darker the shaded "
+                             f"faces (default {AMBIENT})")
     parser.add_argument("--count", type=int, metavar="N",
                         help="scans of the object, seeds SEED..SEED+N-1 (default 1)")
 
@@ -64,7 +81,8 @@ def _make_object(args: argparse.Namespace) -> SimObject:
     if args.shape == "lumpy":
         return LumpyFigure(position, size, seed=args.seed)
     yaw = 30.0 if args.yaw is None else args.yaw
-    return SuperquadricObject.on_table(args.shape, size, position, yaw, bool(args.lying))
+    family, lying = PRESETS.get(args.shape, (args.shape, False))
+    return SuperquadricObject.on_table(family, size, position, yaw, lying or bool(args.lying))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -74,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
         if given:
             print(f"robocell sim: {', '.join(given)} only apply with --shape", file=sys.stderr)
             return 2
-        for path in write_standard_set(args.out, seed=args.seed, write_masks=args.masks):
+        if args.supplied_masks:
+            print("robocell sim: --supplied-masks only applies with --shape", file=sys.stderr)
+            return 2
+        for path in _SETS[args.set_name or "standard"](args.out, seed=args.seed, write_masks=args.masks):
             print(path, flush=True)
         return 0
     count = 1 if args.count is None else args.count
@@ -93,11 +114,18 @@ def run(args: argparse.Namespace) -> int:
         print("robocell sim: need 0 < MIN <= MAX for --distance and 0 < MIN <= MAX < 90 for --elevation",
               file=sys.stderr)
         return 2
+    look = dict(jpeg_quality=90 if args.jpeg_quality is None else args.jpeg_quality,
+                noise_sigma=2.0 if args.noise is None else args.noise,
+                ambient=AMBIENT if args.ambient is None else args.ambient)
+    if not (1 <= look["jpeg_quality"] <= 100 and look["noise_sigma"] >= 0 and 0 <= look["ambient"] <= 1):
+        print("robocell sim: need 1 <= --jpeg-quality <= 100, --noise >= 0 and 0 <= --ambient <= 1",
+              file=sys.stderr)
+        return 2
     for i in range(count):
         seed = args.seed + i
         spec = make_spec(f"{args.shape}-{seed:03d}", obj, seed, views, distance, elevation,
-                         fit_distance=args.distance is None)
-        print(spec.write(args.out, write_masks=args.masks), flush=True)
+                         fit_distance=args.distance is None, **look)
+        print(spec.write(args.out, write_masks=args.masks, name_masks=args.supplied_masks), flush=True)
     return 0
 
 
