@@ -1,7 +1,7 @@
 """The whole algorithm: views in, superquadric out (DESIGN.md §1).
 
-decode -> segment -> enclosing sphere -> carve -> support plane -> point fit
--> edge samples -> silhouette fit -> quality
+decode -> segment -> edge samples -> enclosing sphere -> carve -> support plane
+-> starts (the point fit's search) -> silhouette fit -> quality
 """
 
 from __future__ import annotations
