@@ -18,6 +18,16 @@ from ._superquadric_cy cimport _rotation, _support, _support_value
 cdef double _TINY = 1e-300
 
 
+cdef inline void _pose(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
+                       double R[3][3], double dR[3][3][3], double* a, double* t) noexcept nogil:
+    """Sizes a, rotation R (and its derivatives dR) and position t of the parameters x."""
+    cdef int k
+    _rotation(R0, x[8], x[9], x[10], R, dR)
+    for k in range(3):
+        a[k] = exp(x[k])
+        t[k] = t0[k] + scale * x[5 + k]
+
+
 cdef inline double _signed_power(double c, double e) noexcept nogil:
     cdef double m = fabs(c)
     if m < _TINY:
@@ -60,10 +70,7 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
             or uv.shape[2] != 2 or counts.shape[0] != n_views):
         raise ValueError("need (V, 3, 4) projections, (V, 3) centres, (V, >= grid, 2) uv and (V,) counts")
     with nogil:
-        _rotation(R0, x[8], x[9], x[10], R, dR)
-        for k in range(3):
-            a[k] = exp(x[k])
-            t[k] = t0[k] + scale * x[5 + k]
+        _pose(x, R0, t0, scale, R, dR, a, t)
         # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
         for j in range(n_omega):
             co[j] = _signed_power(cos(omega[j]), e2)
@@ -281,10 +288,7 @@ def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not N
     if planes.shape[1] != 9 or support_plane.shape[0] != 4:
         raise ValueError("planes must be (N, 9) and support_plane (4,)")
     with nogil:
-        _rotation(R0, x[8], x[9], x[10], R, dR)
-        for k in range(3):
-            a[k] = exp(x[k])
-            t[k] = t0[k] + scale * x[5 + k]
+        _pose(x, R0, t0, scale, R, dR, a, t)
         cosines[0] = cos(tilt)
         cosines[1] = 1.0
         cosines[2] = cosines[0]
