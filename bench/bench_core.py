@@ -1,15 +1,25 @@
-"""Benchmark of the reconstruction core: accuracy, speed per stage, and the real bunny.
+"""Benchmark of the reconstruction core: accuracy on a broad simulated set, speed, real photographs.
 
-    .venv/bin/python bench/bench_core.py [--repeat N] [--keep DIR]
+    .venv/bin/python bench/bench_core.py [--keep DIR] [--repeat N] [--per-family N]
 
-(a) accuracy on the fixed simulated set (`robocell sim`'s standard set): volumetric
-    IoU against the truth per family, for plain Jaklic, inside weighting alone, and
-    the chosen cost (inside weighting + Cauchy loss outside); the non-superquadric
-    objects against their true volume;
-(b) time per stage, decode of three 640x480 JPEGs to fitted superquadric, on one core;
-(c) ../shared/data/bunny (real photographs, supplied masks): silhouette IoU per view.
+(a) accuracy on `robocell sim --set broad`: seven families (box, flat box with a half-size of
+    8-12 mm, cylinder, lying cylinder, standing plate, ellipsoid, rounded box), 2-15 cm, each object
+    scanned with 3, 4 and 6 views at elevations of 20-60 degrees, JPEG quality 70-95, sensor noise
+    1-4 grey levels, shaded sides as dark as V = 30. Volumetric IoU against the truth per family
+    and per number of views, mean and worst, for the silhouette fit on the photographs (hsv
+    segmentation), the same on the supplied masks, and today's point fit (Options(silhouette_fit=
+    False), the inside-weighted fit to the carved hull) on the photographs. Then the standard set
+    (`robocell sim`'s default, 3 views at 35-55 degrees) the same way, and its non-superquadric
+    objects against their true volume.
+(b) speed, on one core: the time of each stage over the standard set's 3-view 640x480 JPEG bundles,
+    in process; then `robocell reconstruct` over 60 of them in one process, timed from outside as a
+    user sees it (wall time between its output lines, and the whole run over 60 with its start-up),
+    beside the in-process time of the same bundles in the same run.
+(c) real photographs, supplied masks: ../shared/data/bunny, and dtu65 with three and with six views
+    (silhouette IoU per view; the three-view fit is also scored on all six views).
 
-Prints tables; asserts nothing.
+Prints tables; asserts nothing. The broad set takes a few minutes to render: --keep DIR keeps it
+(and reuses it when DIR already holds it).
 """
 
 from __future__ import annotations
@@ -23,7 +33,12 @@ for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
+import resource  # noqa: E402
+import shutil  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
+import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -31,19 +46,21 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.scans import standard_set  # noqa: E402
-from core_cy.reconstruct import Options, reconstruct  # noqa: E402
+from workers.sim.scans import BROAD_FAMILIES, broad_set, standard_set  # noqa: E402
+from core_cy.quality import silhouette_iou  # noqa: E402
+from core_cy.reconstruct import Options, View, reconstruct  # noqa: E402
 from core_cy.scoring import volumetric_iou  # noqa: E402
+from core_cy.segment import mask_with_outline  # noqa: E402
 from core_cy.superquadric import Superquadric, inside_outside  # noqa: E402
 
-BUNNY = Path(__file__).resolve().parents[2] / "shared" / "data" / "bunny"
-STAGES = ("decode", "segment", "centroid", "carve", "fit", "quality", "total")
-# The first two compare costs alone, so the silhouette refinement of poor fits is off for them.
-COSTS = {
-    "plain Jaklic": dict(inside_weight=1.0, outside_loss="squared", refine_below=0.0),
-    "inside weight": dict(outside_loss="squared", refine_below=0.0),
-    "chosen": dict(),
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+STAGES = ("decode", "segment", "edges", "centroid", "carve", "start", "fit", "quality", "total")
+METHODS = {  # name: (options, use the supplied masks)
+    "silhouette fit": (Options(), False),
+    "same, masks": (Options(), True),
+    "today's point fit": (Options(silhouette_fit=False), False),
 }
+VIEWS = (3, 4, 6)
 
 
 def object_iou(fit: Superquadric, obj, n: int = 200_000, seed: int = 0) -> float:
@@ -59,40 +76,106 @@ def object_iou(fit: Superquadric, obj, n: int = 200_000, seed: int = 0) -> float
     return float((in_fit & in_object).sum() / max(1, (in_fit | in_object).sum()))
 
 
-def run(bundle, options: Options):
-    return reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane,
-                       options=options)
+def views_of(bundle, masks: bool):
+    """The bundle's views, or the same cameras with the masks written beside the photographs."""
+    if not masks:
+        return bundle.views
+    return [View(v.camera, mask=(bundle.path / f"mask{i}.png").read_bytes()) for i, v in enumerate(bundle.views)]
 
 
-def accuracy(specs, bundles) -> None:
-    scores = {name: defaultdict(list) for name in COSTS}
-    others = []
+def run(bundle, options: Options, masks: bool = False):
+    return reconstruct(views_of(bundle, masks), segmentation=bundle.segmentation,
+                       support_plane=bundle.support_plane, options=options)
+
+
+def written(specs, out: Path) -> list:
+    """Each spec's bundle under ``out`` (with masks), rendered unless already there."""
+    bundles = []
+    for spec in specs:
+        path = out / spec.name
+        if not (path / "truth.json").exists() or not (path / "mask0.png").exists():
+            spec.write(out, write_masks=True)
+        bundles.append(load_bundle(path))
+    return bundles
+
+
+def scores(specs, bundles) -> dict:
+    """{method: {spec name: volumetric IoU}} for the superquadric scans."""
+    result = {name: {} for name in METHODS}
     for spec, bundle in zip(specs, bundles):
-        family = spec.name.rsplit("-", 1)[0]
-        obj = spec.objects[0]
-        for name, cost in COSTS.items():
-            fit = run(bundle, Options(**cost)).superquadric
-            if obj.truth()["kind"] == "superquadric":
-                scores[name][family].append(volumetric_iou(fit, Superquadric.from_dict(obj.truth())))
-            elif name == "chosen":
-                others.append((spec.name, object_iou(fit, obj)))
-    families = list(scores["chosen"])
-    print("\n(a) volumetric IoU against the truth, simulated set "
-          f"({sum(len(v) for v in scores['chosen'].values())} superquadric scans, support plane given)")
-    print(f"{'family':<14}" + "".join(f"{name:>28}" for name in COSTS))
-    print(f"{'':<14}" + "".join(f"{'mean':>19}{'worst':>9}" for _ in COSTS))
-    for family in families + ["all"]:
-        row = f"{family:<14}"
-        for name in COSTS:
-            values = sum(scores[name].values(), []) if family == "all" else scores[name][family]
-            row += f"{np.mean(values):>19.3f}{np.min(values):>9.3f}"
+        truth = Superquadric.from_dict(spec.objects[0].truth())
+        for name, (options, masks) in METHODS.items():
+            result[name][spec.name] = volumetric_iou(run(bundle, options, masks).superquadric, truth)
+    return result
+
+
+def table(title: str, result: dict, groups: dict) -> None:
+    """Mean and worst per group (rows) for each method (columns)."""
+    print(f"\n{title}")
+    print(f"{'':<22}" + "".join(f"{name:>22}" for name in result))
+    print(f"{'':<22}" + "".join(f"{'mean':>13}{'worst':>9}" for _ in result))
+    for label, names in groups.items():
+        row = f"{label:<22}"
+        for values in result.values():
+            picked = [values[n] for n in names]
+            row += f"{np.mean(picked):>13.3f}{np.min(picked):>9.3f}"
         print(row)
-    print("\nnon-superquadric objects (chosen cost), IoU against the true volume:")
-    for name, iou in others:
-        print(f"  {name:<14}{iou:.3f}")
 
 
-def timing(bundles, repeat: int) -> None:
+def accuracy_broad(out: Path, per_family: int) -> None:
+    specs = broad_set(0, per_family=per_family)
+    started = time.perf_counter()
+    bundles = written(specs, out)
+    print(f"\n(a) broad set: {len(specs)} scans of {len(specs) // len(VIEWS)} objects "
+          f"({time.perf_counter() - started:.0f} s to render or load)")
+    result = scores(specs, bundles)
+
+    def family(name: str) -> str:
+        return name.rsplit("-", 2)[0]
+
+    for views in VIEWS:
+        groups = {fam: [s.name for s in specs if family(s.name) == fam and s.name.endswith(f"-{views}v")]
+                  for fam in BROAD_FAMILIES}
+        groups["all"] = [n for names in groups.values() for n in names]
+        table(f"volumetric IoU, {views} views", result, groups)
+    table("volumetric IoU by number of views, all families", result,
+          {f"{views} views": [s.name for s in specs if s.name.endswith(f"-{views}v")] for views in VIEWS})
+    print("\nper family, silhouette fit (photographs) by 3 / 4 / 6 views (mean):")
+    for fam in BROAD_FAMILIES:
+        means = [np.mean([v for n, v in result["silhouette fit"].items()
+                          if family(n) == fam and n.endswith(f"-{views}v")]) for views in VIEWS]
+        print(f"  {fam:<16}" + " -> ".join(f"{m:.3f}" for m in means))
+
+
+def accuracy_standard(out: Path) -> list:
+    specs = standard_set(seed=0)
+    bundles = written(specs, out)
+    superquadrics = [(s, b) for s, b in zip(specs, bundles) if s.objects[0].truth()["kind"] == "superquadric"]
+    result = scores(*zip(*superquadrics))
+    groups = defaultdict(list)
+    for spec, _ in superquadrics:
+        groups[spec.name.rsplit("-", 1)[0]].append(spec.name)
+    groups["all"] = [s.name for s, _ in superquadrics]
+    table(f"standard set: {len(superquadrics)} superquadric scans, 3 views at 35-55 degrees", result, groups)
+    print("\nnon-superquadric objects (silhouette fit), IoU against the true volume:")
+    for spec, bundle in zip(specs, bundles):
+        if spec.objects[0].truth()["kind"] != "superquadric":
+            fit = run(bundle, Options()).superquadric
+            print(f"  {spec.name:<14}{object_iou(fit, spec.objects[0]):.3f}")
+    return [b for _, b in superquadrics]
+
+
+def _first_core() -> int | None:
+    """Pin this process to one core (the lowest it may use); None where that is not possible."""
+    try:
+        core = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {core})
+        return core
+    except (AttributeError, OSError):
+        return None
+
+
+def timing(bundles, repeat: int, core: int | None) -> None:
     cv2.setNumThreads(1)
     samples = defaultdict(list)
     for _ in range(repeat):
@@ -101,43 +184,101 @@ def timing(bundles, repeat: int) -> None:
             for stage in STAGES:
                 samples[stage].append(result.timings_ms.get(stage, 0.0))
     n = len(samples["total"])
-    print(f"\n(b) time per stage, ms, {n} reconstructions of 3 x 640x480 JPEG bundles, one core "
-          f"({platform.processor() or platform.machine()})")
+    where = f"core {core}" if core is not None else "one process"
+    print(f"\n(b) time per stage, ms, {n} reconstructions of 3 x 640x480 JPEG bundles, in process, {where} "
+          f"({platform.processor() or platform.machine()}; other processes share the machine: compare "
+          f"stages with each other and with the same run's figures)")
     print(f"{'stage':<10}{'median':>10}{'p90':>10}")
     for stage in STAGES:
         print(f"{stage:<10}{np.median(samples[stage]):>10.2f}{np.percentile(samples[stage], 90):>10.2f}")
+    outside(bundles, core)
 
 
-def bunny() -> None:
-    print(f"\n(c) {BUNNY} (real photographs, supplied masks): silhouette IoU per view")
-    if not (BUNNY / "scan.json").exists():
-        print("  not found")
+def outside(bundles, core: int | None) -> None:
+    """`robocell reconstruct` over 60 bundles in one process, timed from outside.
+
+    Each output line carries the core's own time for its bundle: the wall time between lines
+    beside it is what reading, checking and writing a bundle add, in the same run (the machine's
+    load changes from one minute to the next, so only figures of one run compare).
+    """
+    robocell = Path(sys.executable).with_name("robocell")
+    if not robocell.exists():
+        print(f"\n  {robocell} not found: no outside timing")
         return
-    result = run(load_bundle(BUNNY), Options())
-    names = [view["mask"] for view in json.loads((BUNNY / "scan.json").read_text())["views"]]
-    for name, iou in zip(names, result.silhouette_iou):
-        print(f"  {name:<12}{iou:.3f}")
-    print(f"  {'mean':<12}{np.mean(result.silhouette_iou):.3f}   ({result.timings_ms['total']:.1f} ms; "
-          f"size {np.round(result.superquadric.size, 2).tolist()}, shape "
-          f"{np.round(result.superquadric.shape, 2).tolist()})")
+    dirs = [str(b.path) for b in (bundles * (60 // len(bundles) + 1))[:60]]
+    pin = ["taskset", "-c", str(core)] if core is not None and shutil.which("taskset") else []
+    gaps, cores, totals, cpus, starts = [], [], [], [], []
+    for _ in range(3):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        begin = time.perf_counter()
+        process = subprocess.Popen([*pin, str(robocell), "reconstruct", *dirs], stdout=subprocess.PIPE, text=True)
+        lines = [(time.perf_counter(), json.loads(line)) for line in process.stdout]
+        process.wait()
+        end = time.perf_counter()
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        stamps = np.array([stamp for stamp, _ in lines])
+        gaps.append(float(np.median(np.diff(stamps))) * 1e3)
+        cores.append(float(np.median([line["timings_ms"]["total"] for _, line in lines[1:]])))
+        totals.append((end - begin) / len(dirs) * 1e3)
+        starts.append((stamps[0] - begin) * 1e3)
+        cpus.append((after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime) / len(dirs) * 1e3)
+    gap, inside = float(np.median(gaps)), float(np.median(cores))
+    print(f"\n`robocell reconstruct` over {len(dirs)} of these bundles in one process, from outside"
+          f"{' (taskset -c ' + str(core) + ')' if pin else ''}, median of 3 runs:")
+    print(f"  wall time per bundle (between output lines)   {gap:7.2f} ms")
+    print(f"  of which in the core (its timings_ms total)   {inside:7.2f} ms   "
+          f"(reading, checking, JSON: {gap - inside:.2f} ms, {gap / inside:.2f} x the core)")
+    print(f"  whole run / {len(dirs)} (start-up included)          {np.median(totals):7.2f} ms   "
+          f"(first line after {np.median(starts):.0f} ms)")
+    print(f"  CPU time / {len(dirs)} (start-up included)           {np.median(cpus):7.2f} ms")
+
+
+def real_photographs() -> None:
+    print("\n(c) real photographs, supplied masks: silhouette IoU per view")
+    bunny = DATA / "bunny"
+    if (bunny / "scan.json").exists():
+        result = run(load_bundle(bunny), Options())
+        names = [view["mask"] for view in json.loads((bunny / "scan.json").read_text())["views"]]
+        print(f"  bunny         " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
+              + f"   mean {np.mean(result.silhouette_iou):.3f}")
+    else:
+        print(f"  {bunny} not found")
+    fits = {}
+    for name in ("three", "six"):
+        path = DATA / "dtu65" / name
+        if not (path / "scan.json").exists():
+            print(f"  {path} not found")
+            continue
+        bundle = load_bundle(path)
+        result = run(bundle, Options())
+        fits[name] = result.superquadric
+        names = [view["mask"] for view in json.loads((path / "scan.json").read_text())["views"]]
+        print(f"  dtu65 {name:<7} " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
+              + f"   mean {np.mean(result.silhouette_iou):.3f}")
+    if len(fits) == 2:
+        six = load_bundle(DATA / "dtu65" / "six")
+        silhouettes = [mask_with_outline(cv2.imdecode(np.frombuffer(v.mask, np.uint8), cv2.IMREAD_GRAYSCALE))[0]
+                       for v in six.views]
+        for name, fit in fits.items():
+            ious = [silhouette_iou(fit, v.camera, s) for v, s in zip(six.views, silhouettes)]
+            print(f"  dtu65 {name}-view fit seen by all six views: mean {np.mean(ious):.3f}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeat", type=int, default=5, help="timing passes over the set (default 5)")
-    parser.add_argument("--keep", help="write the simulated set here instead of a temporary directory")
+    parser.add_argument("--repeat", type=int, default=3, help="timing passes over the standard set (default 3)")
+    parser.add_argument("--keep", help="keep the simulated sets here (and reuse them) instead of a temporary directory")
+    parser.add_argument("--per-family", type=int, default=6, help="objects per family in the broad set (default 6)")
     args = parser.parse_args()
+    core = _first_core()
     defaults = Options()
-    print(f"robocell core benchmark: n_points={defaults.n_points}, inside_weight={defaults.inside_weight}, "
-          f"cauchy_scale={defaults.cauchy_scale}, fit_points={defaults.fit_points}")
+    print(f"robocell core benchmark: n_points={defaults.n_points}, edge_samples={defaults.edge_samples}")
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(args.keep or scratch)
-        specs = standard_set(seed=0)
-        bundles = [load_bundle(spec.write(out)) for spec in specs]
-        accuracy(specs, bundles)
-        superquadric_bundles = [b for s, b in zip(specs, bundles) if s.objects[0].truth()["kind"] == "superquadric"]
-        timing(superquadric_bundles, args.repeat)
-    bunny()
+        accuracy_broad(out / "broad", args.per_family)
+        superquadrics = accuracy_standard(out / "standard")
+        timing(superquadrics, args.repeat, core)
+    real_photographs()
 
 
 if __name__ == "__main__":

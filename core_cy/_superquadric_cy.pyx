@@ -10,72 +10,10 @@ evaluated in log space (``u^p = exp(p log u)``) so that the steep powers of a
 box-like shape (2/e = 20) neither overflow nor lose the small terms.
 """
 
-from libc.math cimport exp, log, log1p, fabs, copysign, sqrt, sin, cos
+from libc.math cimport exp, log, log1p, fabs, copysign, sqrt
 
 # |x| below this is treated as this: keeps log() finite at the axes' planes.
 cdef double _TINY = 1e-300
-
-
-cdef inline void _rotation(const double[:, ::1] R0, double alpha, double beta,
-                           double gamma, double R[3][3], double dR[3][3][3]) noexcept nogil:
-    """R = R0 @ Rz(gamma) @ Ry(beta) @ Rx(alpha) and dR/d(alpha, beta, gamma)."""
-    cdef double ca = cos(alpha), sa = sin(alpha)
-    cdef double cb = cos(beta), sb = sin(beta)
-    cdef double cg = cos(gamma), sg = sin(gamma)
-    cdef double Rx[3][3]
-    cdef double Ry[3][3]
-    cdef double Rz[3][3]
-    cdef double dRx[3][3]
-    cdef double dRy[3][3]
-    cdef double dRz[3][3]
-    cdef double A[3][3]
-    cdef double B[3][3]
-    cdef int i, j, k, m
-    for i in range(3):
-        for j in range(3):
-            Rx[i][j] = 0.0; Ry[i][j] = 0.0; Rz[i][j] = 0.0
-            dRx[i][j] = 0.0; dRy[i][j] = 0.0; dRz[i][j] = 0.0
-    Rx[0][0] = 1.0; Rx[1][1] = ca; Rx[1][2] = -sa; Rx[2][1] = sa; Rx[2][2] = ca
-    dRx[1][1] = -sa; dRx[1][2] = -ca; dRx[2][1] = ca; dRx[2][2] = -sa
-    Ry[1][1] = 1.0; Ry[0][0] = cb; Ry[0][2] = sb; Ry[2][0] = -sb; Ry[2][2] = cb
-    dRy[0][0] = -sb; dRy[0][2] = cb; dRy[2][0] = -cb; dRy[2][2] = -sb
-    Rz[2][2] = 1.0; Rz[0][0] = cg; Rz[0][1] = -sg; Rz[1][0] = sg; Rz[1][1] = cg
-    dRz[0][0] = -sg; dRz[0][1] = -cg; dRz[1][0] = cg; dRz[1][1] = -sg
-    # m = 0: d/dalpha, 1: d/dbeta, 2: d/dgamma, 3: R itself
-    for m in range(4):
-        for i in range(3):
-            for j in range(3):
-                A[i][j] = 0.0
-                for k in range(3):
-                    A[i][j] += R0[i, k] * (dRz[k][j] if m == 2 else Rz[k][j])
-        for i in range(3):
-            for j in range(3):
-                B[i][j] = 0.0
-                for k in range(3):
-                    B[i][j] += A[i][k] * (dRy[k][j] if m == 1 else Ry[k][j])
-        for i in range(3):
-            for j in range(3):
-                A[i][j] = 0.0
-                for k in range(3):
-                    A[i][j] += B[i][k] * (dRx[k][j] if m == 0 else Rx[k][j])
-                if m == 3:
-                    R[i][j] = A[i][j]
-                else:
-                    dR[m][i][j] = A[i][j]
-
-
-cdef inline double _log_sum(double la, double lb, double* wa, double* wb) noexcept nogil:
-    """log(e^la + e^lb), and the shares e^la / (e^la + e^lb), e^lb / (...) in wa, wb."""
-    cdef double r
-    if la >= lb:
-        r = exp(lb - la)
-        wa[0] = 1.0 / (1.0 + r)
-        wb[0] = r * wa[0]
-        return la + log(1.0 + r)
-    r = exp(la - lb)
-    wb[0] = 1.0 / (1.0 + r)
-    wa[0] = r * wb[0]
-    return lb + log(1.0 + r)
 
 
 cdef double _support(const double* a, const double* e, const double* v, double* dh_da,
@@ -109,6 +47,18 @@ cdef double _support(const double* a, const double* e, const double* v, double* 
     return h
 
 
+cdef double _support_value(const double* a, const double* e, const double* v) noexcept nogil:
+    """:func:`_support` without the derivatives."""
+    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1])
+    cdef double lT[3]
+    cdef double T, w1, w2
+    cdef int k
+    for k in range(3):
+        T = fabs(a[k] * v[k])
+        lT[k] = log(T if T > _TINY else _TINY)
+    return exp(_log_sum(q1 / q2 * _log_sum(q2 * lT[0], q2 * lT[1], &w1, &w2), q1 * lT[2], &w1, &w2) / q1)
+
+
 def support(const double[::1] size not None, const double[::1] shape not None,
             const double[::1] v not None):
     """Support (max of v . x) of the superquadric at the origin along object-frame v."""
@@ -140,6 +90,86 @@ def inside_outside(const double[:, ::1] points not None, const double[:, ::1] R 
                                   2.0 / e1 * (log(z if z > _TINY else _TINY) - la3), &w1, &w2))
 
 
+cdef inline double _jaklic(const double* params, double R[3][3], double dR[3][3][3], double s,
+                          const double* log_size, double qx, double qy, double qz, double* J) noexcept nogil:
+    """Residual ``r = sqrt(a1 a2 a3) (F^e1 - 1)`` of the point at world offset q from the centre,
+    and its derivatives by the 11 parameters in J (``s = sqrt(a1 a2 a3)``, log_size = log a)."""
+    cdef double a1 = params[0], a2 = params[1], a3 = params[2], e1 = params[3], e2 = params[4]
+    cdef double p2e1 = 2.0 / e1, p2e2 = 2.0 / e2, e2e1 = e2 / e1
+    cdef double x, y, z, ax, ay, az, lu, lv, lw, wU, wV, wP, wQ, logA, logF, Fe, r, D, PU, PV, QW, gx, gy, gz
+    cdef int j, m
+    x = R[0][0] * qx + R[1][0] * qy + R[2][0] * qz
+    y = R[0][1] * qx + R[1][1] * qy + R[2][1] * qz
+    z = R[0][2] * qx + R[1][2] * qy + R[2][2] * qz
+    ax = fabs(x)
+    ay = fabs(y)
+    az = fabs(z)
+    if ax < _TINY:
+        ax = _TINY
+    if ay < _TINY:
+        ay = _TINY
+    if az < _TINY:
+        az = _TINY
+    lu = log(ax) - log_size[0]
+    lv = log(ay) - log_size[1]
+    lw = log(az) - log_size[2]
+    # F = A^(e2/e1) + Q with A = U + V; w* are the shares U/A, V/A, P/F, Q/F
+    logA = _log_sum(p2e2 * lu, p2e2 * lv, &wU, &wV)
+    logF = _log_sum(e2e1 * logA, p2e1 * lw, &wP, &wQ)
+    Fe = exp(e1 * logF)
+    r = s * (Fe - 1.0)
+    # D = F dr/dF; dF/dx = (2/e1) P/A U/x = (2/e1) F wP wU / x, dF/dz = (2/e1) F wQ / z
+    D = s * e1 * Fe
+    PU = p2e1 * D * wP * wU
+    PV = p2e1 * D * wP * wV
+    QW = p2e1 * D * wQ
+    J[0] = (0.5 * r - PU) / a1
+    J[1] = (0.5 * r - PV) / a2
+    J[2] = (0.5 * r - QW) / a3
+    J[3] = (e1 * s * Fe * logF - D * (e2e1 * logA * wP + p2e1 * lw * wQ)) / e1
+    J[4] = D * wP * (logA - p2e2 * (wU * lu + wV * lv)) / e1
+    gx = PU / copysign(ax, x)  # dF/dx has the sign of x
+    gy = PV / copysign(ay, y)
+    gz = QW / copysign(az, z)
+    # X = R^T (p - t): dr/dt = -R g, dr/dangle = q^T dR g
+    for j in range(3):
+        J[5 + j] = -(R[j][0] * gx + R[j][1] * gy + R[j][2] * gz)
+    for m in range(3):
+        J[8 + m] = (qx * (dR[m][0][0] * gx + dR[m][0][1] * gy + dR[m][0][2] * gz)
+                    + qy * (dR[m][1][0] * gx + dR[m][1][1] * gy + dR[m][1][2] * gz)
+                    + qz * (dR[m][2][0] * gx + dR[m][2][1] * gy + dR[m][2][2] * gz))
+    return r
+
+
+cdef inline double _depth_below(const double* params, double R[3][3], double dR[3][3][3],
+                                const double[::1] plane, double* J) noexcept nogil:
+    """How far the superquadric reaches below the plane n . x + d = 0 (unit n; the support along -n
+    beyond it), and its derivatives by the 11 parameters in J."""
+    cdef double down[3]
+    cdef double v[3]
+    cdef double dh_da[3]
+    cdef double dh_de[2]
+    cdef double dh_dv[3]
+    cdef double depth
+    cdef int j, k, m
+    for j in range(3):
+        down[j] = -plane[j]
+    for k in range(3):  # the direction in the object frame, R^T down
+        v[k] = R[0][k] * down[0] + R[1][k] * down[1] + R[2][k] * down[2]
+    depth = (_support(&params[0], &params[3], v, dh_da, dh_de, dh_dv)
+             - (plane[0] * params[5] + plane[1] * params[6] + plane[2] * params[7]) - plane[3])
+    for k in range(3):
+        J[k] = dh_da[k]
+        J[5 + k] = -plane[k]
+    J[3] = dh_de[0]
+    J[4] = dh_de[1]
+    for m in range(3):  # d(R^T down)/d angle = dR^T down
+        J[8 + m] = 0.0
+        for k in range(3):
+            J[8 + m] += dh_dv[k] * (dR[m][0][k] * down[0] + dR[m][1][k] * down[1] + dR[m][2][k] * down[2])
+    return depth
+
+
 def objective(const double[::1] params not None, const double[:, ::1] R0 not None,
               const double[:, ::1] points not None, double inside_weight,
               bint cauchy, double cauchy_scale, const double[::1] plane not None,
@@ -157,118 +187,97 @@ def objective(const double[::1] params not None, const double[:, ::1] R0 not Non
     cdef Py_ssize_t i, n = points.shape[0]
     cdef double R[3][3]
     cdef double dR[3][3][3]
-    cdef double a1 = params[0], a2 = params[1], a3 = params[2]
-    cdef double e1 = params[3], e2 = params[4]
-    cdef double t0 = params[5], t1 = params[6], t2 = params[7]
-    cdef double la1 = log(a1), la2 = log(a2), la3 = log(a3)
-    cdef double s = sqrt(a1 * a2 * a3)
-    cdef double c2 = cauchy_scale * cauchy_scale, inv_c2 = 1.0 / c2, u
-    cdef double p2e1 = 2.0 / e1, p2e2 = 2.0 / e2, e2e1 = e2 / e1
-    cdef double qx, qy, qz, x, y, z, ax, ay, az, lu, lv, lw
-    cdef double wU, wV, wP, wQ, logA, logF, Fe, r, dl, D, PU, PV, QW, gx, gy, gz
-    cdef double loss = 0.0
-    # accumulators: dL/da (3), dL/de (2), g = sum dL/dX (3), M = sum q g^T (9)
-    cdef double da1 = 0.0, da2 = 0.0, da3 = 0.0, de1 = 0.0, de2 = 0.0
-    cdef double g0 = 0.0, g1 = 0.0, g2 = 0.0
-    cdef double M[3][3]
-    cdef double down[3]
-    cdef double v[3]
-    cdef double dh_da[3]
-    cdef double dh_de[2]
-    cdef double dh_dv[3]
-    cdef double depth, dcost
-    cdef int j, k, m
+    cdef double J[11]
+    cdef double log_size[3]
+    cdef double s = sqrt(params[0] * params[1] * params[2])
+    cdef double c2 = cauchy_scale * cauchy_scale, r, u, dl, depth, loss = 0.0
+    cdef int j
     with nogil:
         _rotation(R0, params[8], params[9], params[10], R, dR)
         for j in range(3):
-            for k in range(3):
-                M[j][k] = 0.0
+            log_size[j] = log(params[j])
+        for j in range(11):
+            grad[j] = 0.0
         for i in range(n):
-            qx = points[i, 0] - t0
-            qy = points[i, 1] - t1
-            qz = points[i, 2] - t2
-            x = R[0][0] * qx + R[1][0] * qy + R[2][0] * qz
-            y = R[0][1] * qx + R[1][1] * qy + R[2][1] * qz
-            z = R[0][2] * qx + R[1][2] * qy + R[2][2] * qz
-            ax = fabs(x)
-            ay = fabs(y)
-            az = fabs(z)
-            if ax < _TINY:
-                ax = _TINY
-            if ay < _TINY:
-                ay = _TINY
-            if az < _TINY:
-                az = _TINY
-            lu = log(ax) - la1
-            lv = log(ay) - la2
-            lw = log(az) - la3
-            # F = A^(e2/e1) + Q with A = U + V; w* are the shares U/A, V/A, P/F, Q/F
-            logA = _log_sum(p2e2 * lu, p2e2 * lv, &wU, &wV)
-            logF = _log_sum(e2e1 * logA, p2e1 * lw, &wP, &wQ)
-            Fe = exp(e1 * logF)
-            r = s * (Fe - 1.0)
-            if Fe < 1.0:
+            r = _jaklic(&params[0], R, dR, s, log_size, points[i, 0] - params[5], points[i, 1] - params[6],
+                        points[i, 2] - params[7], J)
+            if r < 0.0:  # inside: F < 1
                 loss += inside_weight * r * r
                 dl = 2.0 * inside_weight * r
             elif cauchy:
-                u = r * r * inv_c2
+                u = r * r / c2
                 loss += c2 * log1p(u)
                 dl = 2.0 * r / (1.0 + u)
             else:
                 loss += r * r
                 dl = 2.0 * r
-            # D = F dl/dF; dF/dx = (2/e1) P/A U/x = (2/e1) F wP wU / x, dF/dz = (2/e1) F wQ / z
-            D = dl * s * e1 * Fe
-            PU = p2e1 * D * wP * wU
-            PV = p2e1 * D * wP * wV
-            QW = p2e1 * D * wQ
-            # sums of a_k dL/da_k and e1 dL/de: divided once after the loop
-            da1 += dl * 0.5 * r - PU
-            da2 += dl * 0.5 * r - PV
-            da3 += dl * 0.5 * r - QW
-            de1 += e1 * dl * s * Fe * logF - D * (e2e1 * logA * wP + p2e1 * lw * wQ)
-            de2 += D * wP * (logA - p2e2 * (wU * lu + wV * lv))
-            gx = PU / copysign(ax, x)  # dF/dx has the sign of x
-            gy = PV / copysign(ay, y)
-            gz = QW / copysign(az, z)
-            g0 += gx
-            g1 += gy
-            g2 += gz
-            M[0][0] += qx * gx; M[0][1] += qx * gy; M[0][2] += qx * gz
-            M[1][0] += qy * gx; M[1][1] += qy * gy; M[1][2] += qy * gz
-            M[2][0] += qz * gx; M[2][1] += qz * gy; M[2][2] += qz * gz
-        grad[0] = da1 / (a1 * n)
-        grad[1] = da2 / (a2 * n)
-        grad[2] = da3 / (a3 * n)
-        grad[3] = de1 / (e1 * n)
-        grad[4] = de2 / (e1 * n)
-        # X = R^T (p - t): dL/dt = -R g, dL/dR = M
-        for j in range(3):
-            grad[5 + j] = -(R[j][0] * g0 + R[j][1] * g1 + R[j][2] * g2) / n
-        for m in range(3):
-            grad[8 + m] = 0.0
-            for j in range(3):
-                for k in range(3):
-                    grad[8 + m] += dR[m][j][k] * M[j][k]
-            grad[8 + m] /= n
+            for j in range(11):
+                grad[j] += dl * J[j]
+        for j in range(11):
+            grad[j] /= n
         loss /= n
         if plane_weight > 0.0:
-            for j in range(3):
-                down[j] = -plane[j]
-            for k in range(3):  # the direction in the object frame, R^T down
-                v[k] = R[0][k] * down[0] + R[1][k] * down[1] + R[2][k] * down[2]
-            depth = (_support(&params[0], &params[3], v, dh_da, dh_de, dh_dv)
-                     - (plane[0] * t0 + plane[1] * t1 + plane[2] * t2) - plane[3])
+            depth = _depth_below(&params[0], R, dR, plane, J)
             if depth > 0.0:
                 loss += plane_weight * depth * depth
-                dcost = 2.0 * plane_weight * depth
-                for k in range(3):
-                    grad[k] += dcost * dh_da[k]
-                    grad[5 + k] -= dcost * plane[k]
-                grad[3] += dcost * dh_de[0]
-                grad[4] += dcost * dh_de[1]
-                for m in range(3):  # d(R^T down)/d angle = dR^T down
-                    for k in range(3):
-                        grad[8 + m] += dcost * dh_dv[k] * (
-                            dR[m][0][k] * down[0] + dR[m][1][k] * down[1] + dR[m][2][k] * down[2])
+                for j in range(11):
+                    grad[j] += 2.0 * plane_weight * depth * J[j]
     return loss
+
+
+def jaklic_normal_equations(const double[::1] params not None, const double[:, ::1] R0 not None,
+                            const double[:, ::1] points not None, const double[::1] plane not None,
+                            double plane_weight, double[:, ::1] JtJ not None, double[::1] Jtr not None):
+    """The plain Jaklic cost and its Gauss-Newton normal equations, for Levenberg-Marquardt.
+
+    Residuals ``r_i / sqrt(n)``, ``r = sqrt(a1 a2 a3) (F^e1 - 1)``, plus, with
+    ``plane_weight > 0``, ``sqrt(plane_weight) * depth`` where the superquadric
+    reaches ``depth > 0`` below the plane (as in :func:`objective`); the cost
+    is half their sum of squares, the same as :func:`objective` with
+    ``inside_weight = 1`` and the squared loss, halved. ``params`` as there.
+    Fills ``JtJ`` (11, 11) and ``Jtr`` (11,), and returns the cost.
+    """
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double J[11]
+    cdef double log_size[3]
+    cdef double s = sqrt(params[0] * params[1] * params[2]), root_n = sqrt(<double>n)
+    cdef double r, cost = 0.0, weight = sqrt(plane_weight) if plane_weight > 0 else 0.0
+    cdef int j, k
+    if params.shape[0] != 11 or JtJ.shape[0] != 11 or JtJ.shape[1] != 11 or Jtr.shape[0] != 11:
+        raise ValueError("params and Jtr must have 11 entries, JtJ 11 x 11")
+    if points.shape[1] != 3 or n < 1 or plane.shape[0] != 4:
+        raise ValueError("points must be (N, 3) with N >= 1, plane (4,)")
+    with nogil:
+        _rotation(R0, params[8], params[9], params[10], R, dR)
+        for j in range(3):
+            log_size[j] = log(params[j])
+        for j in range(11):
+            Jtr[j] = 0.0
+            for k in range(11):
+                JtJ[j, k] = 0.0
+        for i in range(n + 1):
+            if i < n:
+                r = _jaklic(&params[0], R, dR, s, log_size, points[i, 0] - params[5], points[i, 1] - params[6],
+                            points[i, 2] - params[7], J) / root_n
+                for j in range(11):
+                    J[j] /= root_n
+            else:
+                if weight == 0.0:
+                    break
+                r = _depth_below(&params[0], R, dR, plane, J)
+                if r <= 0.0:
+                    break
+                r *= weight
+                for j in range(11):
+                    J[j] *= weight
+            cost += 0.5 * r * r
+            for j in range(11):
+                Jtr[j] += J[j] * r
+                for k in range(j, 11):
+                    JtJ[j, k] += J[j] * J[k]
+        for j in range(11):
+            for k in range(j):
+                JtJ[j, k] = JtJ[k, j]
+    return cost

@@ -77,7 +77,10 @@ class Camera:
     def __post_init__(self) -> None:
         view = self.view
         K = _matrix(self.K, (3, 3), "K", view)
-        if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0 or K[0, 0] <= 0 or K[1, 1] <= 0:
+        # Plain comparisons: np.allclose costs more than the rest of the checks together.
+        k = K.tolist()
+        if (abs(k[2][0]) > 1e-8 or abs(k[2][1]) > 1e-8 or abs(k[2][2] - 1.0) > 1.001e-5 or k[1][0] != 0.0
+                or k[0][0] <= 0 or k[1][1] <= 0):
             raise CameraError(
                 "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", view=view
             )
@@ -102,17 +105,23 @@ class Camera:
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "dist", dist)
+        # Derived once: every stage projects through them.
+        R = T[:3, :3]
+        centre = np.ascontiguousarray(T[:3, 3])
+        projection = K @ np.hstack([R.T, -(R.T @ centre)[:, None]])
+        for name, array in (("_centre", centre), ("_projection", projection)):
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
 
     @property
     def center(self) -> np.ndarray:
-        """(3,) camera centre in the world."""
-        return self.T_world_cam[:3, 3]
+        """(3,) camera centre in the world (read-only)."""
+        return self._centre
 
     @property
     def projection(self) -> np.ndarray:
-        """(3, 4) pinhole projection matrix ``K [R^T | -R^T c]`` (world to pixels)."""
-        R = self.T_world_cam[:3, :3]
-        return self.K @ np.hstack([R.T, -(R.T @ self.center)[:, None]])
+        """(3, 4) pinhole projection matrix ``K [R^T | -R^T c]`` (world to pixels; read-only)."""
+        return self._projection
 
     @property
     def focal_length(self) -> float:
@@ -137,7 +146,7 @@ class Camera:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must have shape (N, 3), got {points.shape}")
-        homogeneous = points @ self.projection[:, :3].T + self.projection[:, 3]
+        homogeneous = points @ self._projection[:, :3].T + self._projection[:, 3]
         depth = homogeneous[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = homogeneous[:, :2] / depth[:, None]

@@ -23,20 +23,30 @@ _EDGE_LEVEL = 0.5
 _EDGE_BLUR_SIGMA = 0.7
 
 
-def occupancy(silhouette: np.ndarray) -> np.ndarray:
+def occupancy(silhouette: np.ndarray, box=None) -> np.ndarray:
     """The silhouette as smooth float32 occupancy in [0, 1], for sub-pixel edges.
 
     Parameters
     ----------
     silhouette : (H, W) ndarray of uint8
         0 or 255.
+    box : (4,) tuple of int, optional
+        The silhouette's bounding box ``(x, y, w, h)`` (``cv2.boundingRect``),
+        if known; only it is blurred.
 
     Returns
     -------
     (H, W) ndarray of float32
     """
-    smooth = cv2.GaussianBlur(silhouette, (3, 3), _EDGE_BLUR_SIGMA)
-    return smooth.astype(np.float32) * np.float32(1.0 / 255.0)
+    occupied = np.zeros(silhouette.shape, np.float32)
+    x, y, w, h = cv2.boundingRect(silhouette) if box is None else box
+    if not w:
+        return occupied
+    height, width = silhouette.shape
+    x0, y0, x1, y1 = max(0, x - 2), max(0, y - 2), min(width, x + w + 2), min(height, y + h + 2)
+    smooth = cv2.GaussianBlur(silhouette[y0:y1, x0:x1], (3, 3), _EDGE_BLUR_SIGMA, borderType=cv2.BORDER_REPLICATE)
+    occupied[y0:y1, x0:x1] = smooth * np.float32(1.0 / 255.0)
+    return occupied
 
 
 def carve(directions, centre, radius: float, cameras, occupancies) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ __all__ = ["silhouette_iou", "hull_iou", "radial_residual"]
 _SUBPIXEL_BITS = 4
 
 
-def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.ndarray) -> float:
+def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.ndarray, box=None) -> float:
     """Intersection over union of the superquadric's projection and a silhouette.
 
     The superquadric is convex (shape exponents <= 2), so its projection is
@@ -26,6 +26,8 @@ def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.nd
         The view's ideal pinhole camera.
     silhouette : (H, W) ndarray of uint8
         Nonzero = object.
+    box : (4,) tuple of int, optional
+        The silhouette's bounding box ``(x, y, w, h)``, if known.
 
     Returns
     -------
@@ -33,10 +35,10 @@ def silhouette_iou(superquadric: Superquadric, camera: Camera, silhouette: np.nd
         In [0, 1]; 0 if the superquadric is behind the camera.
     """
     uv, depth = camera.project(surface_points(superquadric))
-    return hull_iou(uv[depth > 0], silhouette)
+    return hull_iou(uv[depth > 0], silhouette, box)
 
 
-def hull_iou(uv: np.ndarray, silhouette: np.ndarray) -> float:
+def hull_iou(uv: np.ndarray, silhouette: np.ndarray, box=None) -> float:
     """Intersection over union of the convex hull of pixel points and a silhouette.
 
     Parameters
@@ -46,6 +48,8 @@ def hull_iou(uv: np.ndarray, silhouette: np.ndarray) -> float:
         three cover nothing.
     silhouette : (H, W) ndarray
         Nonzero = object.
+    box : (4,) tuple of int, optional
+        The silhouette's bounding box ``(x, y, w, h)`` (``cv2.boundingRect``), if known.
 
     Examples
     --------
@@ -53,15 +57,27 @@ def hull_iou(uv: np.ndarray, silhouette: np.ndarray) -> float:
     >>> hull_iou(np.array([[2.0, 2.0], [5.0, 2.0], [5.0, 5.0], [2.0, 5.0]]), square)
     1.0
     """
-    covered = np.zeros(silhouette.shape, np.uint8)
+    height, width = silhouette.shape
+    hull = None
     if len(uv) >= 3:
         # Clamp far off-image points: fillConvexPoly takes int32 coordinates.
-        limit = 4.0 * max(silhouette.shape)
-        hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32))
-        fixed_point = np.round(hull * (1 << _SUBPIXEL_BITS)).astype(np.int32)
+        limit = 4.0 * max(height, width)
+        hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32)).reshape(-1, 2)
+    # Only the box around both shapes (within the image) can hold a pixel of either.
+    x, y, w, h = cv2.boundingRect(silhouette) if box is None else box
+    x0, y0, x1, y1 = (x, y, x + w, y + h) if w else (width, height, 0, 0)
+    if hull is not None:
+        low, high = np.floor(hull.min(axis=0)), np.ceil(hull.max(axis=0)) + 1
+        x0, y0 = min(x0, max(0, int(low[0]))), min(y0, max(0, int(low[1])))
+        x1, y1 = max(x1, min(width, int(high[0]))), max(y1, min(height, int(high[1])))
+    if x1 <= x0 or y1 <= y0:
+        return 0.0
+    covered = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    if hull is not None:
+        fixed_point = np.round((hull - (x0, y0)) * (1 << _SUBPIXEL_BITS)).astype(np.int32)
         cv2.fillConvexPoly(covered, fixed_point, 1, shift=_SUBPIXEL_BITS)
     covered = covered.view(bool)
-    object_pixels = silhouette != 0
+    object_pixels = silhouette[y0:y1, x0:x1] != 0
     union = np.count_nonzero(object_pixels | covered)
     return float(np.count_nonzero(object_pixels & covered) / union) if union else 0.0
 

@@ -1,6 +1,7 @@
 """The whole algorithm: views in, superquadric out (DESIGN.md §1).
 
-decode -> segment -> enclosing sphere -> carve -> support plane -> fit -> quality
+decode -> segment -> edge samples -> enclosing sphere -> carve -> support plane
+-> starts (the point fit's search) -> silhouette fit -> quality
 """
 
 from __future__ import annotations
@@ -13,13 +14,14 @@ import numpy as np
 
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, occupancy
+from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .quality import radial_residual, silhouette_iou
-from .refine import refine_to_silhouettes
-from .segment import RED_HSV, Segmentation, segment, silhouette_from_mask
+from .segment import RED_HSV, Segmentation, mask_with_outline, segment_with_outline
+from .silhouette_fit import fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
-from .superquadric import Superquadric, fit_superquadric
+from .superquadric import Superquadric, fit_superquadric, start_superquadrics
 
 __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
 
@@ -61,11 +63,13 @@ class Options:
         Starting sphere radius over the largest silhouette extent.
     fit_points : int
         At most this many points go into the fit (evenly strided).
-    refine_below : float
-        When the fit's projections cover the silhouettes worse than this (mean
-        IoU), the object is not a superquadric: fit again without trusting the
-        hull's inner envelope, refine against the silhouettes themselves, and
-        keep what covers them best. 0 turns this off.
+    silhouette_fit : bool
+        Fit to the silhouettes' edges (DESIGN.md §1, step 7), starting from
+        the point fit's candidate starts. Off, the inside-weighted point fit
+        (``inside_weight``, ``outside_loss``, ``cauchy_scale``, which apply
+        only then) is the result, as before the silhouette fit existed.
+    edge_samples : int
+        Edge samples per view for the silhouette fit.
     """
 
     n_points: int = 1000
@@ -74,7 +78,8 @@ class Options:
     cauchy_scale: float = 0.1
     radius_margin: float = 1.25
     fit_points: int = 250
-    refine_below: float = 0.8
+    silhouette_fit: bool = True
+    edge_samples: int = 32
 
     def __post_init__(self) -> None:
         if self.n_points < 50:
@@ -85,6 +90,8 @@ class Options:
             raise ValueError("inside_weight and cauchy_scale must be positive")
         if not self.radius_margin >= 1:
             raise ValueError(f"radius_margin must be >= 1, got {self.radius_margin}")
+        if self.edge_samples < 4:
+            raise ValueError(f"edge_samples must be >= 4, got {self.edge_samples}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,23 +197,33 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         timings[stage] = timings.get(stage, 0.0) + (now - last) * 1e3
         last = now
 
-    silhouettes = []
+    silhouettes, boxes, edges = [], [], []
     for index, view in enumerate(views):
         data, is_mask = _decoded(index, view)
         lap("decode")
         if is_mask:
-            silhouette = silhouette_from_mask(data, view=index)
+            silhouette, outline = mask_with_outline(data, view=index)
         else:
-            silhouette = segment(data, segmentation, view=index)
-        silhouettes.append(undistort_mask(silhouette, view.camera))
+            silhouette, outline = segment_with_outline(data, segmentation, view=index)
+        if view.camera.dist is None:
+            silhouettes.append(silhouette)
+            boxes.append(cv2.boundingRect(outline))
+        else:
+            silhouettes.append(undistort_mask(silhouette, view.camera))
+            boxes.append(cv2.boundingRect(silhouettes[-1]))
         lap("segment")
+        if options.silhouette_fit:
+            edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
+                                      camera=view.camera))
+            lap("edges")
     cameras = [view.camera for view in views]
-    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin)
+    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
     plane = None if support_plane is None else check_support_plane(support_plane, centre)
     lap("centroid")
 
     directions = fibonacci_sphere(options.n_points)
-    radii, observed = carve(directions, centre, radius, cameras, [occupancy(s) for s in silhouettes])
+    radii, observed = carve(directions, centre, radius, cameras,
+                            [occupancy(s, box) for s, box in zip(silhouettes, boxes)])
     if plane is not None:
         radii = clip_to_plane(directions, radii, centre, plane)
     # Points that no view saw, and directions in which no view saw the object, carry no evidence.
@@ -217,22 +234,18 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     if len(points) < 11:
         raise FitError(f"only {len(points)} points survived carving: the silhouettes do not overlap")
     stride = max(1, len(points) // options.fit_points)
-    fit = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
-                           outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
-                           support_plane=plane)
-    lap("fit")
-
-    superquadric = fit.superquadric
-    ious = [silhouette_iou(superquadric, camera, s) for camera, s in zip(cameras, silhouettes)]
+    if options.silhouette_fit:
+        starts = start_superquadrics(points[::stride], support_plane=plane)
+        lap("start")
+        superquadric = fit_to_silhouettes(starts, cameras, edges, support_plane=plane).superquadric
+        lap("fit")
+    else:
+        superquadric = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
+                                        outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
+                                        support_plane=plane).superquadric
+        lap("fit")
+    ious = [silhouette_iou(superquadric, camera, s, box) for camera, s, box in zip(cameras, silhouettes, boxes)]
     lap("quality")
-    if np.mean(ious) < options.refine_below:
-        plain = fit_superquadric(points[::stride], inside_weight=1.0, outside_loss="squared",
-                                 support_plane=plane)
-        refined = refine_to_silhouettes(plain.superquadric, cameras, silhouettes)
-        refined_ious = [silhouette_iou(refined, camera, s) for camera, s in zip(cameras, silhouettes)]
-        if np.mean(refined_ious) > np.mean(ious):
-            superquadric, ious = refined, refined_ious
-        lap("refine")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
     return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings)

@@ -25,7 +25,7 @@ _MIN_RAY_SPREAD = 1e-6
 _BOX_SLACK = 0.1
 
 
-def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25) -> tuple[np.ndarray, float]:
+def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25, known_boxes=None) -> tuple[np.ndarray, float]:
     """Estimate the object's centre and a radius that surely encloses it.
 
     Parameters
@@ -36,6 +36,8 @@ def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25) -> tuple[np.
         The views' cameras, in the same order.
     margin : float
         Factor applied to the largest extent seen in any view.
+    known_boxes : sequence of (4,) tuple of int, optional
+        Each silhouette's bounding box ``(x, y, w, h)``, if known.
 
     Returns
     -------
@@ -55,8 +57,8 @@ def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25) -> tuple[np.
     normal_matrix = np.zeros((3, 3))
     normal_rhs = np.zeros(3)
     boxes = []
-    for silhouette, camera in zip(silhouettes, cameras):
-        x, y, w, h = box = cv2.boundingRect(silhouette)
+    for index, (silhouette, camera) in enumerate(zip(silhouettes, cameras)):
+        x, y, w, h = box = cv2.boundingRect(silhouette) if known_boxes is None else tuple(known_boxes[index])
         # Moments of the box alone: the rest of the image is empty, and this is 10x faster.
         moments = cv2.moments(silhouette[y : y + h, x : x + w], binaryImage=True)
         centroid = np.array([[x + moments["m10"] / moments["m00"], y + moments["m01"] / moments["m00"]]])

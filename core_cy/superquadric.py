@@ -17,13 +17,13 @@ import numbers
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import Bounds, minimize
-from scipy.special import beta as _beta
 
 from ._superquadric_cy import inside_outside as _inside_outside_kernel
+from ._superquadric_cy import jaklic_normal_equations
 from ._superquadric_cy import objective as _objective_kernel
 from ._superquadric_cy import support as _support_kernel
 from .errors import CoreError, FitError
+from .least_squares import Descent
 from .rigid import rigid_error
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "SuperquadricFit",
     "fit_superquadric",
     "inside_outside",
+    "start_superquadrics",
     "mesh",
     "surface_points",
 ]
@@ -39,8 +40,8 @@ __all__ = [
 _SIZE_BOUNDS = (0.01, 3.0)
 _TRANSLATION_BOUND = 2.0
 # Start search: a few iterations of each start on at most this many points.
-_SEARCH_POINTS = 120
-_SEARCH_ITERATIONS = 12
+_SEARCH_POINTS = 60
+_SEARCH_ITERATIONS = 6
 _START_SHAPE = (1.0, 1.0)  # an ellipsoid: from there e1 and e2 move either way
 # A start turned 45 degrees about z is added when the two principal spreads
 # across the z axis are closer than this ratio (their axes are then arbitrary).
@@ -55,6 +56,11 @@ _MAXCOR = 20  # L-BFGS memory: 20 pairs took ~10 % fewer iterations than the def
 # data term's slope is small at a fit, so this already keeps the depth near
 # 1e-3; a stiffer penalty (1e3) tripled the iterations on simulated hulls.
 _PLANE_WEIGHT = 10.0
+
+
+def _beta(a: float, b: float) -> float:
+    """The Beta function, by log-gamma (scipy.special alone takes a fifth of a second to import)."""
+    return math.exp(math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b))
 
 
 def _vector(value, length: int, name: str, error=CoreError) -> np.ndarray:
@@ -235,23 +241,11 @@ def mesh(sq: Superquadric, n_eta: int = 24, n_omega: int = 48) -> tuple[np.ndarr
     >>> vertices.shape, triangles.shape
     ((10, 3), (16, 3))
     """
-    if not (isinstance(n_eta, numbers.Integral) and isinstance(n_omega, numbers.Integral)
-            and n_eta >= 1 and n_omega >= 3):
-        raise CoreError(f"need integers n_eta >= 1 and n_omega >= 3, got {n_eta!r} and {n_omega!r}")
+    vertices = surface_points(sq, n_eta, n_omega)
     n_eta, n_omega = int(n_eta), int(n_omega)
-    (a1, a2, a3), (e1, e2) = sq.size, sq.shape
-    eta = -np.pi / 2 + np.pi * np.arange(1, n_eta + 1) / (n_eta + 1)
-    omega = -np.pi + 2 * np.pi * np.arange(n_omega) / n_omega
-    ce, se = _signed_power(np.cos(eta), e1)[:, None], _signed_power(np.sin(eta), e1)[:, None]
-    co, so = _signed_power(np.cos(omega), e2), _signed_power(np.sin(omega), e2)
-    rings = np.stack([a1 * ce * co, a2 * ce * so, a3 * se * np.ones_like(co)], axis=-1)
-    local = np.concatenate([[[0, 0, -a3]], rings.reshape(-1, 3), [[0, 0, a3]]])
-    T = sq.T_world_object
-    vertices = local @ T[:3, :3].T + T[:3, 3]
-
     ring = 1 + np.arange(n_eta)[:, None] * n_omega + np.arange(n_omega)  # (n_eta, n_omega)
     after = np.roll(ring, -1, axis=1)
-    north = len(local) - 1
+    north = len(vertices) - 1
     south_fan = np.stack([np.zeros(n_omega, int), after[0], ring[0]], axis=1)
     north_fan = np.stack([np.full(n_omega, north), ring[-1], after[-1]], axis=1)
     a, b, c, d = ring[:-1], after[:-1], after[1:], ring[1:]
@@ -274,7 +268,19 @@ def surface_points(sq: Superquadric, n_eta: int = 24, n_omega: int = 48) -> np.n
     >>> surface_points(Superquadric([1, 1, 2], [1, 1], np.eye(4)), 3, 8).shape
     (26, 3)
     """
-    return mesh(sq, n_eta, n_omega)[0]
+    if not (isinstance(n_eta, numbers.Integral) and isinstance(n_omega, numbers.Integral)
+            and n_eta >= 1 and n_omega >= 3):
+        raise CoreError(f"need integers n_eta >= 1 and n_omega >= 3, got {n_eta!r} and {n_omega!r}")
+    n_eta, n_omega = int(n_eta), int(n_omega)
+    (a1, a2, a3), (e1, e2) = sq.size, sq.shape
+    eta = -np.pi / 2 + np.pi * np.arange(1, n_eta + 1) / (n_eta + 1)
+    omega = -np.pi + 2 * np.pi * np.arange(n_omega) / n_omega
+    ce, se = _signed_power(np.cos(eta), e1)[:, None], _signed_power(np.sin(eta), e1)[:, None]
+    co, so = _signed_power(np.cos(omega), e2), _signed_power(np.sin(omega), e2)
+    rings = np.stack([a1 * ce * co, a2 * ce * so, a3 * se * np.ones_like(co)], axis=-1)
+    local = np.concatenate([[[0, 0, -a3]], rings.reshape(-1, 3), [[0, 0, a3]]])
+    T = sq.T_world_object
+    return local @ T[:3, :3].T + T[:3, 3]
 
 
 @dataclass(frozen=True, eq=False)
@@ -353,16 +359,12 @@ def _starts(points: np.ndarray, search: np.ndarray) -> list[tuple[int, np.ndarra
     return starts
 
 
-def _check_options(inside_weight, outside_loss, cauchy_scale, shape_bounds, max_iterations,
-                   subsample) -> None:
+def _check_options(inside_weight, outside_loss, cauchy_scale, max_iterations, subsample) -> None:
     for name, value in (("inside_weight", inside_weight), ("cauchy_scale", cauchy_scale)):
         if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
             raise FitError(f"{name} must be a positive number, got {value!r}")
     if outside_loss not in ("cauchy", "squared"):
         raise FitError(f"outside_loss must be 'cauchy' or 'squared', got {outside_loss!r}")
-    low, high = _vector(shape_bounds, 2, "shape_bounds", FitError)
-    if not 0 < low <= high < 2:
-        raise FitError(f"shape_bounds must satisfy 0 < low <= high < 2, got {shape_bounds!r}")
     if not (isinstance(max_iterations, numbers.Integral) and max_iterations >= 1):
         raise FitError(f"max_iterations must be a positive integer, got {max_iterations!r}")
     if subsample is not None and not (isinstance(subsample, numbers.Integral) and subsample >= 11):
@@ -373,6 +375,116 @@ def _strided(points: np.ndarray, count: int) -> np.ndarray:
     if count >= len(points):
         return points
     return np.ascontiguousarray(points[np.linspace(0, len(points) - 1, count).round().astype(int)])
+
+
+class _JaklicProblem:
+    """The plain Jaklic cost of points about a start frame R0, for :class:`Descent`."""
+
+    def __init__(self, points, R0, plane):
+        self.points, self.R0 = points, R0
+        self.plane = np.zeros(4) if plane is None else plane
+        self.plane_weight = 0.0 if plane is None else _PLANE_WEIGHT
+
+    def evaluate(self, x, JtJ, Jtr) -> float:
+        return jaklic_normal_equations(x, self.R0, self.points, self.plane, self.plane_weight, JtJ, Jtr)
+
+    def keep(self, accepted: bool) -> None:
+        pass
+
+
+class _Search:
+    """The start search shared by :func:`fit_superquadric` and :func:`start_superquadrics`.
+
+    Normalises the points (centroid at 0, RMS distance 1), and runs each start
+    of :func:`_starts` for a few Levenberg-Marquardt steps of the plain Jaklic
+    cost on a few points; ``tried`` holds (descent, axis order, R0), lowest
+    cost first.
+    """
+
+    def __init__(self, points, support_plane, shape_bounds, subsample):
+        points = _points(points, error=FitError)
+        if len(points) < 11:
+            raise FitError(f"need at least 11 points (one per parameter) to fit, got {len(points)}")
+        if not np.all(np.isfinite(points)):
+            raise FitError("points contain NaN or infinity")
+        low, high = _vector(shape_bounds, 2, "shape_bounds", FitError)
+        if not 0 < low <= high < 2:
+            raise FitError(f"shape_bounds must satisfy 0 < low <= high < 2, got {shape_bounds!r}")
+        self.points = points
+        self.centroid = points.mean(axis=0)
+        self.scale = math.sqrt(np.mean(np.sum((points - self.centroid) ** 2, axis=1)))
+        if not self.scale > 0:
+            raise FitError("all points coincide: nothing to fit")
+        normalised = (points - self.centroid) / self.scale
+        self.plane = None
+        if support_plane is not None:
+            plane = _vector(support_plane, 4, "support_plane", FitError)
+            length = np.linalg.norm(plane[:3])
+            if length == 0:
+                raise FitError("support_plane's normal (nx, ny, nz) must not be zero")
+            self.plane = np.append(plane[:3], (plane[:3] @ self.centroid + plane[3]) / self.scale) / length
+        self.refine = _strided(normalised, subsample or len(points))
+        search = _strided(self.refine, _SEARCH_POINTS)
+        limits = np.array([_SIZE_BOUNDS] * 3 + [(low, high)] * 2
+                          + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
+                          + [(-np.pi, np.pi)] * 3)
+        self.low, self.high = limits[:, 0] / _STEP_SCALE, limits[:, 1] / _STEP_SCALE
+        self.tried = sorted(((Descent(_JaklicProblem(search, R0, self.plane), x0, limits[:, 0], limits[:, 1])
+                              .run(_SEARCH_ITERATIONS), k, R0) for k, R0, x0 in _starts(normalised, search)),
+                            key=lambda item: item[0].cost)
+
+    def run(self, cloud, R0, y0, weights, iterations):
+        objective = _Objective(cloud, R0, *weights, self.plane, _STEP_SCALE)
+        # Imported here: scipy.optimize takes most of a second to import on a slow machine, and
+        # only the point fit's refinement (not the default pipeline) needs it.
+        from scipy.optimize import Bounds, minimize
+
+        y0 = np.clip(y0, self.low, self.high)  # L-BFGS-B would clip silently
+        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=Bounds(self.low, self.high),
+                        options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
+
+    def superquadric(self, R0, x) -> Superquadric:
+        """The world superquadric of normalised parameters x about the frame R0."""
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = _rotation(R0, x[8:11]), self.centroid + self.scale * x[5:8]
+        return Superquadric(x[0:3] * self.scale, x[3:5], T)
+
+
+def start_superquadrics(points, *, support_plane=None, shape_bounds=(0.1, 1.9)) -> list[Superquadric]:
+    """The starts that :func:`fit_superquadric` searches, each after its few search iterations.
+
+    One per start (each principal axis of the points as the object's z axis,
+    and the 45-degree turns), lowest plain Jaklic cost first: the candidates a
+    fit to other evidence (the silhouettes) can choose from.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like of float64
+        N >= 11, in any units.
+    support_plane : (4,) array_like, optional
+        As for :func:`fit_superquadric`.
+    shape_bounds : (2,) array_like
+        Bounds of both exponents.
+
+    Returns
+    -------
+    list of Superquadric
+
+    Raises
+    ------
+    FitError
+        As :func:`fit_superquadric`.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> d = rng.normal(size=(500, 3))
+    >>> starts = start_superquadrics(d / np.linalg.norm(d, axis=1, keepdims=True) * [3.0, 2.0, 1.0])
+    >>> len(starts), np.sort(starts[0].size).round(1)
+    (3, array([1., 2., 3.]))
+    """
+    search = _Search(points, support_plane, shape_bounds, None)
+    return [search.superquadric(R0, descent.x) for descent, _, R0 in search.tried]
 
 
 def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str = "cauchy",
@@ -396,8 +508,8 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     the start's frame, angles from 0). Starts: each principal axis of the
     points as the object's z axis (plus a 45-degree turn about it when the
     other two spreads are nearly equal), shape (1, 1), sizes from the spreads.
-    Each start runs 12 iterations of the plain Jaklic cost (its basin is
-    wider) on at most 120 evenly strided points; the start with the lowest
+    Each start takes 6 Levenberg-Marquardt steps of the plain Jaklic cost (its
+    basin is wider) on at most 60 evenly strided points; the start with the lowest
     cost then converges under the requested cost on all the points (or
     ``subsample`` of them).
 
@@ -417,7 +529,7 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     shape_bounds : (2,) array_like
         Bounds of both exponents, ``0 < low <= high < 2`` (convex shapes).
     max_iterations : int
-        Iteration limit of the convergence (the start search adds 12 per start).
+        Iteration limit of the convergence (the start search adds 6 per start).
     subsample : int, optional
         If smaller than N, refine on this many evenly strided points.
 
@@ -440,49 +552,13 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     >>> np.sort(fit.superquadric.size).round(2), fit.superquadric.shape.round(1)
     (array([1., 2., 3.]), array([1., 1.]))
     """
-    points = _points(points, error=FitError)
-    if len(points) < 11:
-        raise FitError(f"need at least 11 points (one per parameter) to fit, got {len(points)}")
-    if not np.all(np.isfinite(points)):
-        raise FitError("points contain NaN or infinity")
-    _check_options(inside_weight, outside_loss, cauchy_scale, shape_bounds, max_iterations,
-                   subsample)
-    centroid = points.mean(axis=0)
-    scale = math.sqrt(np.mean(np.sum((points - centroid) ** 2, axis=1)))
-    if not scale > 0:
-        raise FitError("all points coincide: nothing to fit")
-    normalised = (points - centroid) / scale
-    plane = None
-    if support_plane is not None:
-        plane = _vector(support_plane, 4, "support_plane", FitError)
-        length = np.linalg.norm(plane[:3])
-        if length == 0:
-            raise FitError("support_plane's normal (nx, ny, nz) must not be zero")
-        plane = np.append(plane[:3], (plane[:3] @ centroid + plane[3]) / scale) / length
-    refine = _strided(normalised, subsample or len(points))
-    search = _strided(refine, _SEARCH_POINTS)
-    limits = np.array([_SIZE_BOUNDS] * 3 + [tuple(shape_bounds)] * 2
-                      + [(-_TRANSLATION_BOUND, _TRANSLATION_BOUND)] * 3
-                      + [(-np.pi, np.pi)] * 3) / _STEP_SCALE
-    bounds = Bounds(limits[:, 0], limits[:, 1])
+    _check_options(inside_weight, outside_loss, cauchy_scale, max_iterations, subsample)
+    search = _Search(points, support_plane, shape_bounds, subsample)
+    searched, axis_order, R0 = search.tried[0]
     loss = (inside_weight, outside_loss == "cauchy", cauchy_scale)
-
-    def run(cloud, R0, y0, weights, iterations):
-        objective = _Objective(cloud, R0, *weights, plane, _STEP_SCALE)
-        y0 = np.clip(y0, bounds.lb, bounds.ub)  # L-BFGS-B would clip silently
-        return minimize(objective, y0, jac=True, method="L-BFGS-B", bounds=bounds,
-                        options={"maxiter": iterations, "ftol": _FTOL, "maxcor": _MAXCOR})
-
-    plain_jaklic = (1.0, False, 1.0)
-    tried = [(run(search, R0, x0 / _STEP_SCALE, plain_jaklic, _SEARCH_ITERATIONS), k, R0)
-             for k, R0, x0 in _starts(normalised, search)]
-    searched, axis_order, R0 = min(tried, key=lambda item: item[0].fun)
-    result = run(refine, R0, searched.x, loss, max_iterations)
-    iterations = searched.nit + result.nit
-    x = result.x * _STEP_SCALE
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = _rotation(R0, x[8:11]), centroid + scale * x[5:8]
-    sq = Superquadric(x[0:3] * scale, x[3:5], T)
-    F = inside_outside(points, sq)
+    result = search.run(search.refine, R0, searched.x / _STEP_SCALE, loss, max_iterations)
+    iterations = searched.iterations + result.nit
+    sq = search.superquadric(R0, result.x * _STEP_SCALE)
+    F = inside_outside(search.points, sq)
     residual = math.sqrt(np.prod(sq.size)) * np.sqrt(np.mean((F ** sq.shape[0] - 1) ** 2))
     return SuperquadricFit(sq, float(residual), float(result.fun), int(iterations), axis_order)

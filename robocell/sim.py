@@ -18,7 +18,9 @@ from .command import Commands
 
 __all__ = ["register", "add_arguments", "run"]
 
-SHAPES = [*FAMILIES, "cup-stack", "lumpy", *COMPOUNDS]
+# A flat box is a box thin along z; a plate, a thin cylinder standing on its rim.
+PRESETS = {"flat-box": ("box", False), "plate": ("cylinder", True)}
+SHAPES = [*FAMILIES, *PRESETS, "cup-stack", "lumpy", *COMPOUNDS]
 # Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
 # radius, height of one cup; for a lumpy figure: the radii of its ellipsoid.
 DEFAULT_SIZE = {
@@ -26,10 +28,13 @@ DEFAULT_SIZE = {
     "cylinder": (0.03, 0.03, 0.06),
     "ellipsoid": (0.045, 0.035, 0.03),
     "rounded-box": (0.05, 0.035, 0.03),
+    "flat-box": (0.05, 0.04, 0.01),
+    "plate": (0.06, 0.06, 0.008),
     "cup-stack": (0.025, 0.038, 0.06),
     "lumpy": (0.05, 0.04, 0.045),
 }
-_SHAPE_ONLY = ("size", "yaw", "lying", "position", "count", "views", "distance", "elevation")
+_SHAPE_ONLY = ("size", "yaw", "lying", "position", "count", "views", "distance", "elevation", "jpeg_quality",
+               "noise", "ambient")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,8 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard", "grasp"], dest="set_name",
-                       help="write a fixed benchmark set (the default when --shape is not given): standard, "
+    which.add_argument("--set", choices=["standard", "broad", "grasp"], dest="set_name",
+                       help="write a fixed benchmark set: standard (the default when --shape is not given; "
+                            "32 scans), broad (126: seven families, 3, 4 and 6 views, see bench/bench_core.py), "
                             "or grasp (bench/bench_grasp.py's scenes, 10 per family)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
@@ -56,6 +62,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--views", type=int, metavar="N", help="views per scan (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="seed for cameras, table and noise (default 0)")
     parser.add_argument("--masks", action="store_true", help="also write mask{i}.png (not named in scan.json)")
+    parser.add_argument("--supplied-masks", action="store_true",
+                        help="write mask{i}.png and name them in scan.json (a reconstruction then uses them)")
+    parser.add_argument("--jpeg-quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    parser.add_argument("--noise", type=float, metavar="SIGMA",
+                        help="sensor noise, standard deviation in grey levels (default 2)")
+    parser.add_argument("--ambient", type=float, metavar="A",
+                        help="light on the side turned from the lamp, 0-1: the lower, the darker the shaded "
+                             "faces (default: the renderer's, workers.sim.render.AMBIENT)")
     parser.add_argument("--count", type=int, metavar="N",
                         help="scans of the object, seeds SEED..SEED+N-1 (default 1)")
 
@@ -72,21 +86,27 @@ def _make_object(args: argparse.Namespace) -> SimObject:
     if args.shape == "lumpy":
         return LumpyFigure(position, size, seed=args.seed)
     yaw = 30.0 if args.yaw is None else args.yaw
-    return SuperquadricObject.on_table(args.shape, size, position, yaw, bool(args.lying))
+    family, lying = PRESETS.get(args.shape, (args.shape, False))
+    return SuperquadricObject.on_table(family, size, position, yaw, lying or bool(args.lying))
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
     from workers.sim.grasp_set import grasp_set
-    from workers.sim.scans import make_spec, write_standard_set
+    from workers.sim.scans import broad_set, make_spec, write_standard_set
 
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
         if given:
             print(f"robocell sim: {', '.join(given)} only apply with --shape", file=sys.stderr)
             return 2
+        if args.supplied_masks:
+            print("robocell sim: --supplied-masks only applies with --shape", file=sys.stderr)
+            return 2
         if args.set_name == "grasp":
             paths = (spec.write(args.out, write_masks=args.masks) for spec in grasp_set(args.seed))
+        elif args.set_name == "broad":
+            paths = (spec.write(args.out, write_masks=args.masks) for spec in broad_set(args.seed))
         else:
             paths = write_standard_set(args.out, seed=args.seed, write_masks=args.masks)
         for path in paths:
@@ -108,11 +128,19 @@ def run(args: argparse.Namespace) -> int:
         print("robocell sim: need 0 < MIN <= MAX for --distance and 0 < MIN <= MAX < 90 for --elevation",
               file=sys.stderr)
         return 2
+    # What is not given keeps make_spec's defaults.
+    given = {"jpeg_quality": args.jpeg_quality, "noise_sigma": args.noise, "ambient": args.ambient}
+    look = {name: value for name, value in given.items() if value is not None}
+    if not (1 <= look.get("jpeg_quality", 90) <= 100 and look.get("noise_sigma", 0) >= 0
+            and 0 <= look.get("ambient", 0) <= 1):
+        print("robocell sim: need 1 <= --jpeg-quality <= 100, --noise >= 0 and 0 <= --ambient <= 1",
+              file=sys.stderr)
+        return 2
     for i in range(count):
         seed = args.seed + i
         spec = make_spec(f"{args.shape}-{seed:03d}", obj, seed, views, distance, elevation,
-                         fit_distance=args.distance is None)
-        print(spec.write(args.out, write_masks=args.masks), flush=True)
+                         fit_distance=args.distance is None, **look)
+        print(spec.write(args.out, write_masks=args.masks, name_masks=args.supplied_masks), flush=True)
     return 0
 
 

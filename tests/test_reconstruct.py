@@ -6,7 +6,7 @@ import pytest
 
 from wire.bundle import load_bundle
 from workers.sim.objects import box, cylinder, ellipsoid, rounded_box
-from workers.sim.scans import default_K, plan_views, write_scan
+from workers.sim.scans import BROAD_FAMILIES, default_K, plan_views, write_scan
 from core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
 from core_cy.reconstruct import Options, View, reconstruct
 from core_cy.scoring import volumetric_iou
@@ -34,7 +34,8 @@ def test_sphere_on_the_table(sphere_bundle):
     # Every carved point is on or outside the sphere: the hull contains the object.
     distances = np.linalg.norm(result.points - SPHERE_CENTRE, axis=1)
     assert distances.min() > SPHERE_RADIUS * 0.97
-    assert set(result.timings_ms) == {"decode", "segment", "centroid", "carve", "fit", "quality", "total"}
+    assert set(result.timings_ms) == {"decode", "segment", "edges", "centroid", "carve", "start", "fit", "quality",
+                                      "total"}
 
 
 def test_units_do_not_matter(tmp_path, sphere_bundle):
@@ -63,6 +64,9 @@ FAMILIES = {
     "ellipsoid": lambda: ellipsoid([0.045, 0.035, 0.03], [0.62, 0.0], yaw_deg=60),
     "rounded-box": lambda: rounded_box([0.04, 0.04, 0.03], [0.6, 0.05], yaw_deg=-30),
     "lying-cylinder": lambda: cylinder([0.025, 0.025, 0.07], [0.6, 0.0], yaw_deg=-40, lying=True),
+    # The broad benchmark's own families, drawn as it draws them.
+    "flat-box": lambda: BROAD_FAMILIES["flat-box"](np.random.default_rng(11), (0.6, 0.0), 20.0),
+    "standing plate": lambda: BROAD_FAMILIES["plate"](np.random.default_rng(12), (0.6, 0.0), 70.0),
 }
 
 
@@ -70,11 +74,12 @@ FAMILIES = {
 def test_simulated_objects_against_the_truth(tmp_path, family):
     obj = FAMILIES[family]()
     target = obj.T_world_object[:3, 3]
-    cameras = plan_views(target, rng=np.random.default_rng(3))
-    bundle = write_scan(tmp_path / family, [obj], cameras, default_K(), seed=3)
+    # Cameras anywhere from 20 to 60 degrees up, a dim shaded side, JPEG at 80.
+    cameras = plan_views(target, elevation_deg=(20.0, 60.0), rng=np.random.default_rng(3))
+    bundle = write_scan(tmp_path / family, [obj], cameras, default_K(), seed=3, jpeg_quality=80, ambient=0.2)
     result = _run(bundle)
-    assert volumetric_iou(result.superquadric, Superquadric.from_dict(obj.truth())) > 0.8
-    assert min(result.silhouette_iou) > 0.85
+    assert volumetric_iou(result.superquadric, Superquadric.from_dict(obj.truth())) > 0.95
+    assert min(result.silhouette_iou) > 0.9  # a thin object seen edge-on is a few pixels wide
 
 
 def test_distorted_lens(tmp_path):
@@ -95,25 +100,6 @@ def _run_without_distortion(bundle_dir):
     views = [View(type(v.camera)(K=v.camera.K, T_world_cam=v.camera.T_world_cam), image=v.image)
              for v in bundle.views]
     return reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane).superquadric
-
-
-def test_refinement_brings_a_poor_fit_onto_the_silhouettes(sphere_bundle):
-    from core_cy.quality import silhouette_iou
-    from core_cy.refine import refine_to_silhouettes
-
-    result = _run(sphere_bundle)
-    cameras = [view.camera for view in load_bundle(sphere_bundle).views]
-    truth = _truth(sphere_bundle)
-    shifted = truth.T_world_object.copy()
-    shifted[:3, 3] += [0.01, -0.01, 0.005]
-    poor = Superquadric(truth.size * 0.6, [0.3, 0.3], shifted)
-
-    def coverage(sq):
-        return np.mean([silhouette_iou(sq, c, s) for c, s in zip(cameras, result.silhouettes)])
-
-    refined = refine_to_silhouettes(poor, cameras, result.silhouettes)
-    assert coverage(poor) < 0.6 and coverage(refined) > 0.85
-    assert volumetric_iou(refined, truth) > 0.7
 
 
 # --- bad input ---------------------------------------------------------------------------------

@@ -280,7 +280,7 @@ def test_write_scan_bundle(tmp_path: Path, kind: str):
     scan = json.loads((out / "scan.json").read_text())
     assert set(scan) == {"views", "segmentation", "support_plane"}
     assert scan["segmentation"] == HSV_SEGMENTATION
-    assert HSV_SEGMENTATION == {"method": "hsv", "lower": [170, 90, 40], "upper": [10, 255, 255]}
+    assert HSV_SEGMENTATION == {"method": "hsv", "lower": [170, 90, 20], "upper": [10, 255, 255]}
     assert scan["support_plane"] == [0, 0, 1, 0]
     assert len(scan["views"]) == 3
     for i, view in enumerate(scan["views"]):
@@ -373,3 +373,45 @@ def test_cli_rejects_shape_options_without_shape(capsys):
     assert "--shape" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         _parse(["--set", "standard", "--shape", "box"])
+
+
+def test_broad_set():
+    from workers.sim.scans import BROAD_FAMILIES, broad_set
+
+    specs = broad_set(0, per_family=2)
+    assert len(specs) == len(BROAD_FAMILIES) * 2 * 3
+    assert {s.name.rsplit("-", 2)[0] for s in specs} == set(BROAD_FAMILIES)
+    for spec in specs:
+        obj = spec.objects[0]
+        views = int(spec.name.rsplit("-", 1)[1][:-1])
+        assert len(spec.cameras) == views in (3, 4, 6)
+        assert 70 <= spec.jpeg_quality <= 95 and 1 <= spec.noise_sigma <= 4 and 0.15 <= spec.ambient <= 0.4
+        full = 2 * obj.size
+        family = spec.name.rsplit("-", 2)[0]
+        if family == "flat-box":
+            assert 0.016 <= full.min() <= 0.024, spec.name
+        elif family == "plate":
+            assert obj.size[0] == obj.size[1] and full[2] <= 0.02 and abs(obj.T_world_object[2, 2]) < 1e-9
+        else:
+            assert np.all(full >= 0.02 - 1e-12) and np.all(full <= 0.15 + 1e-12), spec.name
+        for T in spec.cameras:
+            off = T[:3, 3] - spec.target
+            assert 20 - 2.5 <= np.degrees(np.arcsin(off[2] / np.linalg.norm(off))) <= 60 + 2.5, spec.name
+    # One object, one look, three layouts of views.
+    same = [s for s in specs if s.name.startswith("plate-01-")]
+    assert len(same) == 3 and len({s.seed for s in same}) == 1 and len({s.jpeg_quality for s in same}) == 1
+    assert same[0].objects[0] is same[2].objects[0]
+
+
+def test_cli_writes_flat_boxes_plates_and_supplied_masks(tmp_path: Path, capsys):
+    args = _parse(["--out", str(tmp_path), "--shape", "plate", "--views", "2", "--jpeg-quality", "75",
+                   "--noise", "0", "--ambient", "0.2", "--supplied-masks"])
+    assert cli.run(args) == 0
+    bundle = Path(capsys.readouterr().out.split()[0])
+    scan = json.loads((bundle / "scan.json").read_text())
+    assert [v["mask"] for v in scan["views"]] == ["mask0.png", "mask1.png"]
+    truth = json.loads((bundle / "truth.json").read_text())
+    assert truth["shape"] == list(FAMILIES["cylinder"]) and truth["size"] == [0.06, 0.06, 0.008]
+    assert truth["T_world_object"][2][3] == pytest.approx(0.06)  # standing on its rim
+    assert cli.run(_parse(["--out", str(tmp_path), "--shape", "flat-box", "--ambient", "2"])) == 2
+    assert "--ambient" in capsys.readouterr().err

@@ -1,7 +1,7 @@
 """A simulated Axis camera: the VAPIX snapshot endpoint, rendered from the robot's pose.
 
 :class:`SimCameraServer` answers ``GET /axis-cgi/jpg/image.cgi?resolution=WxH`` with
-a JPEG of the simulated scene (``cell.sim.render``) seen from ``pose_provider()``, and
+a JPEG of the simulated scene (``workers.sim.render``) seen from ``pose_provider()``, and
 ``GET /axis-cgi/param.cgi?action=list&group=Properties.Image.Resolution`` with the
 resolutions it offers, as an Axis camera does: a real HTTP server (stdlib), with
 optional Digest (RFC 7616, MD5, qop=auth) or Basic authentication, so the camera
@@ -124,7 +124,7 @@ class SimCameraServer:
     Parameters
     ----------
     scene_objects : sequence of SimObject
-        What stands on the table (see :func:`cell.sim.scene.scene_from_config`).
+        What stands on the table (see :func:`workers.sim.scene.scene_from_config`).
     K : (3, 3) array_like
         Pinhole matrix at ``image_size``; scaled for other resolutions.
     image_size : (int, int)

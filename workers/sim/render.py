@@ -251,6 +251,7 @@ def render(
     noise_sigma: float = 2.0,
     *,
     table: TableScene | None = None,
+    ambient: float = AMBIENT,
 ) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
     """Render red ``objects`` on a table as seen from ``T_world_cam``.
 
@@ -263,6 +264,8 @@ def render(
     rng : generator for the sensor noise; None means ``default_rng(0)``.
     noise_sigma : standard deviation of the Gaussian sensor noise (grey levels).
     table : the surroundings; None means ``TableScene()``.
+    ambient : share of the light a face turned away from the lamp still gets, in [0, 1]:
+        the lower, the darker the shaded side (0.15 puts it at V = 30).
 
     Returns
     -------
@@ -295,7 +298,7 @@ def render(
     n = sum(wts[:, k, None] * normals[fv[:, k]] for k in range(3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     p = sum(wts[:, k, None] * verts[fv[:, k]] for k in range(3))
-    lambert = AMBIENT + (1 - AMBIENT) * np.clip(n @ LIGHT_DIR, 0, 1)
+    lambert = ambient + (1 - ambient) * np.clip(n @ LIGHT_DIR, 0, 1)
     # A faint mottle so the object is not a flat plastic colour.
     mottle = 1.0 + 0.03 * np.sin(p @ [157.0, 91.0, 211.0]) * np.sin(p @ [-83.0, 139.0, 67.0])
     # Box-filter the samples down to pixels: sums per pixel by bincount.

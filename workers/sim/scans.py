@@ -16,11 +16,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
-from .render import TableScene, render
+from .render import AMBIENT, TableScene, render
 
 __all__ = [
     "HSV_SEGMENTATION",
+    "BROAD_FAMILIES",
     "ScanSpec",
+    "broad_set",
     "default_K",
     "fitting_distance",
     "look_at",
@@ -33,7 +35,7 @@ __all__ = [
 ]
 
 #: The segmentation written into every simulated scan.json: red, hue wrapping round 0.
-HSV_SEGMENTATION: dict[str, Any] = {"method": "hsv", "lower": [170, 90, 40], "upper": [10, 255, 255]}
+HSV_SEGMENTATION: dict[str, Any] = {"method": "hsv", "lower": [170, 90, 20], "upper": [10, 255, 255]}
 
 
 def default_K(image_size: tuple[int, int] = (640, 480), f: float = 600.0) -> NDArray[np.float64]:
@@ -139,6 +141,9 @@ def write_scan(
     image_size: tuple[int, int] = (640, 480),
     jpeg_quality: int = 90,
     write_masks: bool = False,
+    name_masks: bool = False,
+    noise_sigma: float = 2.0,
+    ambient: float = AMBIENT,
 ) -> Path:
     """Render and write one scan bundle; return its directory.
 
@@ -147,8 +152,11 @@ def write_scan(
     ``truth.json``: the object's ``truth()``, or ``{"kind": "scene",
     "objects": [...]}`` for several objects. ``write_masks`` adds
     ``mask{i}.png`` (255 = object) for inspection; scan.json does not name them,
-    so a reconstruction still has to segment the images. The table's look and
-    the sensor noise follow ``seed``: the same arguments give the same bytes.
+    so a reconstruction still has to segment the images, unless ``name_masks``
+    (which implies ``write_masks``) supplies them as each view's ``mask``.
+    ``noise_sigma`` (grey levels) and ``ambient`` (see :func:`render`) set the
+    sensor noise and how dark the shaded side is. The table's look and the
+    sensor noise follow ``seed``: the same arguments give the same bytes.
     """
     objs = [objects] if isinstance(objects, SimObject) else list(objects)
     if not objs:
@@ -159,14 +167,17 @@ def write_scan(
     table = TableScene.from_seed(seed)
     views = []
     for i, T in enumerate(cameras):
-        bgr, mask = render(objs, T, K, dist, image_size, rng=np.random.default_rng([seed, i]), table=table)
+        bgr, mask = render(objs, T, K, dist, image_size, rng=np.random.default_rng([seed, i]),
+                           noise_sigma=noise_sigma, table=table, ambient=ambient)
         ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         if not ok:
             raise RuntimeError(f"JPEG encoding failed for view {i}")
         (out / f"view{i}.jpg").write_bytes(jpg.tobytes())
-        if write_masks:
+        if write_masks or name_masks:
             cv2.imwrite(str(out / f"mask{i}.png"), mask)
         view: dict[str, Any] = {"image": f"view{i}.jpg", "K": K.tolist()}
+        if name_masks:
+            view["mask"] = f"mask{i}.png"
         if dist is not None:
             view["dist"] = np.asarray(dist, dtype=np.float64).ravel().tolist()
         view["T_world_cam"] = np.asarray(T, dtype=np.float64).tolist()
@@ -190,12 +201,17 @@ class ScanSpec:
     seed: int
     dist: NDArray[np.float64] | None = None
     image_size: tuple[int, int] = field(default=(640, 480))
+    jpeg_quality: int = 90
+    noise_sigma: float = 2.0
+    ambient: float = AMBIENT
 
-    def write(self, out_dir: str | Path, write_masks: bool = False) -> Path:
-        """Write the bundle to ``out_dir / name``."""
+    def write(self, out_dir: str | Path, write_masks: bool = False, name_masks: bool = False) -> Path:
+        """Write the bundle to ``out_dir / name`` (see :func:`write_scan` for the masks)."""
         return write_scan(
             Path(out_dir) / self.name, self.objects, self.cameras, self.K, self.dist,
-            seed=self.seed, image_size=self.image_size, write_masks=write_masks,
+            seed=self.seed, image_size=self.image_size, jpeg_quality=self.jpeg_quality,
+            write_masks=write_masks, name_masks=name_masks, noise_sigma=self.noise_sigma,
+            ambient=self.ambient,
         )
 
 
@@ -219,11 +235,13 @@ def make_spec(
     name: str, obj: SimObject, seed: int, n_views: int = 3,
     distance: tuple[float, float] = (0.4, 0.7), elevation_deg: tuple[float, float] = (35.0, 55.0),
     image_size: tuple[int, int] = (640, 480), fit_distance: bool = True,
+    jpeg_quality: int = 90, noise_sigma: float = 2.0, ambient: float = AMBIENT,
 ) -> ScanSpec:
     """A spec with cameras planned around ``obj``, seeded by ``seed``.
 
     With ``fit_distance`` the near end of ``distance`` moves out (at most to the
-    far end) until the whole object fits in the image.
+    far end) until the whole object fits in the image. ``jpeg_quality``,
+    ``noise_sigma`` and ``ambient`` are passed on to :func:`write_scan`.
     """
     K = default_K(image_size)
     near = distance[0]
@@ -232,7 +250,8 @@ def make_spec(
     rng = np.random.default_rng([seed, 1])
     target = object_target(obj)
     cams = plan_views(target, n_views, (near, distance[1]), elevation_deg, rng.uniform(0, 360), rng)
-    return ScanSpec(name, (obj,), tuple(cams), K, target, seed, image_size=image_size)
+    return ScanSpec(name, (obj,), tuple(cams), K, target, seed, image_size=image_size,
+                    jpeg_quality=jpeg_quality, noise_sigma=noise_sigma, ambient=ambient)
 
 
 def standard_set(seed: int = 0) -> list[ScanSpec]:
@@ -268,3 +287,69 @@ def standard_set(seed: int = 0) -> list[ScanSpec]:
 def write_standard_set(out_dir: str | Path, seed: int = 0, write_masks: bool = False) -> list[Path]:
     """Write every bundle of :func:`standard_set` under ``out_dir``; return their directories."""
     return [spec.write(out_dir, write_masks) for spec in standard_set(seed)]
+
+
+def _flat_box(rng: np.random.Generator, xy, yaw: float) -> SuperquadricObject:
+    """A box with one half-size of 8-12 mm: lying flat (thin along z) or standing on its narrow side."""
+    a = rng.uniform(0.025, 0.075, 3)
+    a[rng.choice([0, 2])] = rng.uniform(0.008, 0.012)
+    return SuperquadricObject.on_table("box", a, xy, yaw)
+
+
+def _plate(rng: np.random.Generator, xy, yaw: float) -> SuperquadricObject:
+    """A disc standing on its rim: radius 3.5-7.5 cm, 0.8-2 cm thick."""
+    radius = rng.uniform(0.035, 0.075)
+    return SuperquadricObject.on_table("cylinder", [radius, radius, rng.uniform(0.004, 0.01)], xy, yaw,
+                                       lying=True)
+
+
+def _cylinder(lying: bool):
+    def make(rng: np.random.Generator, xy, yaw: float) -> SuperquadricObject:
+        radius = rng.uniform(0.01, 0.05)
+        return SuperquadricObject.on_table("cylinder", [radius, radius, rng.uniform(0.015, 0.075)], xy, yaw,
+                                           lying=lying)
+    return make
+
+
+def _family(name: str):
+    def make(rng: np.random.Generator, xy, yaw: float) -> SuperquadricObject:
+        return SuperquadricObject.on_table(name, rng.uniform(0.01, 0.075, 3), xy, yaw)
+    return make
+
+
+#: The broad benchmark's object families: each draws an object standing on the table at (x, y), turned by yaw.
+BROAD_FAMILIES = {
+    "box": _family("box"),
+    "flat-box": _flat_box,
+    "cylinder": _cylinder(lying=False),
+    "lying-cylinder": _cylinder(lying=True),
+    "plate": _plate,
+    "ellipsoid": _family("ellipsoid"),
+    "rounded-box": _family("rounded-box"),
+}
+
+
+def broad_set(seed: int = 0, per_family: int = 6, view_counts: Sequence[int] = (3, 4, 6)) -> list[ScanSpec]:
+    """A benchmark broad enough that no single kind of scan can be tuned to.
+
+    ``per_family`` objects of each of :data:`BROAD_FAMILIES`, full dimensions
+    2-15 cm, turned at random within 8 cm of (0.6, 0); each is scanned once per
+    number of views in ``view_counts``, every camera at its own elevation of
+    20-60 degrees and distance of 0.4-0.7 m, all scans of one object sharing
+    its table, JPEG quality (70-95), sensor noise (1-4 grey levels) and how
+    dark its shaded side is (ambient light 0.15-0.4). Names are
+    ``{family}-{i:02d}-{n}v``.
+    """
+    specs = []
+    for fam_index, (family, make) in enumerate(BROAD_FAMILIES.items()):
+        for i in range(per_family):
+            rng = np.random.default_rng([seed, 100 + fam_index, i])
+            rho, phi = 0.08 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            obj = make(rng, (0.6 + rho * np.cos(phi), rho * np.sin(phi)), rng.uniform(0, 180))
+            look = dict(jpeg_quality=int(rng.integers(70, 96)), noise_sigma=float(rng.uniform(1.0, 4.0)),
+                        ambient=float(rng.uniform(0.15, 0.4)))
+            scene_seed = 1000 * seed + 50 * fam_index + i
+            for n in view_counts:
+                specs.append(make_spec(f"{family}-{i:02d}-{n}v", obj, scene_seed, n, elevation_deg=(20.0, 60.0),
+                                       **look))
+    return specs

@@ -3,7 +3,7 @@
 This module is the one list: ``krl/config_dat_additions.txt`` declares exactly
 the variables of :data:`GLOBALS` (a test parses it), ``krl/robocell.dat``
 defines the command, status and error codes below under the same names, and
-the simulator in ``cell.sim.kuka`` serves these and nothing else.
+the simulator in ``workers.sim.kuka`` serves these and nothing else.
 
 The handshake (one move)::
 

@@ -1,0 +1,368 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Kernels of the silhouette fit: the superquadric's surface to outline it in a
+view, the plane through each edge sample's ray that the outline says is
+tangent to the object, and the robust least-squares normal equations of the
+11 parameters against those planes.
+
+Parameters ``x`` = (log a1, log a2, log a3, e1, e2, u1, u2, u3, alpha, beta,
+gamma): sizes ``a = exp(x[0:3])``, position ``t = t0 + scale * u`` and
+orientation ``R = R0 Rz(gamma) Ry(beta) Rx(alpha)``, as in the point fit.
+"""
+
+import numpy as np
+
+from libc.math cimport exp, log, fabs, sqrt, cos, sin
+
+from ._superquadric_cy cimport _rotation, _support, _support_value
+
+cdef double _TINY = 1e-300
+
+
+cdef inline void _pose(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
+                       double R[3][3], double dR[3][3][3], double* a, double* t) noexcept nogil:
+    """Sizes a, rotation R (and its derivatives dR) and position t of the parameters x."""
+    cdef int k
+    _rotation(R0, x[8], x[9], x[10], R, dR)
+    for k in range(3):
+        a[k] = exp(x[k])
+        t[k] = t0[k] + scale * x[5 + k]
+
+
+cdef inline double _signed_power(double c, double e) noexcept nogil:
+    cdef double m = fabs(c)
+    if m < _TINY:
+        return 0.0
+    return exp(e * log(m)) if c > 0 else -exp(e * log(m))
+
+
+def outline_points(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
+                   double scale, const double[::1] eta not None, const double[::1] omega not None,
+                   const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
+                   double[:, ::1] grid not None, float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None):
+    """Pixels of the surface points that may lie on each view's outline; False if any is behind a camera.
+
+    The surface is sampled on ``eta`` x ``omega`` (signed-power
+    parametrisation) and at its poles; a point may lie on the outline where the
+    view ray grazes the surface, i.e. where its normal turns from facing the
+    camera to facing away between it and a grid neighbour (the poles always
+    count). For view v, ``uv[v, :counts[v]]`` gets those points' pixels, whose
+    convex hull is the outline. ``grid`` (len(eta) * len(omega) + 2, 6) is
+    scratch space (object-frame points and normals). ``x`` as in
+    :func:`normal_equations`.
+    """
+    cdef Py_ssize_t n_eta = eta.shape[0], n_omega = omega.shape[0], n_grid = n_eta * n_omega
+    cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double a[3]
+    cdef double t[3]
+    cdef double c[3]
+    cdef double w[3]
+    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz, g
+    cdef double[::1] co = np.empty(n_omega), so = np.empty(n_omega)
+    cdef double[::1] nco = np.empty(n_omega), nso = np.empty(n_omega)
+    cdef double[::1] facing = np.empty(n_grid + 2)
+    cdef bint in_front = True, candidate
+    if grid.shape[0] != n_grid + 2 or grid.shape[1] != 6:
+        raise ValueError("grid must be (len(eta) * len(omega) + 2, 6)")
+    if (projections.shape[1] != 3 or projections.shape[2] != 4 or centres.shape[0] != n_views
+            or centres.shape[1] != 3 or uv.shape[0] != n_views or uv.shape[1] < n_grid + 2
+            or uv.shape[2] != 2 or counts.shape[0] != n_views):
+        raise ValueError("need (V, 3, 4) projections, (V, 3) centres, (V, >= grid, 2) uv and (V,) counts")
+    with nogil:
+        _pose(x, R0, t0, scale, R, dR, a, t)
+        # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
+        for j in range(n_omega):
+            co[j] = _signed_power(cos(omega[j]), e2)
+            so[j] = _signed_power(sin(omega[j]), e2)
+            nco[j] = _signed_power(cos(omega[j]), 2.0 - e2)
+            nso[j] = _signed_power(sin(omega[j]), 2.0 - e2)
+        for i in range(n_eta):
+            ce = _signed_power(cos(eta[i]), e1)
+            se = _signed_power(sin(eta[i]), e1)
+            ne = _signed_power(cos(eta[i]), 2.0 - e1)
+            nz = _signed_power(sin(eta[i]), 2.0 - e1) / a[2]
+            for j in range(n_omega):
+                row = i * n_omega + j
+                grid[row, 0] = a[0] * ce * co[j]
+                grid[row, 1] = a[1] * ce * so[j]
+                grid[row, 2] = a[2] * se
+                grid[row, 3] = ne * nco[j] / a[0]
+                grid[row, 4] = ne * nso[j] / a[1]
+                grid[row, 5] = nz
+        for k in range(2):  # the poles
+            grid[n_grid + k, 0] = 0.0
+            grid[n_grid + k, 1] = 0.0
+            grid[n_grid + k, 2] = -a[2] if k == 0 else a[2]
+            grid[n_grid + k, 3] = 0.0
+            grid[n_grid + k, 4] = 0.0
+            grid[n_grid + k, 5] = -1.0 if k == 0 else 1.0
+        for v in range(n_views):
+            for k in range(3):  # the camera centre in the object frame
+                c[k] = (R[0][k] * (centres[v, 0] - t[0]) + R[1][k] * (centres[v, 1] - t[1])
+                        + R[2][k] * (centres[v, 2] - t[2]))
+            for row in range(n_grid + 2):
+                facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
+                               + grid[row, 5] * (grid[row, 2] - c[2]))
+            count = 0
+            for row in range(n_grid + 2):
+                if row >= n_grid:
+                    candidate = True
+                else:
+                    i = row // n_omega
+                    j = row % n_omega
+                    g = facing[row]
+                    other = i * n_omega + (j + 1) % n_omega
+                    candidate = (g > 0) != (facing[other] > 0)
+                    other = i * n_omega + (j + n_omega - 1) % n_omega
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                    other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                    other = (i - 1) * n_omega + j if i > 0 else n_grid
+                    candidate = candidate or ((g > 0) != (facing[other] > 0))
+                if not candidate:
+                    continue
+                for k in range(3):
+                    w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
+                hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
+                if hz <= 1e-12:
+                    in_front = False
+                    break
+                hx = projections[v, 0, 0] * w[0] + projections[v, 0, 1] * w[1] + projections[v, 0, 2] * w[2] + projections[v, 0, 3]
+                hy = projections[v, 1, 0] * w[0] + projections[v, 1, 1] * w[1] + projections[v, 1, 2] * w[2] + projections[v, 1, 3]
+                uv[v, count, 0] = <float>(hx / hz)
+                uv[v, count, 1] = <float>(hy / hz)
+                count += 1
+            counts[v] = count
+            if not in_front:
+                break
+    return in_front
+
+
+def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] samples not None,
+                   const double[:, ::1] K not None, const double[:, ::1] R not None,
+                   const double[::1] centre not None, double pixels_per_unit, double[:, ::1] planes not None):
+    """The plane through each edge sample's ray with the normal of the outline where it passes nearest.
+
+    ``hull`` (H, 2) is the outline, a convex polygon in either orientation;
+    ``samples`` (N, 2) the edge samples (pixels); ``K``, ``R`` (camera-to-world
+    rotation) and ``centre`` the camera. Row i of ``planes`` (N, 9) gets the
+    plane's unit normal m (world, pointing out of the outline), ``m . centre``,
+    the weight that turns the object's reach beyond the plane (world units)
+    into pixels, ``|K^T (n, -n . p)| * pixels_per_unit`` (``pixels_per_unit``
+    = 1 / the object's depth), and the plane's in-plane unit vector
+    ``b = d x m`` across the ray d, with ``b . centre``: turning the plane
+    about the ray by psi gives the normal ``cos(psi) m + sin(psi) b``.
+    Where the sample lies outside a vertex of the outline, the normal points
+    from the vertex to the sample.
+    """
+    cdef Py_ssize_t h = hull.shape[0], n = samples.shape[0], i, j
+    cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area
+    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
+    cdef double[:, ::1] edges = np.empty((h, 5))  # e_x, e_y, 1 / |e|^2, outward unit normal
+    if hull.shape[1] != 2 or h < 3:
+        raise ValueError("hull must be (H, 2) with H >= 3")
+    if samples.shape[1] != 2 or planes.shape[0] != n or planes.shape[1] != 9:
+        raise ValueError("samples must be (N, 2) and planes (N, 9)")
+    with nogil:
+        area = 0.0
+        for j in range(h):
+            area += (hull[j, 0] * hull[(j + 1) % h, 1] - hull[(j + 1) % h, 0] * hull[j, 1])
+        # Outward normal of edge (e_x, e_y): (e_y, -e_x) when the polygon runs clockwise on screen
+        # (a positive shoelace area in these y-down coordinates), (-e_y, e_x) otherwise.
+        sign = 1.0 if area > 0 else -1.0
+        for j in range(h):
+            ex = hull[(j + 1) % h, 0] - hull[j, 0]
+            ey = hull[(j + 1) % h, 1] - hull[j, 1]
+            d2 = ex * ex + ey * ey
+            edges[j, 0] = ex
+            edges[j, 1] = ey
+            edges[j, 2] = 1.0 / d2 if d2 > 0 else 0.0
+            norm = sqrt(d2) if d2 > 0 else 1.0
+            edges[j, 3] = sign * ey / norm
+            edges[j, 4] = -sign * ex / norm
+        for i in range(n):
+            px = samples[i, 0]
+            py = samples[i, 1]
+            best = 1e300
+            best_nx = 0.0
+            best_ny = 0.0
+            for j in range(h):
+                ax = px - hull[j, 0]
+                ay = py - hull[j, 1]
+                tau = (ax * edges[j, 0] + ay * edges[j, 1]) * edges[j, 2]
+                if tau < 0:
+                    tau = 0.0
+                elif tau > 1:
+                    tau = 1.0
+                dx = ax - tau * edges[j, 0]
+                dy = ay - tau * edges[j, 1]
+                d2 = dx * dx + dy * dy
+                if d2 < best:
+                    best = d2
+                    best_nx = edges[j, 3]
+                    best_ny = edges[j, 4]
+                    if (tau == 0.0 or tau == 1.0) and best_nx * dx + best_ny * dy > 0 and d2 > 1e-12:
+                        norm = sqrt(d2)
+                        best_nx = dx / norm
+                        best_ny = dy / norm
+            # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
+            s = best_nx * px + best_ny * py
+            mc0 = K[0, 0] * best_nx
+            mc1 = K[0, 1] * best_nx + K[1, 1] * best_ny
+            mc2 = K[0, 2] * best_nx + K[1, 2] * best_ny - s
+            norm = sqrt(mc0 * mc0 + mc1 * mc1 + mc2 * mc2)
+            mc0 /= norm
+            mc1 /= norm
+            mc2 /= norm
+            for j in range(3):
+                planes[i, j] = R[j, 0] * mc0 + R[j, 1] * mc1 + R[j, 2] * mc2
+            planes[i, 3] = planes[i, 0] * centre[0] + planes[i, 1] * centre[1] + planes[i, 2] * centre[2]
+            planes[i, 4] = norm * pixels_per_unit
+            # The ray's direction: K^-1 (p, 1) (upper-triangular K), turned into the world.
+            r1 = (py - K[1, 2]) / K[1, 1]
+            r0 = (px - K[0, 2] - K[0, 1] * r1) / K[0, 0]
+            r2 = 1.0
+            w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+            w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+            w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+            norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            w0 /= norm
+            w1 /= norm
+            w2 /= norm
+            planes[i, 5] = w1 * planes[i, 2] - w2 * planes[i, 1]
+            planes[i, 6] = w2 * planes[i, 0] - w0 * planes[i, 2]
+            planes[i, 7] = w0 * planes[i, 1] - w1 * planes[i, 0]
+            planes[i, 8] = planes[i, 5] * centre[0] + planes[i, 6] * centre[1] + planes[i, 7] * centre[2]
+
+
+cdef inline double _reach(const double* a, const double* e, const double* t, double R[3][3], const double* m,
+                          double offset, double* v, double* dh_da, double* dh_de, double* dh_dv) noexcept nogil:
+    """How far (world units) the superquadric reaches beyond the plane m . x = offset; v gets R^T m."""
+    cdef int k
+    for k in range(3):
+        v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+    return m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support(a, e, v, dh_da, dh_de, dh_dv) - offset
+
+
+def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not None,
+                     const double[::1] t0 not None, double scale, const double[:, ::1] planes not None,
+                     double loss_scale, const double[::1] support_plane not None, double plane_weight,
+                     double tilt, double[:, ::1] JtJ not None, double[::1] Jtr not None, bint jacobian=True):
+    """Robust cost of the samples' residuals and, with ``jacobian``, the Gauss-Newton normal equations.
+
+    Residual of sample i: ``w_i (h(m) - m . c)``, how far (pixels) the
+    superquadric reaches beyond the plane through its ray, h being its support
+    function; positive where the sample lies inside the outline. The plane of
+    :func:`tangent_planes` comes from a polygon outline; the tangent plane
+    through the ray is the one of least reach, so the plane is turned about
+    the ray by -``tilt``, 0 and ``tilt`` (radians), a parabola through the
+    three reaches points to a fourth, and the least of them counts. The loss
+    is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
+    quadratic for small residuals, linear for large ones. With
+    ``plane_weight > 0`` the superquadric's reach below ``support_plane`` (n,
+    d; unit n; the object where n . x + d >= 0) is one more residual, times
+    ``plane_weight``, under the same loss: the object stands on the plane,
+    touching it. Fills ``JtJ`` (11, 11) with J^T W J and ``Jtr`` with J^T W r
+    (W the IRLS weights of the loss) and returns the cost.
+    """
+    cdef Py_ssize_t n = planes.shape[0], i, j, k, q, rows
+    cdef double R[3][3]
+    cdef double dR[3][3][3]
+    cdef double a[3]
+    cdef double v[3]
+    cdef double m[3]
+    cdef double best_m[3]
+    cdef double J[11]
+    cdef double dh_da[3]
+    cdef double dh_de[2]
+    cdef double dh_dv[3]
+    cdef double t[3]
+    cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, best_offset
+    cdef double psi, cs, sn, reach, best, curvature
+    cdef double cosines[3]
+    cdef double sines[3]
+    cdef double reaches[3]
+    if x.shape[0] != 11 or JtJ.shape[0] != 11 or JtJ.shape[1] != 11 or Jtr.shape[0] != 11:
+        raise ValueError("x and Jtr must have 11 entries, JtJ 11 x 11")
+    if planes.shape[1] != 9 or support_plane.shape[0] != 4:
+        raise ValueError("planes must be (N, 9) and support_plane (4,)")
+    with nogil:
+        _pose(x, R0, t0, scale, R, dR, a, t)
+        cosines[0] = cos(tilt)
+        cosines[1] = 1.0
+        cosines[2] = cosines[0]
+        sines[0] = -sin(tilt)
+        sines[1] = 0.0
+        sines[2] = -sines[0]
+        if jacobian:
+            for j in range(11):
+                Jtr[j] = 0.0
+                for k in range(11):
+                    JtJ[j, k] = 0.0
+        rows = n + 1 if plane_weight > 0 else n
+        for i in range(rows):
+            if i < n:
+                weight = planes[i, 4]
+                best = 1e300
+                for j in range(4):
+                    if j < 3:
+                        cs = cosines[j]
+                        sn = sines[j]
+                    else:  # the parabola's vertex, if it opens upwards, within the three
+                        curvature = reaches[0] - 2.0 * reaches[1] + reaches[2]
+                        if curvature <= 0 or tilt <= 0:
+                            break
+                        psi = 0.5 * tilt * (reaches[0] - reaches[2]) / curvature
+                        if psi < -tilt or psi > tilt:
+                            break
+                        cs = cos(psi)
+                        sn = sin(psi)
+                    for k in range(3):
+                        m[k] = cs * planes[i, k] + sn * planes[i, 5 + k]
+                    offset = cs * planes[i, 3] + sn * planes[i, 8]
+                    for k in range(3):
+                        v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+                    reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, &x[3], v) - offset
+                    if j < 3:
+                        reaches[j] = reach
+                    if reach < best:
+                        best = reach
+                        best_offset = offset
+                        for k in range(3):
+                            best_m[k] = m[k]
+                    if tilt <= 0:
+                        break
+                for k in range(3):
+                    m[k] = best_m[k]
+                offset = best_offset
+            else:  # the support plane: the superquadric's reach along -n beyond d
+                for k in range(3):
+                    m[k] = -support_plane[k]
+                offset = support_plane[3]
+                weight = plane_weight
+            r = weight * _reach(a, &x[3], t, R, m, offset, v, dh_da, dh_de, dh_dv)
+            root = sqrt(1.0 + r * r / c2)
+            cost += c2 * (root - 1.0)
+            if not jacobian:
+                continue
+            w = 1.0 / root
+            for k in range(3):
+                J[k] = weight * dh_da[k] * a[k]
+                J[5 + k] = weight * scale * m[k]
+            J[3] = weight * dh_de[0]
+            J[4] = weight * dh_de[1]
+            for q in range(3):  # d(R^T m)/d angle = dR^T m
+                J[8 + q] = 0.0
+                for k in range(3):
+                    J[8 + q] += dh_dv[k] * (dR[q][0][k] * m[0] + dR[q][1][k] * m[1] + dR[q][2][k] * m[2])
+                J[8 + q] *= weight
+            for j in range(11):
+                Jtr[j] += w * J[j] * r
+                for k in range(j, 11):
+                    JtJ[j, k] += w * J[j] * J[k]
+        if jacobian:
+            for j in range(11):
+                for k in range(j):
+                    JtJ[j, k] = JtJ[k, j]
+    return cost

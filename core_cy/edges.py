@@ -1,0 +1,126 @@
+"""Edge samples: points on a silhouette's outline, placed to a fraction of a pixel.
+
+A segmentation decides pixel by pixel, and where the object's colour mixes
+with the background's (anti-aliasing, lens blur, JPEG's coarse colour) its
+decision moves the outline by up to a pixel or two, depending on the colours
+and the thresholds. The edge itself is where the image is half-way between
+the object's colour and the background's: each sample starts on the
+segmented outline and moves, along the outline's normal, to that crossing in
+the photograph (or, for a supplied mask, to the mask's own half-way line).
+Samples on the image's border are dropped: there the object is cut off, not
+outlined.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ._edges_cy import edge_crossings
+from .camera import Camera
+from .errors import SilhouetteError
+
+__all__ = ["edge_samples", "silhouette_outline"]
+
+# Half-length of the profile across the edge, px: the segmented outline lies within a pixel or two of
+# the edge, and the colours at the profile's ends (its outer pixel) must be the object's and the background's.
+_REACH_PX = 3.0
+_STEP_PX = 0.25
+# Below this difference between the object's and the background's colour (grey levels, the length
+# of the BGR difference) the crossing is noise: the segmented outline is kept.
+_MIN_CONTRAST = 24.0
+# The outline's direction is taken over this many contour steps either side.
+_TANGENT_SPAN = 3
+# Samples this close to the image border (px) are dropped: the object may run on beyond it.
+_BORDER_PX = 2
+# A mask's edge is found on the mask blurred by this much (px), within its box grown by the margin.
+_MASK_BLUR_PX = 1.2
+_MASK_MARGIN = 8
+
+
+def silhouette_outline(silhouette: np.ndarray) -> np.ndarray:
+    """The outer contour of a silhouette's largest region, (M, 2) int32 pixel coordinates, in order.
+
+    Raises
+    ------
+    SilhouetteError
+        If the silhouette is empty.
+    """
+    contours, _ = cv2.findContours(silhouette, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        raise SilhouetteError("the silhouette is empty")
+    return max(contours, key=cv2.contourArea).reshape(-1, 2)
+
+
+def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray | None = None, *,
+                 count: int = 64, camera: Camera | None = None) -> np.ndarray:
+    """Up to ``count`` points on the object's edge, spread evenly along its outline.
+
+    Parameters
+    ----------
+    outline : (M, 2) ndarray of int
+        The silhouette's outer contour, in order (:func:`silhouette_outline`).
+    silhouette : (H, W) ndarray of uint8
+        The silhouette the outline belongs to, 0 or 255.
+    image : (H, W, 3) ndarray of uint8, optional
+        The photograph it was segmented from; without it the samples are
+        placed on the silhouette's own half-way line.
+    count : int
+        How many samples to take (fewer remain when some lie on the border).
+    camera : Camera, optional
+        With lens distortion, the samples are moved to where the ideal
+        pinhole camera would see them.
+
+    Returns
+    -------
+    (N, 2) ndarray of float64
+        Pixel coordinates (column, row) of the ideal pinhole image, N <= count.
+
+    Examples
+    --------
+    A mask of pixels 30-69 by 20-59: its edge runs half-way between the
+    outermost pixels inside and the first outside, x = 29.5 and 69.5,
+    y = 19.5 and 59.5.
+
+    >>> square = np.zeros((80, 100), np.uint8)
+    >>> square[20:60, 30:70] = 255
+    >>> points = edge_samples(silhouette_outline(square), square, count=8)
+    >>> points[1::2].round(1).tolist()  # the others sit on corners, which blur into a curve
+    [[29.5, 39.0], [49.0, 59.5], [69.5, 40.0], [50.0, 19.5]]
+    """
+    outline = np.asarray(outline)
+    length = len(outline)
+    if length < 2 * _TANGENT_SPAN + 1:
+        return np.zeros((0, 2))
+    picked = np.unique(np.linspace(0, length, count, endpoint=False).astype(np.intp))
+    after, before = outline[(picked + _TANGENT_SPAN) % length], outline[picked - _TANGENT_SPAN]
+    tangent = (after - before).astype(np.float64)
+    # Across the outline; whether it points out or in does not matter: the crossing is found
+    # between the colours at the profile's two ends, whichever is the object's.
+    normals = np.column_stack([tangent[:, 1], -tangent[:, 0]])
+    lengths = np.linalg.norm(normals, axis=1)
+    points = outline[picked].astype(np.float64)
+    height, width = silhouette.shape
+    keep = ((lengths > 0) & (points[:, 0] >= _BORDER_PX) & (points[:, 1] >= _BORDER_PX)
+            & (points[:, 0] <= width - 1 - _BORDER_PX) & (points[:, 1] <= height - 1 - _BORDER_PX))
+    points, normals = points[keep], normals[keep] / lengths[keep, None]
+    shift = np.zeros(len(points))
+    found = np.zeros(len(points), np.uint8)
+    if image is not None:
+        edge_crossings(image, points, normals, _REACH_PX, _STEP_PX, _MIN_CONTRAST, shift, found)
+    if not found.all():
+        # A mask knows its edge only to the pixel; blurred along the edge, a slanted staircase of
+        # pixels averages to the line it steps along.
+        missing = found == 0
+        x, y, w, h = cv2.boundingRect(outline)
+        x0, y0 = max(0, x - _MASK_MARGIN), max(0, y - _MASK_MARGIN)
+        x1, y1 = min(width, x + w + _MASK_MARGIN), min(height, y + h + _MASK_MARGIN)
+        smooth = cv2.GaussianBlur(silhouette[y0:y1, x0:x1], (0, 0), _MASK_BLUR_PX, borderType=cv2.BORDER_REPLICATE)
+        rest, rest_found = np.zeros(missing.sum()), np.zeros(missing.sum(), np.uint8)
+        edge_crossings(smooth[:, :, None], np.ascontiguousarray(points[missing] - (x0, y0)),
+                       np.ascontiguousarray(normals[missing]), _REACH_PX, _STEP_PX, 1.0, rest, rest_found)
+        shift[missing] = rest
+    points += shift[:, None] * normals
+    if camera is not None and camera.dist is not None and len(points):
+        points = cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K).reshape(-1, 2)
+    return points

@@ -1,0 +1,243 @@
+"""Fit a superquadric to the silhouettes themselves (DESIGN.md §1, step 7).
+
+What the cameras saw is each silhouette's edge: the ray through an edge point
+just touches the object. For the superquadric that means: among the planes
+that contain the ray, the one its outline (seen from that camera) says is
+tangent must be tangent to it, so its support function h along the plane's
+normal m meets the plane, ``h(m) = m . c``. The residual of an edge sample is
+the gap ``h(m) - m . c`` turned into pixels (through the sample's depth): the
+signed distance, in the image, from the sample to the superquadric's outline
+(positive inside). The normal comes from the outline where it passes nearest
+the sample, re-taken at every step; since the gap is stationary in the plane's
+tilt about the ray at the true tangent (an envelope), the step's Jacobian
+needs only h's derivatives at a fixed m, which the support function gives in
+closed form.
+
+Every sample of every view is one residual under the same robust loss, so a
+view added is evidence added, with nothing to retune; the support plane, when
+given, is one more tangent plane (the object stands on it). Levenberg-Marquardt
+from a start (the point fit) minimises the sum.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
+from .errors import FitError
+from .least_squares import Descent
+from .superquadric import Superquadric, _rotation
+
+__all__ = ["SilhouetteFit", "fit_to_silhouettes"]
+
+# The outline is the convex hull of the surface on this grid, of the points where it turns away from
+# the camera (signed powers put the points where the surface bends, so a box's edges are as well drawn
+# as an ellipsoid's rim).
+_ETA = -np.pi / 2 + np.pi * np.arange(1, 17) / 17
+_OMEGA = -np.pi + 2 * np.pi * np.arange(40) / 40
+# Exponents above 1 pinch the shape (a diamond, a star): no object a robot picks, and a square
+# section seen as a diamond turned 45 degrees is a false minimum on the way to the box.
+_SHAPE_BOUNDS = (0.1, 1.0)
+# The polygon outline's normals are off by up to half its angle between vertices (a few degrees):
+# the residual tries the plane turned about the ray by this much either way (radians).
+_TILT = 0.05
+# Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object.
+_LOG_SIZE_RANGE = 4.0
+# With several starts, each takes this many steps before the best goes on.
+_SEARCH_ITERATIONS = 2
+# Edge samples lie this close (px, RMS) to the true outline: colour edges ~0.15, binary masks ~0.3.
+_NOISE_PX = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class SilhouetteFit:
+    """Result of :func:`fit_to_silhouettes`.
+
+    Attributes
+    ----------
+    superquadric : Superquadric
+    rms_px : float
+        RMS distance (pixels) of the edge samples from the superquadric's outlines
+        (read from the robust cost: exact when they are all alike).
+    iterations : int
+        Levenberg-Marquardt steps tried from the start that won.
+    """
+
+    superquadric: Superquadric
+    rms_px: float
+    iterations: int
+
+
+@dataclass(frozen=True, eq=False)
+class _Views:
+    """The cameras and their edge samples, packed for the kernels."""
+
+    projections: np.ndarray  # (V, 3, 4)
+    centres: np.ndarray  # (V, 3)
+    cameras: list  # (K, R camera-to-world, centre, 1 / object depth) per view
+    samples: list  # (N_v, 2) per view
+    rows: list  # slices of the planes array, per view
+    count: int
+    pixel_scale: float  # the views' mean f / depth: pixels per world unit at the object
+
+    @classmethod
+    def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
+        projections, centres, packed, samples, rows, scales, row = [], [], [], [], [], [], 0
+        for camera, view_samples in zip(cameras, edges):
+            view_samples = np.ascontiguousarray(view_samples, dtype=np.float64).reshape(-1, 2)
+            (_, depth) = camera.project(reference[None])
+            if depth[0] <= 0:
+                raise FitError("the object lies behind the camera", view=camera.view)
+            scales.append(camera.focal_length / depth[0])
+            if not len(view_samples):
+                continue
+            projections.append(camera.projection)
+            centres.append(camera.center)
+            packed.append((camera.K, np.ascontiguousarray(camera.T_world_cam[:3, :3]),
+                           np.ascontiguousarray(camera.center), 1.0 / depth[0]))
+            samples.append(view_samples)
+            rows.append(slice(row, row + len(view_samples)))
+            row += len(view_samples)
+        return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
+                   packed, samples, rows, row, float(np.mean(scales)))
+
+
+class _Problem:
+    """The silhouette fit about one start: parameters to tangent planes, cost and normal equations."""
+
+    def __init__(self, start: Superquadric, views: _Views, support_plane, plane_weight, loss_scale):
+        self.R0 = np.ascontiguousarray(start.T_world_object[:3, :3])
+        self.t0 = start.T_world_object[:3, 3].copy()
+        self.scale = float(np.mean(start.size))
+        self.views, self.support_plane, self.plane_weight, self.loss_scale = (
+            views, support_plane, plane_weight, loss_scale)
+        grid = len(_ETA) * len(_OMEGA) + 2
+        self.grid = np.empty((grid, 6))
+        self.uv = np.empty((len(views.samples), grid, 2), np.float32)
+        self.counts = np.empty(len(views.samples), np.intp)
+        self.planes, self.trial_planes = np.empty((views.count, 9)), np.empty((views.count, 9))
+        self.x0 = np.concatenate([np.log(start.size), np.clip(start.shape, *_SHAPE_BOUNDS), np.zeros(6)])
+        self.low, self.high = np.full(11, -np.inf), np.full(11, np.inf)
+        self.low[3:5], self.high[3:5] = _SHAPE_BOUNDS
+        self.low[:3], self.high[:3] = self.x0[:3] - _LOG_SIZE_RANGE, self.x0[:3] + _LOG_SIZE_RANGE
+
+    def superquadric(self, x: np.ndarray) -> Superquadric:
+        T = np.eye(4)
+        T[:3, :3] = _rotation(self.R0, x[8:11])
+        T[:3, 3] = self.t0 + self.scale * x[5:8]
+        return Superquadric(np.exp(x[:3]), x[3:5], T)
+
+    def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
+        views, planes = self.views, self.trial_planes
+        if not outline_points(x, self.R0, self.t0, self.scale, _ETA, _OMEGA, views.projections, views.centres,
+                              self.grid, self.uv, self.counts):
+            return np.inf  # the superquadric reaches behind a camera
+        for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
+                zip(views.samples, views.rows, views.cameras)):
+            hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
+            if len(hull) < 3:
+                return np.inf
+            tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[rows])
+        return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
+                                self.plane_weight, _TILT, JtJ, Jtr)
+
+    def keep(self, accepted: bool) -> None:
+        if accepted:
+            self.planes, self.trial_planes = self.trial_planes, self.planes
+
+
+def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
+    """The superquadric's frame turned so that its x, then its y axis becomes z (sizes and the two
+    exponents following: the profile across the new z had the old profile's exponent)."""
+    turned = []
+    R, e1, e2 = sq.T_world_object[:3, :3], sq.shape[0], sq.shape[1]
+    for order in ((1, 2, 0), (2, 0, 1)):
+        T = sq.T_world_object.copy()
+        T[:3, :3] = R[:, order]
+        turned.append(Superquadric(sq.size[list(order)], [e2, e1], T))
+    return turned
+
+
+def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
+                       max_iterations: int = 40) -> SilhouetteFit:
+    """Refine a superquadric until its outline in every view runs through that view's edge samples.
+
+    Parameters
+    ----------
+    starts : Superquadric or sequence of Superquadric
+        Where to start (the point fit's candidates); each must lie in front
+        of every camera. With several, each takes a few steps and the one
+        whose outlines then fit best goes on.
+    cameras : sequence of Camera
+        Ideal pinhole cameras of the views.
+    edges : sequence of (N_i, 2) array_like
+        Each view's edge samples, pixels of the ideal pinhole image
+        (:func:`core_cy.edges.edge_samples`); a view may have none.
+    support_plane : (4,) array_like, optional
+        ``[nx, ny, nz, d]`` with a unit normal: the object stands on it, where
+        ``n . x + d >= 0``.
+    loss_scale : float
+        Residuals (pixels) up to about this size count quadratically, larger
+        ones linearly: the edge's noise, not a property of the views.
+    max_iterations : int
+        Levenberg-Marquardt steps at most, after the choice among the starts.
+
+    Returns
+    -------
+    SilhouetteFit
+
+    Raises
+    ------
+    FitError
+        If there are fewer than 11 samples in all, or a start lies behind a camera.
+    """
+    starts = [starts] if isinstance(starts, Superquadric) else list(starts)
+    if not starts:
+        raise FitError("need at least one start")
+    if len(cameras) != len(edges):
+        raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
+    views = _Views.pack(cameras, edges, starts[0].T_world_object[:3, 3])
+    if views.count < 11:
+        raise FitError(f"need at least 11 edge samples (one per parameter), got {views.count}")
+    if support_plane is None:
+        plane, plane_weight = np.zeros(4), 0.0
+    else:
+        # The support plane is as sure as a whole view's samples, each seen at the views' mean scale.
+        plane = np.asarray(support_plane, dtype=np.float64)
+        plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
+    # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
+    tolerance = 0.5 * 1e-4 * views.count
+
+    def descend_from(start: Superquadric) -> Descent:
+        problem = _Problem(start, views, plane, plane_weight, float(loss_scale))
+        return Descent(problem, problem.x0, problem.low, problem.high, tolerance)
+
+    descents = [descend_from(start) for start in starts]
+    if len(descents) > 1:
+        for descent in descents:
+            descent.run(_SEARCH_ITERATIONS)
+    best = min(descents, key=lambda descent: descent.cost)
+    if not np.isfinite(best.cost):
+        raise FitError("every start reaches behind a camera")
+    best.run(max_iterations)
+    # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
+    # with another of its axes as z can only be reached by a jump, so try both, each going on only
+    # if a few steps bring it below the best so far. Not needed where the outlines already run
+    # through the samples to within the edges' own noise: no other body can explain them better.
+    if _rms(best.cost, views.count, loss_scale) > _NOISE_PX:
+        for turned in _other_axes_as_z(best.problem.superquadric(best.x)):
+            other = descend_from(turned).run(_SEARCH_ITERATIONS)
+            if other.cost < best.cost:
+                best = other.run(max_iterations)
+    rms = _rms(best.cost, views.count, loss_scale)
+    return SilhouetteFit(best.problem.superquadric(best.x), rms, best.iterations)
+
+
+def _rms(cost: float, count: int, loss_scale: float) -> float:
+    """The RMS residual (px) a cost of the soft-L1 loss stands for (exactly, were all residuals equal)."""
+    per_sample = cost / count / loss_scale**2
+    return loss_scale * math.sqrt(per_sample * (per_sample + 2.0))
