@@ -41,6 +41,7 @@ $(STAMP): $(BIN)/python pyproject.toml setup.py $(wildcard core_cy/*.pyx) | pyth
 	touch $@
 
 test: $(STAMP)
+	$(BIN)/python -m mypy
 	$(BIN)/python -m pytest
 
 demo: $(STAMP)

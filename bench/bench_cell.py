@@ -8,18 +8,20 @@ prints tables; asserts nothing.
     instantly. Overhead = time from submit to result in the client's hands,
     minus what the job really waited for, as the workers reported it: robot
     moves (MoveReply.duration_s), snapshots (CaptureInfo.duration_s) and the
-    reconstruction round trip (ScanResult.durations_s). Target: median <= 5 ms.
-    Beside it, the floor of this design: the same job's round trips (one in
-    place of the submit, then 3 moves and 3 captures) made back to back by
-    this process straight to the same workers, with no daemon, store, events
-    or recording, overhead counted the same way.
+    reconstruction round trip (ScanResult.durations_s). Beside it, the floor
+    of this design: the same job's round trips (one in place of the submit,
+    then 3 moves and 3 captures) made back to back by this process straight
+    to the same workers, with no daemon, store, events or recording, overhead
+    counted the same way, measured in the same run (so that the ratio does
+    not depend on the machine's load). Target: median overhead <= 1.5 x the
+    floor.
 (b) Pipelining: every move takes 1 s; N jobs submitted together. Bound:
     N x (3 moves + 3 captures) + one reconstruction, with the moves and
     captures as the workers reported them (a snapshot's time varies with what
     else the machine does) and the last job's reconstruction round trip.
     Beside it, what a job's moves and captures cost beyond what the workers
     report with no daemon (the floor of (a) less the submit): time the bound
-    does not allow for.
+    does not allow for. Target: total within 1.5 % of the bound.
 
     .venv/bin/python bench/bench_cell.py [--jobs 20] [--pipeline-jobs 10] [--move-time 1.0]
 """
@@ -131,8 +133,9 @@ async def overhead(n_jobs: int, run_dir: Path) -> float:
         print(f"{label:<40}{1000 * statistics.median(values):9.2f}{1000 * _pct(values, 0.9):9.2f}"
               f"{1000 * min(values):9.2f}{1000 * max(values):9.2f}")
     median, floor = 1000 * statistics.median(columns["overhead"]), 1000 * statistics.median(bare)
-    print(f"target: median overhead <= 5 ms -> {'met' if median <= 5 else 'NOT met'} "
-          f"(the floor of this design here: {floor:.1f} ms)")
+    ratio = median / floor
+    print(f"overhead / floor = {median:.1f} / {floor:.1f} ms = {ratio:.2f} x; target <= 1.5 x -> "
+          f"{'met' if ratio <= 1.5 else 'NOT met'}")
     print(f"A query the robot answers at once takes {1000 * round_trip:.2f} ms (median) here. The floor is the "
           f"job's round trips\n(one for the submit, 3 moves, 3 captures) made by this process straight to the "
           f"workers: the\nmessages and the workers' handling of them, before any daemon, store, event or "
@@ -182,9 +185,10 @@ async def pipelining(n_jobs: int, move_time: float, run_dir: Path, lane_floor: f
     waited = sum(_span(e, JobState.RECONSTRUCTING, JobState.SUCCEEDED) for e in events[:-1])
     print(f"  reconstruction (reconstructing -> succeeded) overlapping the next job's motion: "
           f"{overlapped:.3f} s of {waited:.3f} s")
+    excess = 100 * (total - actual) / actual
     print(f"  -> total is {'within' if total <= actual else 'OVER'} the bound by {abs(actual - total):.3f} s "
-          f"({100 * (total - actual) / actual:+.2f} %): orchestration {1000 * (total - actual) / n_jobs:.0f} ms "
-          f"per job")
+          f"({excess:+.2f} %): orchestration {1000 * (total - actual) / n_jobs:.0f} ms per job; target within "
+          f"1.5 % -> {'met' if excess <= 1.5 else 'NOT met'}")
     print(f"  the lane's round trips alone, with no daemon, cost about {1000 * lane_floor:.0f} ms per job beyond what "
           f"the workers report;\n  the bound leaves no time for them.")
 

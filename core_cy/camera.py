@@ -9,7 +9,7 @@ distortion model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -73,6 +73,9 @@ class Camera:
     T_world_cam: np.ndarray
     dist: np.ndarray | None = None
     view: int | None = None
+    # Derived in __post_init__: every stage projects through them.
+    _centre: np.ndarray = field(init=False, repr=False)
+    _projection: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         view = self.view
@@ -105,7 +108,6 @@ class Camera:
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "T_world_cam", T)
         object.__setattr__(self, "dist", dist)
-        # Derived once: every stage projects through them.
         R = T[:3, :3]
         centre = np.ascontiguousarray(T[:3, 3])
         projection = K @ np.hstack([R.T, -(R.T @ centre)[:, None]])

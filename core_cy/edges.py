@@ -122,5 +122,6 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
         shift[missing] = rest
     points += shift[:, None] * normals
     if camera is not None and camera.dist is not None and len(points):
-        points = cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K).reshape(-1, 2)
+        points = np.asarray(cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K),
+                            dtype=np.float64).reshape(-1, 2)
     return points

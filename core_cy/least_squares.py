@@ -10,7 +10,7 @@ from the best.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -34,7 +34,10 @@ class Problem(Protocol):
         ...
 
 
-class Descent:
+ProblemT = TypeVar("ProblemT", bound=Problem)
+
+
+class Descent(Generic[ProblemT]):
     """Levenberg-Marquardt on ``problem`` from ``x`` within ``[low, high]``; :meth:`run` continues.
 
     Attributes ``x``, ``cost`` (of ``x``), ``iterations`` (steps tried) and
@@ -43,7 +46,7 @@ class Descent:
     what counts as nothing where the cost itself is near 0).
     """
 
-    def __init__(self, problem: Problem, x, low, high, tolerance: float = 0.0):
+    def __init__(self, problem: ProblemT, x, low, high, tolerance: float = 0.0):
         self.problem, self.tolerance = problem, float(tolerance)
         self.low = np.ascontiguousarray(low, dtype=np.float64)
         self.high = np.ascontiguousarray(high, dtype=np.float64)
@@ -56,7 +59,7 @@ class Descent:
         self.damping, self.iterations = _DAMPING, 0
         self.converged = not np.isfinite(self.cost)
 
-    def run(self, iterations: int) -> Descent:
+    def run(self, iterations: int) -> Descent[ProblemT]:
         """Take up to ``iterations`` more steps; returns self."""
         stop = self.iterations + iterations
         while not self.converged and self.iterations < stop:

@@ -86,7 +86,7 @@ def _matches(image: np.ndarray, segmentation: Segmentation) -> np.ndarray:
         if lower[0] <= upper[0]:
             return cv2.inRange(hsv, lower, upper)
         # the hue range wraps around 0
-        return cv2.inRange(hsv, lower, (179, *upper[1:])) | cv2.inRange(hsv, (0, *lower[1:]), upper)
+        return cv2.bitwise_or(cv2.inRange(hsv, lower, (179, *upper[1:])), cv2.inRange(hsv, (0, *lower[1:]), upper))
     grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     mode = cv2.THRESH_BINARY_INV if segmentation.invert else cv2.THRESH_BINARY
     return cv2.threshold(grey, segmentation.value, 255, mode)[1]
@@ -199,8 +199,10 @@ def mask_with_outline(mask: np.ndarray, *, view: int | None = None) -> tuple[np.
         raise SilhouetteError("the silhouette is empty: no pixel matches the mask", view=view)
     box = _grown(cv2.boundingRect(mask), _ROI_MARGIN, mask.shape)
     raw = np.where(mask[box[1]:box[3], box[0]:box[2]] > 0, np.uint8(255), np.uint8(0))
+    found = _cleaned(raw, mask.shape, box)
     # The box holds every object pixel: the region cannot run into a cut.
-    return _checked(*_cleaned(raw, mask.shape, box), what="mask", view=view)
+    assert found is not None
+    return _checked(*found, what="mask", view=view)
 
 
 def silhouette_from_mask(mask: np.ndarray, *, view: int | None = None) -> np.ndarray:

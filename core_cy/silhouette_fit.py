@@ -158,7 +158,7 @@ def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
     for order in ((1, 2, 0), (2, 0, 1)):
         T = sq.T_world_object.copy()
         T[:3, :3] = R[:, order]
-        turned.append(Superquadric(sq.size[list(order)], [e2, e1], T))
+        turned.append(Superquadric(sq.size[list(order)], np.array([e2, e1]), T))
     return turned
 
 

@@ -361,13 +361,13 @@ def _starts(points: np.ndarray, search: np.ndarray) -> list[tuple[int, np.ndarra
 
 def _check_options(inside_weight, outside_loss, cauchy_scale, max_iterations, subsample) -> None:
     for name, value in (("inside_weight", inside_weight), ("cauchy_scale", cauchy_scale)):
-        if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+        if not (isinstance(value, numbers.Real) and math.isfinite(value) and float(value) > 0):
             raise FitError(f"{name} must be a positive number, got {value!r}")
     if outside_loss not in ("cauchy", "squared"):
         raise FitError(f"outside_loss must be 'cauchy' or 'squared', got {outside_loss!r}")
-    if not (isinstance(max_iterations, numbers.Integral) and max_iterations >= 1):
+    if not (isinstance(max_iterations, numbers.Integral) and int(max_iterations) >= 1):
         raise FitError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if subsample is not None and not (isinstance(subsample, numbers.Integral) and subsample >= 11):
+    if subsample is not None and not (isinstance(subsample, numbers.Integral) and int(subsample) >= 11):
         raise FitError(f"subsample must be None or an integer >= 11, got {subsample!r}")
 
 
