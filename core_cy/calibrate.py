@@ -109,8 +109,8 @@ def find_corners(image: ArrayLike, board: Sequence[int]) -> NDArray[np.float32] 
     if not found:
         return None
     grid = corners.reshape(rows, cols, 2)
-    spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
-                  np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
+    spacing = min(float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
+                  float(np.min(np.linalg.norm(np.diff(grid, axis=1), axis=2))))
     # The search window must stay within the four squares meeting at a corner, or a neighbour pulls it.
     half = int(np.clip(0.4 * spacing, 2, 11))
     corners = cv2.cornerSubPix(grey, np.ascontiguousarray(grid.reshape(-1, 1, 2)), (half, half), (-1, -1), _SUBPIX)

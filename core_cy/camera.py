@@ -239,7 +239,7 @@ def _distortion_error(K: np.ndarray, dist: np.ndarray) -> str | None:
     with np.errstate(all="ignore"):
         lens, _ = cv2.projectPoints(ideal, np.zeros(3), np.zeros(3), np.eye(3), dist)
         moved = np.linalg.norm(lens.reshape(-1, 2) - ideal[:, :2], axis=1)
-        half_diagonal = np.linalg.norm(ideal[:, :2], axis=1).max()
+        half_diagonal = float(np.max(np.linalg.norm(ideal[:, :2], axis=1)))
         worst = float(moved.max() / half_diagonal) if np.isfinite(moved).all() else np.inf
     if worst <= 1.0:
         return None

@@ -78,8 +78,8 @@ def hull_iou(uv: np.ndarray, silhouette: np.ndarray, box=None) -> float:
         cv2.fillConvexPoly(covered, fixed_point, 1, shift=_SUBPIXEL_BITS)
     covered = covered.view(bool)
     object_pixels = silhouette[y0:y1, x0:x1] != 0
-    union = np.count_nonzero(object_pixels | covered)
-    return float(np.count_nonzero(object_pixels & covered) / union) if union else 0.0
+    union = int(np.count_nonzero(object_pixels | covered))
+    return int(np.count_nonzero(object_pixels & covered)) / union if union else 0.0
 
 
 def radial_residual(superquadric: Superquadric, points) -> float:

@@ -69,8 +69,8 @@ def volumetric_iou(a: Superquadric, b: Superquadric, n: int = 200_000, seed: int
                        & (np.linalg.norm(samples - centre_b, axis=1) <= radius_b))
     weight = np.where(in_both_spheres, 0.5, 1.0)
     inside_a, inside_b = inside_outside(samples, a) <= 1, inside_outside(samples, b) <= 1
-    union = weight[inside_a | inside_b].sum()
-    return float(weight[inside_a & inside_b].sum() / union) if union > 0 else 0.0
+    union = float(weight[inside_a | inside_b].sum())
+    return float(weight[inside_a & inside_b].sum()) / union if union > 0 else 0.0
 
 
 def centre_error(a: Superquadric, b: Superquadric) -> float:
