@@ -70,9 +70,12 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
         try:
             return asyncio.run(_connected(action, args, config))
         except NoResponder:
-            # Every query of these commands goes to the daemon: nobody answering means there is none.
+            # Every query of these commands goes to the daemon: nobody answering means there is none,
+            # or (Zenoh's access control drops a denied query unanswered) that this user may not ask it.
+            denied = (f", or the router's access control does not let user {config.zenoh.user!r} ask it"
+                      if config.zenoh.user is not None else "")
             print(f"robocell {args.command}: no cell daemon is running for cell {config.cell_id} at "
-                  f"{config.zenoh.router}", file=sys.stderr)
+                  f"{config.zenoh.router}{denied}", file=sys.stderr)
             return 1
         except (CellError, TimeoutError) as exc:
             print(f"robocell {args.command}: {exc}", file=sys.stderr)

@@ -329,6 +329,21 @@ def test_an_observer_reads_but_cannot_submit_or_cancel(cell):
     assert dashboard.cell_status().workers == {"robot": True, "camera": True}
 
 
+def test_a_denied_command_says_the_user_may_not_ask(cell, tmp_path, monkeypatch, capsys):
+    """Zenoh drops a denied query unanswered: the command line names that reason beside a missing daemon."""
+    from robocell.main import main
+
+    config = json.loads(cell.config_path.read_text())
+    config["zenoh"]["user"] = "dashboard"
+    path = tmp_path / "dashboard.json"
+    path.write_text(json.dumps(config))
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", _password("dashboard"))
+    assert main(["--config", str(path), "cancel", "no-such-job"]) == 1
+    assert capsys.readouterr().err == (
+        f"robocell cancel: no cell daemon is running for cell {cell.config.cell_id} at {cell.endpoint}, or the "
+        f"router's access control does not let user 'dashboard' ask it\n")
+
+
 def test_a_client_cannot_move_the_robot_or_take_pictures(cell):
     moves, shots = cell.robot.moves, cell.camera.shots
     home = cell.config.robot.home
