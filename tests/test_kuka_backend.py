@@ -14,8 +14,8 @@ from workers.sim.kuka import SimKuka
 from workers.robot.kuka import variables as v
 from workers.robot.kuka.backend import KukaBackend, check_move, make_client
 from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
-from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaConnectionError, KukaError,
-                                       KukaTimeout, Unreachable)
+from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaConnectionError,
+                                       KukaError, KukaTimeout, Unreachable)
 
 PROTOCOLS = ["kvp", "opc"]
 FAST = {"speed_mm_s": 20000.0, "rotation_deg_s": 20000.0}
@@ -259,9 +259,9 @@ def test_a_gripper_that_does_not_let_go(protocol):
         async with kuka_cell(protocol, sim={"grip_in": 7, "grip_timeout_s": 0.2}) as (controller, backend):
             assert (await backend.grip(True)).holding is True
             controller.inject("grip_stuck")  # the input keeps saying it holds
-            with pytest.raises(GripperTimeout, match=r"the gripper did not let go: its input \$IN\[7\] \(robocell.dat "
-                                                     r"GRIP_IN\) still said it held a part after 0.2 s \(GRIP_TIMEOUT\); "
-                                                     r"it may still hold it") as failed:
+            words = (r"the gripper did not let go: its input \$IN\[7\] \(robocell.dat GRIP_IN\) still said it held "
+                     r"a part after 0.2 s \(GRIP_TIMEOUT\); it may still hold it")
+            with pytest.raises(GripperTimeout, match=words) as failed:
                 await backend.grip(False)
             assert failed.value.code == v.ErrorCode.GRIP_TIMEOUT
             assert not controller.gripper_output and controller.gripper_input

@@ -71,7 +71,8 @@ def test_scan_and_pick_on_the_simulated_kuka(kuka_config):
         pick = result.pick
         assert pick is not None and pick.held is True and pick.placed, pick
         assert pick.reason.startswith("held: $IN[1] confirmed it in") and pick.width is None
-        grips = [line for line in cell.log("robot").splitlines() if f"for job {job.job_id}" in line and "gripper" in line]
+        grips = [line for line in cell.log("robot").splitlines()
+                 if f"for job {job.job_id}" in line and "gripper" in line]
         assert [line.split("gripper ")[1].split()[0] for line in grips] == ["open", "closed", "open"]
         # The controller says the flange ended where the pick backs away from the place (to 1 mm).
         poses = pick_poses(np.asarray(result.grasps[pick.grasp].T_world_grasp), request.pick, config)

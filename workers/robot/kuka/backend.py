@@ -130,8 +130,8 @@ class KukaBackend(RobotBackend):
     def from_config(cls, config: KukaConfig, workspace: Workspace) -> "KukaBackend":
         return cls(make_client(config), workspace, max_override=config.max_override, override=config.override,
                    motion=config.motion, ack_timeout_s=config.ack_timeout_s, move_timeout_s=config.move_timeout_s,
-                   grip_timeout_s=config.grip_timeout_s, poll_period_s=config.poll_period_s, reached_tolerance_mm=config.reached_tolerance_mm,
-                   reached_tolerance_deg=config.reached_tolerance_deg)
+                   grip_timeout_s=config.grip_timeout_s, poll_period_s=config.poll_period_s,
+                   reached_tolerance_mm=config.reached_tolerance_mm, reached_tolerance_deg=config.reached_tolerance_deg)
 
     async def open(self) -> None:
         """Connect and read the flange's pose (so that :meth:`pose` has one)."""
@@ -232,7 +232,8 @@ class KukaBackend(RobotBackend):
         self._raise_if_stopped(values, f"before the {what}")
         if _int(values, v.RC_CMD) != v.Command.NONE:
             raise ControllerBusy(f"{self.client.address}: RC_CMD is {values[v.RC_CMD.name]}, not 0: the program "
-                                 "still holds a command (a move, or a program stopped mid-move: reset it)")
+                                 "still holds a command (one in progress, or a program stopped in the middle of one: "
+                                 "reset it)")
         # Never the id the controller last finished, even after this bridge restarted.
         return _int(values, v.RC_DONE_ID) % 32767 + 1
 

@@ -8,7 +8,7 @@
     ├── KukaProtocolError     a malformed or unexpected message on the wire
     ├── KukaVariableError     the controller would not read or write a variable (unknown name, bad value)
     ├── ControllerBusy        the controller still holds a command (RC_CMD is not 0): nothing was written
-    └── GripperTimeout        the gripper's input did not confirm that it let go (also a ``wire.errors.RobotError``)
+    └── GripperTimeout        the gripper's input did not confirm that it let go (a ``wire.errors.RobotError``)
 
     wire.errors.MoveRefused   the bridge refused a move before writing anything: ``limit`` names the limit
     wire.errors.MoveFailed    the controller took the move but did not finish it
