@@ -162,12 +162,17 @@ def add_kuka_arguments(parser: argparse.ArgumentParser) -> None:
 def _kuka(args: argparse.Namespace) -> int:
     import asyncio
 
+    from wire.config import load_config
     from wire.process import run_until_stopped
     from workers.sim import kuka
+    from workers.sim.robot import SceneGripper
+
+    # The gripper's input confirms a hold where the configuration's [gripper] holds its [sim] object.
+    holds = SceneGripper.from_config(load_config(args.config)).holds
 
     async def serve(stop: asyncio.Event) -> None:
         await kuka.main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,
-                        rotation_deg_s=args.rotation_speed)
+                        rotation_deg_s=args.rotation_speed, holds=holds)
 
     return run_until_stopped(serve, "simulated KUKA controller")
 
@@ -186,4 +191,5 @@ def register(commands: Commands) -> None:
                                       "standard benchmark set, or scans of one object (--shape)."))
     sim.add("camera", _camera, help="serve the simulated Axis camera at camera.url, posed by the cell's robot")
     add_kuka_arguments(sim.add("kuka", _kuka, help="a simulated KUKA controller speaking KukaVarProxy (kvp) "
-                                                  "or the OpenOPC gateway (opc)"))
+                                                  "or the OpenOPC gateway (opc); its gripper holds what the "
+                                                  "configuration's [gripper] holds of its [sim] object"))

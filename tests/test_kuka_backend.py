@@ -14,8 +14,8 @@ from workers.sim.kuka import SimKuka
 from workers.robot.kuka import variables as v
 from workers.robot.kuka.backend import KukaBackend, check_move, make_client
 from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
-from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, KukaConnectionError, KukaError, KukaTimeout,
-                                       Unreachable)
+from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaConnectionError,
+                                       KukaError, KukaTimeout, Unreachable)
 
 PROTOCOLS = ["kvp", "opc"]
 FAST = {"speed_mm_s": 20000.0, "rotation_deg_s": 20000.0}
@@ -224,6 +224,85 @@ def test_command_ids_never_repeat_the_last_finished_one(protocol):
                 controller._ints[v.RC_DONE_ID.name] = done_id  # as left by an earlier bridge
                 await backend.move(flange(0.6, 0.0, 0.3 + 0.01 * expected), lambda pose, moving: None)
                 assert controller.commands[-1][0] == expected == controller.read(v.RC_DONE_ID.name)
+
+    run(scenario())
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_the_gripper_closes_where_the_arm_stands_and_says_what_its_input_says(protocol):
+    low = lambda pose: pose[2, 3] < 0.35  # the simulated gripper holds a part only below 35 cm
+    async def scenario():
+        async with kuka_cell(protocol, sim={"holds": low, "grip_in": 7, "grip_timeout_s": 0.2}) as (controller,
+                                                                                                     backend):
+            await backend.move(flange(0.6, 0.0, 0.3), lambda pose, moving: None)
+            grip = await backend.grip(True)
+            assert (grip.closed, grip.holding, grip.width) == (True, True, None)
+            assert grip.reason.startswith("held: $IN[7] confirmed it in 0.05 s")
+            assert controller.gripper_output and controller.gripper_input
+            grip = await backend.grip(False)
+            assert (grip.closed, grip.holding) == (False, None)
+            assert not controller.gripper_output and not controller.gripper_input
+            await backend.move(flange(0.6, 0.0, 0.4), lambda pose, moving: None)
+            grip = await backend.grip(True)  # nothing between the jaws up here: a miss, not an error
+            assert (grip.closed, grip.holding) == (True, False)
+            assert grip.reason == ("the gripper's input $IN[7] (robocell.dat GRIP_IN) did not confirm a hold within "
+                                   "0.2 s (GRIP_TIMEOUT): nothing between the jaws, or the gripper did not close")
+            assert controller.gripper_output and not controller.gripper_input
+            assert [command for _, command, _, _ in controller.commands] == [1, 3, 4, 1, 3]
+
+    run(scenario())
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_a_gripper_that_does_not_let_go(protocol):
+    async def scenario():
+        async with kuka_cell(protocol, sim={"grip_in": 7, "grip_timeout_s": 0.2}) as (controller, backend):
+            assert (await backend.grip(True)).holding is True
+            controller.inject("grip_stuck")  # the input keeps saying it holds
+            words = (r"the gripper did not let go: its input \$IN\[7\] \(robocell.dat GRIP_IN\) still said it held "
+                     r"a part after 0.2 s \(GRIP_TIMEOUT\); it may still hold it")
+            with pytest.raises(GripperTimeout, match=words) as failed:
+                await backend.grip(False)
+            assert failed.value.code == v.ErrorCode.GRIP_TIMEOUT
+            assert not controller.gripper_output and controller.gripper_input
+            controller.reset()
+            assert (await backend.grip(False)).closed is False  # the input follows again
+            assert not controller.gripper_input
+
+    run(scenario())
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("fault, error, message", [
+    ("emergency_stop", EmergencyStop, r"into the gripper's closing: a stop message is active on the controller "
+                                      r"\(\$STOPMESS\)"),
+    ("drives_off", DrivesOff, r"into the gripper's closing: the drives are off")])
+def test_a_stop_during_a_grip(protocol, fault, error, message):
+    async def scenario():
+        async with kuka_cell(protocol, sim={"grip_delay_s": 30.0}) as (controller, backend):
+            grip = asyncio.create_task(backend.grip(True))
+            await wait_for_status(controller, v.Status.MOVING)
+            controller.inject(fault)
+            with pytest.raises(error, match=message):
+                await grip
+            controller.reset()
+            controller.grip_delay_s = 0.01
+            with pytest.raises(error, match="before the gripper's opening"):
+                controller.inject(fault)
+                await backend.grip(False)
+            controller.reset()
+            assert (await backend.grip(True)).holding is True
+
+    run(scenario())
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_a_grip_that_takes_too_long_times_out(protocol):
+    async def scenario():
+        async with kuka_cell(protocol, sim={"grip_delay_s": 30.0}, grip_timeout_s=0.3) as (controller, backend):
+            with pytest.raises(KukaTimeout, match="the gripper's closing did not end within 0.3 s"):
+                await backend.grip(True)
+            controller.reset()
 
     run(scenario())
 

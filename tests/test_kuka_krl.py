@@ -76,7 +76,23 @@ def test_every_name_in_the_program_is_declared():
              if not match.group(1)}
     krl_words = {"DEF", "END", "DEFFCT", "ENDFCT", "INT", "REAL", "DECL", "IF", "THEN", "ELSE", "ENDIF", "FOR",
                  "TO", "ENDFOR", "LOOP", "ENDLOOP", "WAIT", "SEC", "PTP", "LIN", "RETURN", "AND", "OR", "NOT",
-                 "BAS", "COS", "INVERSE"}
-    routines = {"ROBOCELL", "CHECK_COMMAND", "DOWN"}  # the two routines, and CHECK_COMMAND's local variable
+                 "BAS", "COS", "INVERSE", "WHILE", "ENDWHILE", "BOOL", "IN"}
+    # The routines, CHECK_COMMAND's local variable and GRIP's parameter.
+    routines = {"ROBOCELL", "CHECK_COMMAND", "DOWN", "GRIP", "CLOSING"}
     unknown = words - set(local) - globals_ - krl_words - routines
     assert not unknown, f"names neither declared nor KRL: {sorted(unknown)}"
+
+
+def test_the_gripper_is_switched_and_confirmed_on_the_io_that_robocell_dat_sets():
+    """The output, the input and the time-out are the program's own: numbers in robocell.dat, nowhere else."""
+    local = declarations(KRL / "robocell.dat")
+    assert local["GRIP_OUT"][0] == local["GRIP_IN"][0] == "INT" and int(local["GRIP_OUT"][1]) >= 1
+    assert local["GRIP_TIMEOUT"][0] == "REAL" and float(local["GRIP_TIMEOUT"][1]) > 0
+    source = "\n".join(code_lines(KRL / "robocell.src")).upper()
+    assert re.search(r"^\s*\$OUT\[GRIP_OUT\]\s*=\s*CLOSING\s*$", source, re.MULTILINE)
+    assert re.search(r"^\s*WHILE\s*\(\$IN\[GRIP_IN\] <> CLOSING\) AND \(GRIP_WAITED < GRIP_TIMEOUT\)", source,
+                     re.MULTILINE)
+    assert not re.search(r"\$(IN|OUT)\[\d", source), "an I/O number written into robocell.src: set it in robocell.dat"
+    # Both gripper commands reach GRIP; the open it does not confirm is the gripper's error code.
+    assert "GRIP(CUR_CMD == CMD_GRIP_CLOSE)" in source and "CMD_GRIP_OPEN" in source
+    assert re.search(r"RETURN ERR_GRIP_TIMEOUT", source)

@@ -104,6 +104,9 @@ class _Kuka(Section):
     ack_timeout_s: Annotated[float, Field(gt=0, le=60)] = 2.0
     #: The longest a move may take, seconds.
     move_timeout_s: Annotated[float, Field(gt=0, le=600)] = 60.0
+    #: The longest a gripper command may take, seconds: more than the program's own GRIP_TIMEOUT
+    #: (krl/robocell.dat, which also sets the gripper's output and input).
+    grip_timeout_s: Annotated[float, Field(gt=0, le=600)] = 10.0
     #: Time between polls of the controller during a move, seconds (also the progress rate).
     poll_period_s: Annotated[float, Field(gt=0, le=5)] = 0.05
     #: Program override used for moves, percent.

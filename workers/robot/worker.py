@@ -35,12 +35,9 @@ def make_backend(config: CellConfig) -> RobotBackend:
         from .kuka.backend import KukaBackend
 
         return KukaBackend.from_config(robot.kuka, robot.workspace)
-    from workers.sim.robot import SimRobot
-    from workers.sim.scene import scene_from_config
+    from workers.sim.robot import SceneGripper, SimRobot
 
-    return SimRobot(robot, truth=[obj.truth() for obj in scene_from_config(config.sim)],
-                    gripper=config.gripper.dimensions(), T_flange_grasp=config.gripper.T_flange_grasp,
-                    support_plane=config.support_plane, friction=config.gripper.friction)
+    return SimRobot(robot, gripper=SceneGripper.from_config(config))
 
 
 def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend) -> None:

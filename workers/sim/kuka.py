@@ -3,9 +3,13 @@
 :class:`SimController` behaves like ``krl/robocell.src``: it takes a command
 a moment after RC_CMD is set, checks it as the program does (override, its own
 box and tilt limit, reach), moves over time ($POS_ACT follows), then reports
-done or an error code and clears the command. Faults on demand: emergency stop,
-drives off, an unreachable pose, a program that is not running ("stall"), a
-bridge that stops answering ("hang") or drops its connections ("drop").
+done or an error code and clears the command. Its gripper's output follows the
+gripper commands, and its input confirms them ``grip_delay_s`` later: on closing,
+only if ``holds(flange pose)`` says the gripper holds a part there (``robocell sim
+kuka`` judges that against the configuration's scene, ``SceneGripper``). Faults on
+demand: emergency stop, drives off, an unreachable pose, a program that is not
+running ("stall"), a bridge that stops answering ("hang") or drops its connections
+("drop"), a gripper whose input never changes ("grip_stuck").
 $AXIS_ACT is made up (no kinematic model): it only has the right form.
 
 :class:`KvpServer` speaks KukaVarProxy's framing (``workers.kuka.kvp``);
@@ -22,6 +26,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -37,7 +42,7 @@ __all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main"]
 log = logging.getLogger(__name__)
 #: Each protocol's usual port, as the bridge's configuration has it.
 DEFAULT_PORTS = {"kvp": KukaKvpConfig.model_fields["port"].default, "opc": KukaOpcConfig.model_fields["port"].default}
-Fault = Literal["emergency_stop", "drives_off", "unreachable", "stall", "hang", "drop"]
+Fault = Literal["emergency_stop", "drives_off", "unreachable", "stall", "hang", "drop", "grip_stuck"]
 HOME = [[1.0, 0.0, 0.0, 0.4], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.6], [0.0, 0.0, 0.0, 1.0]]
 _HANG_LIMIT_S = 30.0  # a hung bridge answers after this at the latest, so nothing waits forever
 
@@ -47,16 +52,28 @@ class SimController:
 
     ``box_mm`` and ``max_tilt_deg``, ``max_override`` are the program's own
     limits (robocell.dat); ``reach_mm`` the arm's reach from the base origin.
+    ``grip_in`` and ``grip_timeout_s`` are the program's GRIP_IN and GRIP_TIMEOUT;
+    the gripper's input follows its output ``grip_delay_s`` after a command, and a
+    close holds a part when ``holds(flange pose)`` says so (None: always).
     """
 
     def __init__(self, home=HOME, *, speed_mm_s: float = 500.0, rotation_deg_s: float = 90.0,
                  pickup_s: float = 0.02, reach_mm: float = 1100.0, max_override: int = 30,
-                 box_mm=((100.0, -700.0, 50.0), (1000.0, 700.0, 1000.0)), max_tilt_deg: float = 80.0) -> None:
+                 box_mm=((100.0, -700.0, 50.0), (1000.0, 700.0, 1000.0)), max_tilt_deg: float = 80.0,
+                 grip_in: int = 1, grip_timeout_s: float = 2.0, grip_delay_s: float = 0.05,
+                 holds: Callable[[np.ndarray], bool] | None = None) -> None:
         self.speed_mm_s, self.rotation_deg_s, self.pickup_s = speed_mm_s, rotation_deg_s, pickup_s
         self.reach_mm, self.max_override, self.box_mm, self.max_tilt_deg = reach_mm, max_override, box_mm, max_tilt_deg
+        self.grip_timeout_s, self.grip_delay_s, self.holds = grip_timeout_s, grip_delay_s, holds
         self._lock = threading.RLock()
         self._pose = np.asarray(home, dtype=np.float64)
         self._ints = {var.name: 0 for var in v.GLOBALS if var.type == "INT"}
+        self._ints[v.RC_GRIP_IN.name] = grip_in
+        # Globals only the program writes, besides its INTs: what the last gripper command left.
+        self._results: dict[str, object] = {v.RC_GRIP_HELD.name: False, v.RC_GRIP_WAITED.name: 0.0}
+        #: The gripper's output (TRUE closes) and input (TRUE holds a part), as the I/O shows them now.
+        self.gripper_output = self.gripper_input = False
+        self._grip: tuple[float, bool, bool, float] | None = None  # end, closing, the input then, time waited
         self._target = e6pos_from_pose(self._pose)
         self._motion: tuple[float, float, np.ndarray, np.ndarray] | None = None  # start, end, from, to
         self._cmd_set_at = 0.0
@@ -73,6 +90,8 @@ class SimController:
             self._advance(time.monotonic())
             if name in self._ints:
                 return self._ints[name]
+            if name in self._results:
+                return self._results[name]
             if name == v.RC_TARGET.name:
                 return format_e6pos(self._target)
             if name == v.POS_ACT.name:
@@ -117,8 +136,9 @@ class SimController:
         """Start a fault; :meth:`reset` ends them all."""
         with self._lock:
             self._advance(time.monotonic())
-            if fault in ("emergency_stop", "drives_off") and self._motion:
-                self._motion = None  # the arm stops where it is; the program stays mid-move
+            if fault in ("emergency_stop", "drives_off"):
+                # The arm stops where it is; the program stays mid-move or mid-wait for the gripper.
+                self._motion = self._grip = None
             if fault == "hang":
                 self.unhung.clear()
             self.faults.add(fault)
@@ -134,7 +154,7 @@ class SimController:
         with self._lock:
             self.faults.clear()
             self.unhung.set()
-            self._motion = None
+            self._motion = self._grip = None
             self._ints[v.RC_CMD.name] = v.Command.NONE
             self._ints[v.RC_STATUS.name] = v.Status.IDLE
 
@@ -159,12 +179,27 @@ class SimController:
                 return
             self._pose, self._motion = goal, None
             self._finish(v.Status.DONE, v.ErrorCode.NONE)
+        if self._grip is not None:
+            end, closing, level, waited = self._grip
+            if now < end:
+                return
+            self._grip, self.gripper_input = None, level
+            self._results[v.RC_GRIP_HELD.name], self._results[v.RC_GRIP_WAITED.name] = level, waited
+            if level and not closing:
+                self._finish(v.Status.ERROR, v.ErrorCode.GRIP_TIMEOUT)
+            else:
+                self._finish(v.Status.DONE, v.ErrorCode.NONE)
         taken_at = self._cmd_set_at + self.pickup_s
-        if ints[v.RC_CMD.name] == v.Command.NONE or self._motion is not None or now < taken_at:
+        if ints[v.RC_CMD.name] == v.Command.NONE or self._motion is not None or self._grip is not None \
+                or now < taken_at:
             return
         ints[v.RC_STATUS.name] = v.Status.MOVING
         command, override = ints[v.RC_CMD.name], ints[v.RC_OVERRIDE.name]
         self.commands.append((ints[v.RC_CMD_ID.name], command, format_e6pos(self._target), override))
+        if command in (v.Command.GRIP_CLOSE, v.Command.GRIP_OPEN):
+            self._grip = self._gripping(command == v.Command.GRIP_CLOSE, taken_at)
+            self._advance(now)
+            return
         error = self._check(command, override, self._target)
         if error:
             self._finish(v.Status.ERROR, error)
@@ -173,6 +208,16 @@ class SimController:
         duration = self._duration(self._pose, goal, override)
         self._motion = (taken_at, taken_at + duration, self._pose.copy(), goal)
         self._advance(now)
+
+    def _gripping(self, closing: bool, taken_at: float) -> tuple[float, bool, bool, float]:
+        """GRIP of robocell.src: switch the output, wait for the input (at most grip_timeout_s)."""
+        self.gripper_output = closing
+        if "grip_stuck" in self.faults:
+            level = self.gripper_input
+        else:
+            level = closing and (self.holds is None or bool(self.holds(self._pose)))
+        waited = self.grip_delay_s if level == closing else self.grip_timeout_s
+        return taken_at + waited, closing, level, waited
 
     def _finish(self, status: v.Status, error: v.ErrorCode) -> None:
         self._ints[v.RC_ERROR.name] = error

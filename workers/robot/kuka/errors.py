@@ -7,7 +7,8 @@
     ├── KukaTimeout           an answer, the program's acknowledgment or the end of a move came too late
     ├── KukaProtocolError     a malformed or unexpected message on the wire
     ├── KukaVariableError     the controller would not read or write a variable (unknown name, bad value)
-    └── ControllerBusy        the controller still holds a command (RC_CMD is not 0): nothing was written
+    ├── ControllerBusy        the controller still holds a command (RC_CMD is not 0): nothing was written
+    └── GripperTimeout        the gripper's input did not confirm that it let go (a ``wire.errors.RobotError``)
 
     wire.errors.MoveRefused   the bridge refused a move before writing anything: ``limit`` names the limit
     wire.errors.MoveFailed    the controller took the move but did not finish it
@@ -28,11 +29,11 @@ from __future__ import annotations
 from typing import Any
 
 from wire import errors
-from wire.errors import CellError, MoveFailed
+from wire.errors import CellError, MoveFailed, RobotError
 
 __all__ = [
     "KukaError", "KukaConnectionError", "KukaTimeout", "KukaProtocolError", "KukaVariableError", "ControllerBusy",
-    "ControllerRefused", "Unreachable",
+    "GripperTimeout", "ControllerRefused", "Unreachable",
 ]
 
 
@@ -64,8 +65,8 @@ class ControllerBusy(KukaError):
     """The controller still holds a command: a move in progress, or a program stopped in the middle of one."""
 
 
-class ControllerRefused(MoveFailed):
-    """The KRL program checked the command and refused it; ``code`` is its RC_ERROR value."""
+class _ProgramError(CellError):
+    """An error the KRL program reported: ``code`` is its RC_ERROR value."""
 
     def __init__(self, message: str, *, code: int) -> None:
         super().__init__(message)
@@ -73,6 +74,15 @@ class ControllerRefused(MoveFailed):
 
     def details(self) -> dict[str, Any]:
         return {"code": self.code}
+
+
+class GripperTimeout(_ProgramError, KukaError, RobotError):
+    """The KRL program opened the gripper, but its input still said it held a part after the
+    program's GRIP_TIMEOUT (RC_ERROR GRIP_TIMEOUT): the part may still be in the gripper."""
+
+
+class ControllerRefused(_ProgramError, MoveFailed):
+    """The KRL program checked the command and refused it; ``code`` is its RC_ERROR value."""
 
 
 class Unreachable(ControllerRefused, errors.Unreachable):
