@@ -1,3 +1,4 @@
+import contextlib
 import os
 import re
 import select
@@ -289,7 +290,8 @@ def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
         failed = store.update(status.job_id, JobState.FAILED, error="capturing view 1: camera gone",
                               error_kind="CameraTimeout", now=4.0)
         assert failed.error_kind == "CameraTimeout"
-    assert sqlite3.connect(path).execute("PRAGMA user_version").fetchone() == (2,)
+    with contextlib.closing(sqlite3.connect(path)) as db:   # Python 3.13 warns of a connection left open
+        assert db.execute("PRAGMA user_version").fetchone() == (2,)
 
 
 def test_a_damaged_store_is_refused_at_open(tmp_path):
