@@ -29,6 +29,7 @@ import asyncio
 import functools
 import logging
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,7 @@ _CANCEL_WAIT_S = 2.0
 _RETRY_S = 0.5              # between two tries of a step whose part is away
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
+_RECENT_RESULTS = 100       # results kept in memory to answer at once
 
 
 class CellDaemon:
@@ -87,6 +89,9 @@ class CellDaemon:
         self._queue: asyncio.Queue[str] = asyncio.Queue()
         self._queued: dict[str, Job] = {}           # waiting jobs, in order
         self._active: dict[str, Job] = {}           # jobs whose steps run
+        # The latest results, as JSON: a client asks for a result as soon as it hears of it, and
+        # gets it without a trip through the store's thread.
+        self._recent_results: OrderedDict[str, str] = OrderedDict()
         self._journals: dict[str, Journal] = {}     # the recordings of the active jobs
         self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)
@@ -331,7 +336,9 @@ class CellDaemon:
             result.recording = str(self._recording_path(job.job_id))
         else:
             result.recording_error = job.recording_error
-        self._jobs.save_result(result, now=event.time, event=event)
+        # Not waiting for the disk: a success lost to a power cut is reconstructed again from the
+        # pictures kept (the job's reconstructing state is on disk), so nothing hangs on it.
+        self._jobs.save_result(result, now=event.time, event=event, durable=False)
 
     def _flange_poses(self, request: ScanRequest) -> list[np.ndarray]:
         if request.flange_poses is not None:
@@ -430,6 +437,9 @@ class CellDaemon:
         event = job.transition(JobState.SUCCEEDED, message, now=self.clock(), result=result)
         # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
         await asyncio.shield(self._db.call(self._save_result, job, result, event))
+        self._recent_results[job.job_id] = result.model_dump_json()
+        if len(self._recent_results) > _RECENT_RESULTS:
+            self._recent_results.popitem(last=False)
         self._db.post(self._pictures.drop, job.job_id)
         self._publish(event)
         # The client has its result: now the recording's share, whose hand-off would delay it.
@@ -512,6 +522,8 @@ class CellDaemon:
             return Response((await self._cancel(job_id)).model_dump_json())
         if what not in ("status", "result"):
             raise RequestError(f"unknown job query {what!r}: expected status, result or cancel")
+        if what == "result" and job_id in self._recent_results:
+            return Response(self._recent_results[job_id])
         status = await self._status(job_id)
         if what == "status":
             return Response(status.model_dump_json())

@@ -4,10 +4,12 @@ Each method is one short transaction. A store belongs to the thread that opened
 it (an SQLite connection does): the daemon keeps its own in a thread of its
 own, and calls it there, in order. What must survive a crash is synced to disk before the
 method returns (WAL journal, ``synchronous=FULL``): a job once :meth:`JobStore.add` returns,
-its end, its result. A step of a job (``update(..., durable=False)``) is written without
-waiting for the disk, which costs 2.5 ms a commit on this machine: the next durable commit
-syncs it with its own; after a power cut (not a ``kill -9``, which loses nothing written) a
-restarted daemon may find the job a step behind, and takes it up from there.
+its start of reconstruction (with its pictures kept, a restart resumes there), a failure or a
+cancel. A step of a job and a success (``durable=False``) are written without waiting for
+the disk, which costs 2.5-4 ms a commit on this machine: the next durable commit syncs them
+with its own; after a power cut (not a ``kill -9``, which loses nothing written) a restarted
+daemon may find the job a step behind, and takes it up from there (a success lost that way
+is reconstructed again from the pictures kept: nothing a restart cannot redo waits for the disk).
 
 Job ids look like ``20261122-000042``: the UTC day the job was submitted, then
 the store's job counter (the row number; jobs are never deleted). They are
@@ -192,10 +194,12 @@ class JobStore:
         with self._write(durable=durable) as db:
             self._insert_event(db, event)
 
-    def save_result(self, result: ScanResult, *, now: float, event: JobEvent | None = None) -> JobStatus:
+    def save_result(self, result: ScanResult, *, now: float, event: JobEvent | None = None,
+                    durable: bool = True) -> JobStatus:
         """Store the result of job ``result.job_id`` and mark it succeeded, both or neither.
 
-        ``event``, if given, is added to the job's history in the same transaction.
+        ``event``, if given, is added to the job's history in the same transaction;
+        ``durable`` as for :meth:`update`.
 
         Raises
         ------
@@ -204,7 +208,7 @@ class JobStore:
         ValueError
             The job is already finished.
         """
-        with self._write() as db:
+        with self._write(durable=durable) as db:
             self._check_open(db, result.job_id, JobState.SUCCEEDED)
             db.execute("INSERT INTO results (job_id, result) VALUES (?, ?)",
                        (result.job_id, result.model_dump_json()))
