@@ -304,6 +304,18 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     return c
 
 
+def _radial(points: np.ndarray, sq: Superquadric) -> np.ndarray:
+    """Signed radial distance (N,) of points (N, 3) from the model's surface, outside positive."""
+    F = inside_outside(points, sq)
+    return np.linalg.norm(points - sq.T_world_object[:3, 3], axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
+
+
+def _typical_distance(points: np.ndarray, sq: Superquadric) -> float:
+    """The hull's typical distance from the model (the median's, scaled to a standard deviation's):
+    the model's own error, apart from what it leaves out (a handle), which the hull checks cover."""
+    return 1.4826 * float(np.median(np.abs(_radial(points, sq))))
+
+
 def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, length: float):
     """The hull's evidence for each candidate.
 
@@ -315,7 +327,7 @@ def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, leng
     """
     n = len(c["i"])
     if points is None or len(points) == 0:
-        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
+        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3)), np.zeros((0, n, 3))
     centre = sq.T_world_object[:3, 3]
     # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
     local = ((points - centre) @ c["R"].transpose(1, 0, 2).reshape(3, 3 * n)).reshape(len(points), n, 3)
@@ -326,12 +338,29 @@ def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, leng
     between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
                & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
     column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
-    F = inside_outside(points, sq)
-    outside = np.linalg.norm(points - centre, axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
-    return nearest, column, local[outside > 2 * length]
+    return nearest, column, local[_radial(points, sq) > 2 * length], local
 
 
-def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
+def _agreement(local: np.ndarray, half: np.ndarray, gripper: Gripper, length: float, bloat: float) -> np.ndarray:
+    """How well the hull bears out the model where the pads meet it: the chance (M,) that the
+    hull's extent along the closing axis under each pad is the model's ``half``, within two
+    length errors (one for the model, one for the hull's own bloat).
+
+    ``local`` (P, M, 3): the hull's points in each grasp's frame. A contact the hull puts
+    elsewhere (on a handle, on a part the model leaves out) is not where the planner
+    checked the friction cone; with no hull points under the pads the hull says nothing.
+    """
+    if local.shape[0] == 0:
+        return np.ones(local.shape[1])
+    under = ((np.abs(local[:, :, 0]) <= gripper.finger_width / 2) & (np.abs(local[:, :, 2]) <= gripper.pad_length / 2)
+             & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2 + gripper.finger_thickness))
+    top = np.where(under, local[:, :, 1], -np.inf).max(axis=0)
+    bottom = np.where(under, -local[:, :, 1], -np.inf).max(axis=0)
+    apart = np.maximum(np.abs(top - half), np.abs(bottom - half))
+    return np.where(under.any(axis=0), ndtr((2 * length + bloat - apart) / length), 1.0)
+
+
+def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull, bloat: float = 0.0):
     """Closed-form checks of every candidate at its depths.
 
     Returns the passing (candidate, depth) pairs with their reach ``e`` past the
@@ -341,7 +370,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     """
     g = gripper
     length, angle = error
-    hull_near, column, unexplained = hull
+    hull_near, column, unexplained, local = hull
     n = len(c["i"])
     rows = np.arange(n)
     # The model's near side between the fingers (where they slid to), and across the palm.
@@ -399,8 +428,10 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     ok &= np.all(margins > 0, axis=1)
     keep = np.flatnonzero(ok)
     out = _take(cp, keep)
-    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
-               first=np.prod(ndtr(margins[keep]), axis=1))
+    agree = _agreement(local[:, pair[keep]] - np.stack([out["dx"], np.zeros(len(keep)), dz[keep]], axis=1),
+                       half[keep], gripper, length, bloat)
+    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep], agree=agree,
+               first=np.prod(ndtr(margins[keep]), axis=1) * agree)
     return out
 
 
@@ -589,19 +620,22 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
             raise CoreError(f"points must be an (N, 3) array of finite numbers, got shape {points.shape}")
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
+    bloat = 0.0 if points is None or len(points) == 0 else _typical_distance(points, superquadric)
+    if points is not None and len(points):
+        residual = min(residual, bloat)
     error = model_error(superquadric, residual, silhouette_iou)
     centre = superquadric.T_world_object[:3, 3]
 
     candidates = _candidates(superquadric, plane, gripper)
     pairs = _nominal(candidates, centre, plane, gripper, error,
-                     _hull(candidates, points, superquadric, gripper, error[0]))
+                     _hull(candidates, points, superquadric, gripper, error[0]), bloat)
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)
     kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
     pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
-    score = _robust(pairs, gripper, error, plane)
+    score = _robust(pairs, gripper, error, plane) * pairs["agree"]
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
     R = pairs["R"]
