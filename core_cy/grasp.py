@@ -76,6 +76,9 @@ _TILT_ERROR = math.radians(1.0)  # of an upright frame about the horizontal
 _ROBUST_KEEP = 16  # candidates (with their depth) checked under perturbation
 _ERROR_DRAWS = 24  # draws of the model's error per candidate
 _MIN_SCORE = 0.05
+# A superquadric missing more than this share of the silhouettes describes the object poorly
+# (an L, say): the hull's upright box is planned on too.
+_POOR_COVER = 0.15
 _SCORE_STEP = 0.05  # scores closer than this rank as equal
 _HULL_POINTS = 400  # at most this many hull points are checked
 _SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its end
@@ -620,6 +623,46 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
             raise CoreError(f"points must be an (N, 3) array of finite numbers, got shape {points.shape}")
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
+    grasps = _plan(superquadric, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score)
+    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    if plane is not None and points is not None and len(points) >= 4 and miss > _POOR_COVER:
+        # The superquadric describes the object poorly (an L): plan on the hull's upright box
+        # too. The box bounds all the views saw; the hull checks keep its grasps where the
+        # hull has the surface the box claims.
+        box = _upright_box(points, plane)
+        grasps = _merged(grasps, _plan(box, plane, gripper, math.inf, None, points, max_grasps, min_score), max_grasps)
+    return grasps
+
+
+def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
+    """The box around the hull's points standing on the plane, its horizontal axes the
+    points' principal axes in the plane."""
+    normal = plane[:3]
+    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
+    side /= np.linalg.norm(side)
+    basis = np.stack([side, _cross(normal, side)], axis=1)  # (3, 2)
+    flat = points @ basis
+    _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
+    first = basis @ vectors[:, 1]
+    R = np.stack([first, _cross(normal, first), normal], axis=1)
+    local = points @ R
+    low, high = local.min(axis=0), local.max(axis=0)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
+    return Superquadric(np.maximum((high - low) / 2, 1e-9), [0.1, 0.1], T)
+
+
+def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Grasp]:
+    """Two ranked lists as one, by score within ``_SCORE_STEP`` (then from above first)."""
+    both = first + second
+    order = sorted(range(len(both)), key=lambda k: (-round(both[k].score / _SCORE_STEP),
+                                                    _APPROACH_ORDER.index(both[k].approach), k))
+    return [both[k] for k in order[:max_grasps]]
+
+
+def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper, residual: float, silhouette_iou,
+          points: np.ndarray | None, max_grasps: int, min_score: float) -> list[Grasp]:
+    """:func:`plan_grasps` on checked arguments."""
     bloat = 0.0 if points is None or len(points) == 0 else _typical_distance(points, superquadric)
     if points is not None and len(points):
         residual = min(residual, bloat)
