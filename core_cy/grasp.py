@@ -313,24 +313,20 @@ def _radial(points: np.ndarray, sq: Superquadric) -> np.ndarray:
     return np.linalg.norm(points - sq.T_world_object[:3, 3], axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
 
 
-def _typical_distance(points: np.ndarray, sq: Superquadric) -> float:
-    """The hull's typical distance from the model (the median's, scaled to a standard deviation's):
-    the model's own error, apart from what it leaves out (a handle), which the hull checks cover."""
-    return 1.4826 * float(np.median(np.abs(_radial(points, sq))))
-
-
-def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, length: float):
+def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquadric, gripper: Gripper,
+          length: float):
     """The hull's evidence for each candidate.
 
     Returns, along the approach from the model's centre, the nearest hull point towards
     the palm within the palm's footprint, and within the column between the fingers (n,)
     each (``+inf`` with no points, ``-inf`` for the column without points); and the hull
-    points the model leaves unexplained (more than two length errors outside it) in each
+    points the model leaves unexplained (``radial``, their distances outside it, above two
+    length errors) in each
     candidate's axes about the model's centre, shape (U, n, 3).
     """
     n = len(c["i"])
     if points is None or len(points) == 0:
-        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3)), np.zeros((0, n, 3))
+        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
     centre = sq.T_world_object[:3, 3]
     # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
     local = ((points - centre) @ c["R"].transpose(1, 0, 2).reshape(3, 3 * n)).reshape(len(points), n, 3)
@@ -341,20 +337,26 @@ def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, leng
     between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
                & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
     column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
-    return nearest, column, local[_radial(points, sq) > 2 * length], local
+    return nearest, column, local[radial > 2 * length]
 
 
-def _agreement(local: np.ndarray, half: np.ndarray, gripper: Gripper, length: float, bloat: float) -> np.ndarray:
+def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gripper, length: float,
+               bloat: float) -> np.ndarray:
     """How well the hull bears out the model where the pads meet it: the chance (M,) that the
     hull's extent along the closing axis under each pad is the model's ``half``, within two
-    length errors (one for the model, one for the hull's own bloat).
+    length errors and the hull's typical distance from the model (its bloat).
 
-    ``local`` (P, M, 3): the hull's points in each grasp's frame. A contact the hull puts
-    elsewhere (on a handle, on a part the model leaves out) is not where the planner
-    checked the friction cone; with no hull points under the pads the hull says nothing.
+    A contact the hull puts elsewhere (on a handle, on a part the model leaves out) is
+    not where the planner checked the friction cone; with no hull points under the pads
+    the hull says nothing.
     """
-    if local.shape[0] == 0:
-        return np.ones(local.shape[1])
+    m = len(pairs["half"])
+    if points is None or len(points) == 0:
+        return np.ones(m)
+    origin = np.stack([pairs["dx"], np.zeros(m), pairs["dz"]], axis=1)
+    # (P, M, 3): the points in each grasp's axes about its origin, one matrix product for all.
+    local = ((points - centre) @ pairs["R"].transpose(1, 0, 2).reshape(3, 3 * m)).reshape(len(points), m, 3) - origin
+    half = pairs["half"]
     under = ((np.abs(local[:, :, 0]) <= gripper.finger_width / 2) & (np.abs(local[:, :, 2]) <= gripper.pad_length / 2)
              & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2 + gripper.finger_thickness))
     top = np.where(under, local[:, :, 1], -np.inf).max(axis=0)
@@ -363,7 +365,7 @@ def _agreement(local: np.ndarray, half: np.ndarray, gripper: Gripper, length: fl
     return np.where(under.any(axis=0), ndtr((2 * length + bloat - apart) / length), 1.0)
 
 
-def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull, bloat: float = 0.0):
+def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
     """Closed-form checks of every candidate at its depths.
 
     Returns the passing (candidate, depth) pairs with their reach ``e`` past the
@@ -373,7 +375,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     """
     g = gripper
     length, angle = error
-    hull_near, column, unexplained, local = hull
+    hull_near, column, unexplained = hull
     n = len(c["i"])
     rows = np.arange(n)
     # The model's near side between the fingers (where they slid to), and across the palm.
@@ -431,10 +433,8 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     ok &= np.all(margins > 0, axis=1)
     keep = np.flatnonzero(ok)
     out = _take(cp, keep)
-    agree = _agreement(local[:, pair[keep]] - np.stack([out["dx"], np.zeros(len(keep)), dz[keep]], axis=1),
-                       half[keep], gripper, length, bloat)
-    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep], agree=agree,
-               first=np.prod(ndtr(margins[keep]), axis=1) * agree)
+    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
+               first=np.prod(ndtr(margins[keep]), axis=1))
     return out
 
 
@@ -663,22 +663,27 @@ def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Gr
 def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper, residual: float, silhouette_iou,
           points: np.ndarray | None, max_grasps: int, min_score: float) -> list[Grasp]:
     """:func:`plan_grasps` on checked arguments."""
-    bloat = 0.0 if points is None or len(points) == 0 else _typical_distance(points, superquadric)
+    radial, bloat = None, 0.0
     if points is not None and len(points):
+        radial = _radial(points, superquadric)
+        # The hull's typical distance from the model (the median's, scaled to a standard
+        # deviation's): the model's own error, apart from what it leaves out (a handle),
+        # which the hull checks cover; and how far the hull bulges past the object.
+        bloat = 1.4826 * float(np.median(np.abs(radial)))
         residual = min(residual, bloat)
     error = model_error(superquadric, residual, silhouette_iou)
     centre = superquadric.T_world_object[:3, 3]
 
     candidates = _candidates(superquadric, plane, gripper)
     pairs = _nominal(candidates, centre, plane, gripper, error,
-                     _hull(candidates, points, superquadric, gripper, error[0]), bloat)
+                     _hull(candidates, points, radial, superquadric, gripper, error[0]))
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)
     kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
     pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
-    score = _robust(pairs, gripper, error, plane) * pairs["agree"]
+    score = _robust(pairs, gripper, error, plane) * _agreement(pairs, points, centre, gripper, error[0], bloat)
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
     R = pairs["R"]
