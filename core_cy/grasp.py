@@ -14,6 +14,11 @@ superquadric (sizes, exponents, pose) on a support plane:
    third axis, halfway and all the way to either end. Each is tried at four
    depths: the pads' centre just inside the object, the deepest the palm and
    the plane allow, halfway between, and on the model's widest section.
+   Where the superquadric misses more than 15 % of the silhouettes (it
+   describes the object poorly: an L), the same is planned on the hull's
+   upright box too (its horizontal axes the hull's principal ones), and the two
+   lists are merged by score: the box bounds all the views saw, and the hull
+   checks below keep its grasps where the hull has the surface it claims.
 2. **Nominal checks**, in closed form (the jaws are aligned with the model's
    axes, so the widest chord the fingers meet and the normal there follow from
    the inside-outside function): the object fits the open jaws, the palm stays
@@ -36,8 +41,17 @@ superquadric (sizes, exponents, pose) on a support plane:
    open jaws, palm, reach, and the contacts (the patches within
    ``pad_length/20`` of each finger's first touch: the pads give a little)
    antipodal within the friction cone. ``score`` is the share of draws that
-   hold (smoothed over a quarter of a standard error): an estimate of the
-   chance that the grasp holds, on the cautious side.
+   hold (smoothed over a quarter of a standard error), times the chance that
+   the hull bears the model out under the pads (its extent along the closing
+   axis there is the model's, within two length errors and the hull's typical
+   bulge; a handle under a pad moves the contact off the checked one): an
+   estimate of the chance that the grasp holds, on the cautious side.
+
+With the hull's points, the length error comes from their typical (median)
+distance from the model where that is below the fit's RMS ``residual``: what
+the model leaves out (a handle, a ball on a box) is the hull checks' concern,
+not an error of the model, and counting it would leave no grasp on the part
+the model does describe.
 
 Grasps scoring below ``min_score`` (0.05) are left out; an object no
 candidate fits nominally (too big, say) gives an empty list, never a guess.
@@ -570,6 +584,7 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
     gripper : Gripper
     residual : float
         The fit's residual (bundle units): how far the hull's points lie from the model.
+        With ``points``, their typical (median) distance from the model is used where smaller.
     silhouette_iou : sequence of float, optional
         How well the model covers each view's silhouette.
     points : (N, 3) array_like, optional
