@@ -339,7 +339,7 @@ def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquad
     candidate's axes about the model's centre, shape (U, n, 3).
     """
     n = len(c["i"])
-    if points is None or len(points) == 0:
+    if points is None or radial is None or len(points) == 0:
         return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
     centre = sq.T_world_object[:3, 3]
     # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
@@ -664,7 +664,7 @@ def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
     low, high = local.min(axis=0), local.max(axis=0)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
-    return Superquadric(np.maximum((high - low) / 2, 1e-9), [0.1, 0.1], T)
+    return Superquadric(np.maximum((high - low) / 2, 1e-9), np.array([0.1, 0.1]), T)
 
 
 def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Grasp]:
