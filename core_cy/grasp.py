@@ -14,6 +14,11 @@ superquadric (sizes, exponents, pose) on a support plane:
    third axis, halfway and all the way to either end. Each is tried at four
    depths: the pads' centre just inside the object, the deepest the palm and
    the plane allow, halfway between, and on the model's widest section.
+   Where the superquadric misses more than 15 % of the silhouettes (it
+   describes the object poorly: an L), the same is planned on the hull's
+   upright box too (its horizontal axes the hull's principal ones), and the two
+   lists are merged by score: the box bounds all the views saw, and the hull
+   checks below keep its grasps where the hull has the surface it claims.
 2. **Nominal checks**, in closed form (the jaws are aligned with the model's
    axes, so the widest chord the fingers meet and the normal there follow from
    the inside-outside function): the object fits the open jaws, the palm stays
@@ -36,8 +41,17 @@ superquadric (sizes, exponents, pose) on a support plane:
    open jaws, palm, reach, and the contacts (the patches within
    ``pad_length/20`` of each finger's first touch: the pads give a little)
    antipodal within the friction cone. ``score`` is the share of draws that
-   hold (smoothed over a quarter of a standard error): an estimate of the
-   chance that the grasp holds, on the cautious side.
+   hold (smoothed over a quarter of a standard error), times the chance that
+   the hull bears the model out under the pads (its extent along the closing
+   axis there is the model's, within two length errors and the hull's typical
+   bulge; a handle under a pad moves the contact off the checked one): an
+   estimate of the chance that the grasp holds, on the cautious side.
+
+With the hull's points, the length error comes from their typical (median)
+distance from the model where that is below the fit's RMS ``residual``: what
+the model leaves out (a handle, a ball on a box) is the hull checks' concern,
+not an error of the model, and counting it would leave no grasp on the part
+the model does describe.
 
 Grasps scoring below ``min_score`` (0.05) are left out; an object no
 candidate fits nominally (too big, say) gives an empty list, never a guess.
@@ -76,6 +90,9 @@ _TILT_ERROR = math.radians(1.0)  # of an upright frame about the horizontal
 _ROBUST_KEEP = 16  # candidates (with their depth) checked under perturbation
 _ERROR_DRAWS = 24  # draws of the model's error per candidate
 _MIN_SCORE = 0.05
+# A superquadric missing more than this share of the silhouettes describes the object poorly
+# (an L, say): the hull's upright box is planned on too.
+_POOR_COVER = 0.15
 _SCORE_STEP = 0.05  # scores closer than this rank as equal
 _HULL_POINTS = 400  # at most this many hull points are checked
 _SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its end
@@ -304,17 +321,25 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     return c
 
 
-def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, length: float):
+def _radial(points: np.ndarray, sq: Superquadric) -> np.ndarray:
+    """Signed radial distance (N,) of points (N, 3) from the model's surface, outside positive."""
+    F = inside_outside(points, sq)
+    return np.linalg.norm(points - sq.T_world_object[:3, 3], axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
+
+
+def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquadric, gripper: Gripper,
+          length: float):
     """The hull's evidence for each candidate.
 
     Returns, along the approach from the model's centre, the nearest hull point towards
     the palm within the palm's footprint, and within the column between the fingers (n,)
     each (``+inf`` with no points, ``-inf`` for the column without points); and the hull
-    points the model leaves unexplained (more than two length errors outside it) in each
+    points the model leaves unexplained (``radial``, their distances outside it, above two
+    length errors) in each
     candidate's axes about the model's centre, shape (U, n, 3).
     """
     n = len(c["i"])
-    if points is None or len(points) == 0:
+    if points is None or radial is None or len(points) == 0:
         return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
     centre = sq.T_world_object[:3, 3]
     # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
@@ -326,9 +351,32 @@ def _hull(c, points: np.ndarray | None, sq: Superquadric, gripper: Gripper, leng
     between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
                & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
     column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
-    F = inside_outside(points, sq)
-    outside = np.linalg.norm(points - centre, axis=1) * (1 - np.minimum(F, 1e300) ** (-sq.shape[0] / 2))
-    return nearest, column, local[outside > 2 * length]
+    return nearest, column, local[radial > 2 * length]
+
+
+def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gripper, length: float,
+               bloat: float) -> np.ndarray:
+    """How well the hull bears out the model where the pads meet it: the chance (M,) that the
+    hull's extent along the closing axis under each pad is the model's ``half``, within two
+    length errors and the hull's typical distance from the model (its bloat).
+
+    A contact the hull puts elsewhere (on a handle, on a part the model leaves out) is
+    not where the planner checked the friction cone; with no hull points under the pads
+    the hull says nothing.
+    """
+    m = len(pairs["half"])
+    if points is None or len(points) == 0:
+        return np.ones(m)
+    origin = np.stack([pairs["dx"], np.zeros(m), pairs["dz"]], axis=1)
+    # (P, M, 3): the points in each grasp's axes about its origin, one matrix product for all.
+    local = ((points - centre) @ pairs["R"].transpose(1, 0, 2).reshape(3, 3 * m)).reshape(len(points), m, 3) - origin
+    half = pairs["half"]
+    under = ((np.abs(local[:, :, 0]) <= gripper.finger_width / 2) & (np.abs(local[:, :, 2]) <= gripper.pad_length / 2)
+             & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2 + gripper.finger_thickness))
+    top = np.where(under, local[:, :, 1], -np.inf).max(axis=0)
+    bottom = np.where(under, -local[:, :, 1], -np.inf).max(axis=0)
+    apart = np.maximum(np.abs(top - half), np.abs(bottom - half))
+    return np.where(under.any(axis=0), ndtr((2 * length + bloat - apart) / length), 1.0)
 
 
 def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
@@ -536,6 +584,7 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
     gripper : Gripper
     residual : float
         The fit's residual (bundle units): how far the hull's points lie from the model.
+        With ``points``, their typical (median) distance from the model is used where smaller.
     silhouette_iou : sequence of float, optional
         How well the model covers each view's silhouette.
     points : (N, 3) array_like, optional
@@ -589,19 +638,67 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
             raise CoreError(f"points must be an (N, 3) array of finite numbers, got shape {points.shape}")
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
+    grasps = _plan(superquadric, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score)
+    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    if plane is not None and points is not None and len(points) >= 4 and miss > _POOR_COVER:
+        # The superquadric describes the object poorly (an L): plan on the hull's upright box
+        # too. The box bounds all the views saw; the hull checks keep its grasps where the
+        # hull has the surface the box claims.
+        box = _upright_box(points, plane)
+        grasps = _merged(grasps, _plan(box, plane, gripper, math.inf, None, points, max_grasps, min_score), max_grasps)
+    return grasps
+
+
+def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
+    """The box around the hull's points standing on the plane, its horizontal axes the
+    points' principal axes in the plane."""
+    normal = plane[:3]
+    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
+    side /= np.linalg.norm(side)
+    basis = np.stack([side, _cross(normal, side)], axis=1)  # (3, 2)
+    flat = points @ basis
+    _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
+    first = basis @ vectors[:, 1]
+    R = np.stack([first, _cross(normal, first), normal], axis=1)
+    local = points @ R
+    low, high = local.min(axis=0), local.max(axis=0)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
+    return Superquadric(np.maximum((high - low) / 2, 1e-9), np.array([0.1, 0.1]), T)
+
+
+def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Grasp]:
+    """Two ranked lists as one, by score within ``_SCORE_STEP`` (then from above first)."""
+    both = first + second
+    order = sorted(range(len(both)), key=lambda k: (-round(both[k].score / _SCORE_STEP),
+                                                    _APPROACH_ORDER.index(both[k].approach), k))
+    return [both[k] for k in order[:max_grasps]]
+
+
+def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper, residual: float, silhouette_iou,
+          points: np.ndarray | None, max_grasps: int, min_score: float) -> list[Grasp]:
+    """:func:`plan_grasps` on checked arguments."""
+    radial, bloat = None, 0.0
+    if points is not None and len(points):
+        radial = _radial(points, superquadric)
+        # The hull's typical distance from the model (the median's, scaled to a standard
+        # deviation's): the model's own error, apart from what it leaves out (a handle),
+        # which the hull checks cover; and how far the hull bulges past the object.
+        bloat = 1.4826 * float(np.median(np.abs(radial)))
+        residual = min(residual, bloat)
     error = model_error(superquadric, residual, silhouette_iou)
     centre = superquadric.T_world_object[:3, 3]
 
     candidates = _candidates(superquadric, plane, gripper)
     pairs = _nominal(candidates, centre, plane, gripper, error,
-                     _hull(candidates, points, superquadric, gripper, error[0]))
+                     _hull(candidates, points, radial, superquadric, gripper, error[0]))
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)
     kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
     pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
-    score = _robust(pairs, gripper, error, plane)
+    score = _robust(pairs, gripper, error, plane) * _agreement(pairs, points, centre, gripper, error[0], bloat)
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
     R = pairs["R"]
