@@ -426,13 +426,6 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     ok &= (column[pair] <= -s_j + 0.5 * length) & (column[pair] < dz)
     if plane is not None:
         ok &= height[pair] + dz * nz[pair] + lowest[pair] >= clearance * 0.999
-    if unexplained.shape[0]:
-        # What the hull has and the model lacks (a handle) must not be where an open finger is.
-        p = unexplained[:, pair] - np.stack([cp["dx"], np.zeros(len(pair)), dz], axis=1)
-        in_finger = ((np.abs(p[:, :, 0]) <= g.finger_width / 2) & (p[:, :, 2] >= g.palm) & (p[:, :, 2] <= g.tip)
-                     & (np.abs(p[:, :, 1]) >= g.max_opening / 2)
-                     & (np.abs(p[:, :, 1]) <= g.max_opening / 2 + g.finger_thickness))
-        ok &= ~in_finger.any(axis=0)
     # The widest chord the fingers meet: nearest the centre, within their reach.
     u = np.zeros((len(pair), 3))
     index = np.arange(len(pair))
@@ -445,6 +438,15 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
                         (depth - g.pad_length / 2) / length, (_cone(g) - tilt) / angle], axis=1)
     margins = np.nan_to_num(margins, nan=-1.0)
     ok &= np.all(margins > 0, axis=1)
+    if unexplained.shape[0]:
+        # What the hull has and the model lacks (a handle) must not be where an open finger is.
+        # Checked last, on the pairs still standing: it weighs every such point against every pair.
+        alive = np.flatnonzero(ok)
+        p = unexplained[:, pair[alive]] - np.stack([cp["dx"][alive], np.zeros(len(alive)), dz[alive]], axis=1)
+        in_finger = ((np.abs(p[:, :, 0]) <= g.finger_width / 2) & (p[:, :, 2] >= g.palm) & (p[:, :, 2] <= g.tip)
+                     & (np.abs(p[:, :, 1]) >= g.max_opening / 2)
+                     & (np.abs(p[:, :, 1]) <= g.max_opening / 2 + g.finger_thickness))
+        ok[alive] &= ~in_finger.any(axis=0)
     keep = np.flatnonzero(ok)
     out = _take(cp, keep)
     out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
