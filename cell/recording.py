@@ -18,6 +18,7 @@ base, z up, metres. Entities::
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import sys
 import threading
@@ -248,7 +249,17 @@ def find_recording(job_id_or_file: str, run_dir: Path) -> Path:
 
 
 def _rerun_executable() -> str:
-    # The venv's own rerun matches the installed SDK; one on PATH may be another version.
+    # The viewer binary that came with the installed SDK (so the versions match), run directly: the
+    # venv's `rerun` script is a Python wrapper that runs it as a child of its own and, at a Ctrl-C,
+    # returns at once, leaving the viewer running behind it. One on PATH may be another version.
+    try:
+        import rerun_cli
+
+        bundled = Path(rerun_cli.__file__).with_name("rerun")
+        if bundled.is_file() and os.access(bundled, os.X_OK):
+            return str(bundled)
+    except ImportError:
+        pass
     beside = shutil.which("rerun", path=str(Path(sys.executable).parent))
     found = beside or shutil.which("rerun")
     if found is None:

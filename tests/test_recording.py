@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -244,7 +243,10 @@ def test_replay_command_native_and_web(tmp_path):
     native = replay_command(path)
     assert native[1:] == [str(path), "--bind", "127.0.0.1"]  # rerun's own default is every network
     assert Path(native[0]).name == "rerun"
-    assert Path(native[0]).parent == Path(sys.executable).parent  # the venv's own viewer first
+    # The SDK's own viewer binary itself, not the venv's wrapper script, which leaves it running at a Ctrl-C.
+    import rerun_cli
+    assert Path(native[0]) == Path(rerun_cli.__file__).with_name("rerun")
+    assert Path(native[0]).read_bytes()[:4] == b"\x7fELF"
     web = replay_command(path, web=True, web_port=9191, grpc_port=9877)
     assert web == [native[0], str(path), "--bind", "127.0.0.1", "--serve-web", "--port", "9877",
                    "--web-viewer-port", "9191"]
