@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -79,12 +80,24 @@ def _replay(args: argparse.Namespace) -> int:
         print(f"serving {path}: open {web_viewer_address(args.bind, args.web_port, args.grpc_port)} "
               f"(Ctrl-C stops)", flush=True)
     viewer = subprocess.Popen(argv)
+    # A `kill` of this command stops the viewer too, as a Ctrl-C does (which reaches both).
+    signal.signal(signal.SIGTERM, _terminated)
     try:
         return viewer.wait()
-    except KeyboardInterrupt:  # the viewer, in the same process group, had the Ctrl-C too
+    except (KeyboardInterrupt, _Terminated) as stop:
+        if isinstance(stop, _Terminated):
+            viewer.terminate()
         try:
             viewer.wait(_STOP_WAIT_S)
         except subprocess.TimeoutExpired:
             viewer.kill()
             viewer.wait()
         return 0
+
+
+class _Terminated(Exception):
+    """This command got SIGTERM."""
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise _Terminated

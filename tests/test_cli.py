@@ -269,12 +269,15 @@ def _listening(port: int) -> list[str]:
     return found
 
 
-def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_ends_it(recording):
+@pytest.mark.parametrize("stop", ["ctrl-c", "kill"])
+def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_or_kill_ends_it(recording, stop):
     config, run_dir = recording
     web_port, grpc_port = free_port(), free_port()
+    # As from a terminal: Ctrl-C not ignored (a test run started in the background inherits it ignored).
     process = subprocess.Popen([sys.executable, "-m", "robocell", "replay", "j1", "--web", "--config", str(config),
                                 "--web-port", str(web_port), "--grpc-port", str(grpc_port)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         line = process.stdout.readline()
         address = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
@@ -282,8 +285,11 @@ def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_ends_
         wait_until(lambda: _listening(web_port) and _listening(grpc_port), timeout=30, interval=0.1,
                    what="the viewer's servers")
         assert set(_listening(web_port) + _listening(grpc_port)) == {"0100007F"}  # 127.0.0.1 only
-        os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground group
-        _, stderr = process.communicate(timeout=30)
+        if stop == "ctrl-c":
+            os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground group
+        else:
+            process.terminate()  # robocell alone: it stops the viewer
+        _, stderr = process.communicate(timeout=30)  # the viewer gone too: it held the same pipes
     finally:
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)

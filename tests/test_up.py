@@ -11,6 +11,7 @@ import contextlib
 import os
 import select
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -133,6 +134,11 @@ def test_ctrl_c_while_the_cell_starts_stops_it_at_once(up):
     assert _in_groups(started) == []
 
 
+def _accepts(port: int) -> bool:
+    with socket.socket() as probe:
+        return probe.connect_ex(("127.0.0.1", port)) == 0
+
+
 @pytest.fixture
 def simulated_kuka(tmp_path):
     """`robocell sim kuka` (KukaVarProxy) on a free port, fast."""
@@ -140,6 +146,8 @@ def simulated_kuka(tmp_path):
     process = subprocess.Popen([sys.executable, "-m", "robocell", "sim", "kuka", "--port", str(port), "--speed",
                                 "10000", "--rotation-speed", "3000"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
+        # Listening before the cell starts: its robot worker connects once, and stops if nobody answers.
+        wait_until(lambda: _accepts(port), timeout=START_TIMEOUT_S, interval=0.1, what="the simulated KUKA controller")
         yield port
     finally:
         process.terminate()
