@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import socket
 import sys
 import threading
 import time
@@ -37,7 +38,7 @@ from workers.sim.axis import SimCameraServer
 from workers.sim.axis_process import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
-           "GatedReconstructor", "wait_until", "wait_for_footer", "look_away_poses",
+           "GatedReconstructor", "wait_until", "accepts", "wait_for_footer", "look_away_poses",
            "add_worker", "InProcessWorker"]
 
 # Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
@@ -86,6 +87,12 @@ def wait_for_footer(path: str | Path, *, timeout: float = 30.0) -> None:
         return True
 
     wait_until(complete, timeout=timeout, interval=0.05, what=f"the footer of {path}")
+
+
+def accepts(host: str, port: int) -> bool:
+    """Whether something listens on ``host``:``port`` (TCP)."""
+    with socket.socket() as probe:
+        return probe.connect_ex((host, port)) == 0
 
 
 def wait_until(predicate: Callable[[], object], *, timeout: float, interval: float = 0.01, what: str = "") -> object:

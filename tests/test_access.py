@@ -16,7 +16,6 @@ import asyncio
 import contextlib
 import json
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -27,7 +26,7 @@ import numpy as np
 import pytest
 
 from robocell.demo import free_port
-from tests.cell_fixtures import LoopThread, wait_until
+from tests.cell_fixtures import LoopThread, accepts, wait_until
 from tests.pki import router_tls_settings, tls_settings, write_pki
 from wire import keys
 from wire.access import ROLES, access_control, permissions
@@ -175,8 +174,7 @@ class Cell:
     def _router_listening(self) -> bool:
         assert self.children[0].poll() is None, f"the router exited; see {self.config_path.parent}"
         host, port = self.endpoint.removeprefix("tls/").rsplit(":", 1)
-        with socket.socket() as probe:
-            return probe.connect_ex((host, int(port))) == 0
+        return accepts(host, int(port))
 
     async def _start_workers(self) -> None:
         await self.start_robot()

@@ -11,7 +11,6 @@ import contextlib
 import os
 import select
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -26,7 +25,7 @@ from wire.config import CellConfig
 from wire.messages import JobState, ScanRequest
 from workers.sim.scene import target_from_config
 
-from tests.cell_fixtures import START_TIMEOUT_S, cell_config, free_port, wait_until
+from tests.cell_fixtures import START_TIMEOUT_S, accepts, cell_config, free_port, wait_until
 
 PARTS = {"router", "worker robot", "sim camera", "worker camera", "worker reconstruct", "cell"}
 
@@ -134,11 +133,6 @@ def test_ctrl_c_while_the_cell_starts_stops_it_at_once(up):
     assert _in_groups(started) == []
 
 
-def _accepts(port: int) -> bool:
-    with socket.socket() as probe:
-        return probe.connect_ex(("127.0.0.1", port)) == 0
-
-
 @pytest.fixture
 def simulated_kuka(tmp_path):
     """`robocell sim kuka` (KukaVarProxy) on a free port, fast."""
@@ -147,7 +141,7 @@ def simulated_kuka(tmp_path):
                                 "10000", "--rotation-speed", "3000"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
         # Listening before the cell starts: its robot worker connects once, and stops if nobody answers.
-        wait_until(lambda: _accepts(port), timeout=START_TIMEOUT_S, interval=0.1, what="the simulated KUKA controller")
+        wait_until(lambda: accepts("127.0.0.1", port), timeout=START_TIMEOUT_S, interval=0.1, what="the simulated KUKA controller")
         yield port
     finally:
         process.terminate()
