@@ -13,10 +13,11 @@ network shares (``cell.pool``), each to the least loaded live worker; an attempt
 whose worker dies, hangs, runs out of time or answers an error is made again on
 another, up to ``reconstruct.max_attempts`` attempts.
 
-What must outlive a crash is awaited before anyone hears of it: a job is stored
-before its submit is answered, a result before the job is announced succeeded,
-the end of a job (succeeded, failed, cancelled) before its event is published. A
-step's bookkeeping is done once its query to the worker is on its way; what the
+What must outlive a crash is awaited before anyone hears of it: a job is on disk
+before its submit is answered (it may start meanwhile), a job's failure or cancel before
+its event is published. What a restart can redo is not waited for: a step's state, and a
+success (the job stays reconstructing on disk, its pictures kept, until the result is
+stored behind the event). A step's bookkeeping is done once its query to the worker is on its way; what the
 event loop remembers of the jobs (the queue, the jobs in flight) is what its
 decisions need, so no decision waits for the store. After a crash, the restarted
 daemon carries every accepted job on to its end: a job whose pictures were all taken resumes its
@@ -41,8 +42,7 @@ from wire import keys
 from wire.config import CellConfig
 from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, ConfigError, LinkDown,
                          NoResponder, RemoteError, TransportError, TransportTimeout, wire_kind)
-from wire.messages import (CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, ScanResult,
-                           parse)
+from wire.messages import CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, parse
 from wire.transport import Reply, Request, RequestError, Response, Transport
 
 from .executor import Serial, later
@@ -329,17 +329,6 @@ class CellDaemon:
             return
         self._jobs.set_recording(job.job_id, str(path))
 
-    def _save_result(self, job: Job, result: ScanResult, event: JobEvent) -> None:
-        """In the store's thread, after :meth:`_check_recording`: the result, saying where its
-        recording is, or why there is none."""
-        if job.recording_error is None:
-            result.recording = str(self._recording_path(job.job_id))
-        else:
-            result.recording_error = job.recording_error
-        # Not waiting for the disk: a success lost to a power cut is reconstructed again from the
-        # pictures kept (the job's reconstructing state is on disk), so nothing hangs on it.
-        self._jobs.save_result(result, now=event.time, event=event, durable=False)
-
     def _flange_poses(self, request: ScanRequest) -> list[np.ndarray]:
         if request.flange_poses is not None:
             return [np.asarray(pose, dtype=np.float64) for pose in request.flange_poses]
@@ -364,7 +353,9 @@ class CellDaemon:
         job.started = self.clock()
         self._active[job.job_id] = job
         path = self._recording_path(job.job_id)
-        self._db.post(self._check_recording, job, path)
+        checked: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        job.recording_checked = checked
+        self._db.post(self._check_recording, job, path, then=functools.partial(checked.set_result, None))
         journal = Journal(self._recorder, job.job_id, path, started=job.started, clock=self.clock)
         self._journals[job.job_id] = journal
         if resumed:  # the recording starts again: the pictures first
@@ -434,12 +425,21 @@ class CellDaemon:
         if result.pick is not None:
             held = {True: "held", False: "missed", None: "closed on it"}[result.pick.held]
             message += f"; picked with grasp {result.pick.grasp}: {held}" + (", placed" if result.pick.placed else "")
+        if job.recording_checked is not None:  # tried at the job's start, so long done
+            await asyncio.shield(job.recording_checked)
+        if job.recording_error is None:
+            result.recording = str(self._recording_path(job.job_id))
+        else:
+            result.recording_error = job.recording_error
         event = job.transition(JobState.SUCCEEDED, message, now=self.clock(), result=result)
-        # Stored for good before anyone hears of it; shielded: once begun, the job has succeeded.
-        await asyncio.shield(self._db.call(self._save_result, job, result, event))
         self._recent_results[job.job_id] = result.model_dump_json()
         if len(self._recent_results) > _RECENT_RESULTS:
             self._recent_results.popitem(last=False)
+        # Published, then stored without waiting: a success is not worth a wait for the disk or
+        # the store's thread. If the daemon dies between the two, the job is still reconstructing
+        # in the store, with its pictures kept, and the restarted daemon reconstructs it again.
+        # Whoever asks the store after hearing the event asks behind the save (one thread, in order).
+        self._db.post(self._jobs.save_result, result, now=event.time, event=event, durable=False)
         self._db.post(self._pictures.drop, job.job_id)
         self._publish(event)
         # The client has its result: now the recording's share, whose hand-off would delay it.
@@ -475,13 +475,17 @@ class CellDaemon:
             raise RequestError(f"the queue is full ({self.config.max_queued} jobs waiting): try again later")
         self._submitting += 1
         try:
-            # Stored for good before the answer: a submitted job survives a crash.
-            status, created = await self._db.call(self._jobs.add, scan, n_views=len(poses), now=self.clock())
+            status, created = await self._db.call(self._jobs.add, scan, n_views=len(poses), now=self.clock(),
+                                                  durable=False)
         finally:
             self._submitting -= 1
         if created:  # the store added the job's "queued" event with it
             later(self._publish, queued_event(status))
             self._enqueue(Job(status.job_id, scan, poses))
+        # On disk before the answer, so an answered submit survives a crash; the job need not wait
+        # for the disk to start. (A crash before the answer may leave the job, unanswered, to run
+        # after the restart: a client's retry with the same request_id finds it.)
+        await self._db.call(self._jobs.sync)
         return Response(status.model_dump_json())
 
     async def _on_status(self, request: Request) -> Response:

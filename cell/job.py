@@ -95,6 +95,8 @@ class Job:
     pick_poses: dict[str, np.ndarray] = field(default_factory=dict)
     #: Why the job's recording cannot be written, if it cannot.
     recording_error: str | None = None
+    #: Done once the recording's file was tried (``recording_error`` then says how it went).
+    recording_checked: asyncio.Future[None] | None = None
     #: The task that runs the job's steps, once it runs.
     task: asyncio.Task | None = None
 

@@ -3,7 +3,8 @@
 Each method is one short transaction. A store belongs to the thread that opened
 it (an SQLite connection does): the daemon keeps its own in a thread of its
 own, and calls it there, in order. What must survive a crash is synced to disk before the
-method returns (WAL journal, ``synchronous=FULL``): a job once :meth:`JobStore.add` returns,
+method returns (WAL journal, ``synchronous=FULL``): a job once :meth:`JobStore.add` returns (or, added
+with ``durable=False``, once :meth:`JobStore.sync` has),
 its start of reconstruction (with its pictures kept, a restart resumes there), a failure or a
 cancel. A step of a job and a success (``durable=False``) are written without waiting for
 the disk, which costs 2.5-4 ms a commit on this machine: the next durable commit syncs them
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import builtins
 import contextlib
+import os
 import sqlite3
 import time
 from collections.abc import Callable, Iterator
@@ -118,11 +120,12 @@ class JobStore:
 
     # --- writing ----------------------------------------------------------------------------
 
-    def add(self, request: ScanRequest, *, n_views: int, now: float) -> tuple[JobStatus, bool]:
+    def add(self, request: ScanRequest, *, n_views: int, now: float, durable: bool = True) -> tuple[JobStatus, bool]:
         """Queue a new job, with its first event ("queued"); returns ``(status, True)``.
 
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
+        Not ``durable``: on disk only after :meth:`sync` (or the next durable commit).
 
         Raises
         ------
@@ -131,7 +134,7 @@ class JobStore:
         """
         if n_views < 1:
             raise ValueError(f"n_views must be at least 1, got {n_views}")
-        with self._write() as db:
+        with self._write(durable=durable) as db:
             # BEGIN IMMEDIATE holds the write lock, so look-up and insert cannot
             # interleave with another writer; the UNIQUE index is the backstop.
             if request.request_id is not None:
@@ -150,6 +153,22 @@ class JobStore:
             status = self._get(db, job_id)
             self._insert_event(db, queued_event(status))
             return status, True
+
+    def sync(self) -> None:
+        """Put every commit so far on disk, as a durable commit does its own: the WAL file
+        synced (a checkpoint syncs the database file before it empties the WAL)."""
+        try:
+            wal = os.open(f"{self.path}-wal", os.O_RDONLY)
+        except FileNotFoundError:  # checkpointed and removed: the database file has it all
+            return
+        except OSError as exc:
+            raise StoreError(f"job store {self.path}: cannot open its journal: {exc.strerror or exc}") from exc
+        try:
+            os.fsync(wal)
+        except OSError as exc:
+            raise StoreError(f"job store {self.path}: cannot sync its journal: {exc.strerror or exc}") from exc
+        finally:
+            os.close(wal)
 
     def update(self, job_id: str, state: JobState, *, view: int | None = None, error: str | None = None,
                error_kind: str | None = None, recording: str | None = None, now: float,

@@ -225,8 +225,13 @@ from wire.messages import ScanRequest
 from cell.store import JobStore
 
 store = JobStore(Path(sys.argv[1]))  # never closed: this process dies by SIGKILL
+durable = sys.argv[2] == "durable"
 for i in range(100_000):
-    status, _ = store.add(ScanRequest(request_id=f"r{i}", target=[0.5, 0, 0.1]), n_views=3, now=1.8e9 + i)
+    # As the daemon adds: synced at once, or committed at once and synced before the answer.
+    status, _ = store.add(ScanRequest(request_id=f"r{i}", target=[0.5, 0, 0.1]), n_views=3, now=1.8e9 + i,
+                          durable=durable)
+    if not durable:
+        store.sync()
     print(status.job_id, flush=True)
 """
 
@@ -247,10 +252,10 @@ def _read_lines(proc, until, timeout):
     return lines
 
 
-@pytest.mark.parametrize("kill_after", [1, 40])
-def test_every_acknowledged_add_survives_kill_9(tmp_path, kill_after):
+@pytest.mark.parametrize("kill_after, mode", [(1, "durable"), (40, "durable"), (40, "synced")])
+def test_every_acknowledged_add_survives_kill_9(tmp_path, kill_after, mode):
     path = tmp_path / "jobs.sqlite"
-    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(path)], cwd=REPO,
+    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(path), mode], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         printed = _read_lines(proc, lambda lines: len(lines) >= kill_after, timeout=60)
@@ -307,3 +312,13 @@ def test_a_damaged_store_is_refused_at_open(tmp_path):
         file.write(os.urandom(65536))
     with pytest.raises(StoreError, match=r"jobs.sqlite is damaged \(.*\): move it aside"):
         JobStore(path)
+
+
+def test_sync_when_the_journal_was_checkpointed_away_has_nothing_to_do(tmp_path):
+    path = tmp_path / "jobs.sqlite"
+    with JobStore(path) as store:
+        status, _ = store.add(request(), n_views=3, now=T0, durable=False)
+    assert not (tmp_path / "jobs.sqlite-wal").exists()  # the last connection closed: all in the database file
+    with JobStore(path) as store:
+        store.sync()
+        assert store.get(status.job_id).state is JobState.QUEUED
