@@ -34,20 +34,21 @@ def rigid_error(matrix: Sequence[Sequence[float]] | Any) -> str | None:
     try:
         if len(rows) != 4 or any(len(row) != 4 for row in rows):
             return "must be a 4x4 matrix"
-        values = [float(v) for row in rows for v in row]
+        (a, b, c, x), (d, e, f, y), (g, h, k, z), last = ([float(v) for v in row] for row in rows)
     except (TypeError, ValueError):
         return "must be a 4x4 matrix of numbers"
-    if not all(math.isfinite(v) for v in values):
+    if not all(map(math.isfinite, (a, b, c, x, d, e, f, y, g, h, k, z, *last))):
         return "contains NaN or infinity"
-    if any(abs(v - w) > RIGID_TOLERANCE for v, w in zip(values[12:], (0.0, 0.0, 0.0, 1.0))):
+    if (abs(last[0]) > RIGID_TOLERANCE or abs(last[1]) > RIGID_TOLERANCE or abs(last[2]) > RIGID_TOLERANCE
+            or abs(last[3] - 1.0) > RIGID_TOLERANCE):
         return "is not a rigid transform: its last row is not 0 0 0 1"
-    columns = [[values[4 * i + j] for i in range(3)] for j in range(3)]
-    gram_error = max(abs(sum(a * b for a, b in zip(columns[i], columns[j])) - (i == j))
-                     for i in range(3) for j in range(i, 3))
+    # Written out: a pose comes with every message, and generators cost more than the arithmetic.
+    gram_error = max(abs(a * a + d * d + g * g - 1.0), abs(b * b + e * e + h * h - 1.0),
+                     abs(c * c + f * f + k * k - 1.0), abs(a * b + d * e + g * h), abs(a * c + d * f + g * k),
+                     abs(b * c + e * f + h * k))
     if gram_error > RIGID_TOLERANCE:
         return (f"is not a rigid transform: its rotation is not orthonormal "
                 f"(max |R^T R - I| = {gram_error:.2g} > {RIGID_TOLERANCE:g})")
-    a, b, c, _, d, e, f, _, g, h, k = values[:11]
     if a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g) < 0:
         return "is not a rigid transform: its rotation is a reflection (determinant < 0)"
     return None
