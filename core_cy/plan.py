@@ -50,19 +50,23 @@ def look_at(position, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     ValueError
         If position and target coincide, or the camera would look straight along ``up``.
     """
-    position = np.asarray(position, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - position
-    if np.linalg.norm(forward) < 1e-9:
+    # Plain floats: on 3-vectors NumPy's per-call overhead (np.cross above all) is most of the cost,
+    # and a daemon plans every scan it is sent.
+    px, py, pz = (float(v) for v in position)
+    tx, ty, tz = (float(v) for v in target)
+    ux, uy, uz = (float(v) for v in up)
+    fx, fy, fz = tx - px, ty - py, tz - pz
+    length = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if length < 1e-9:
         raise ValueError("the camera position and the target coincide")
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(up, dtype=np.float64))
-    if np.linalg.norm(right) < 1e-9:
+    fx, fy, fz = fx / length, fy / length, fz / length
+    rx, ry, rz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux  # forward x up
+    length = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if length < 1e-9:
         raise ValueError("the camera would look straight along 'up'")
-    right /= np.linalg.norm(right)
-    pose = np.eye(4)
-    pose[:3, :3] = np.column_stack([right, np.cross(forward, right), forward])
-    pose[:3, 3] = position
-    return pose
+    rx, ry, rz = rx / length, ry / length, rz / length
+    dx, dy, dz = fy * rz - fz * ry, fz * rx - fx * rz, fx * ry - fy * rx  # image down: forward x right
+    return np.array([[rx, dx, fx, px], [ry, dy, fy, py], [rz, dz, fz, pz], [0.0, 0.0, 0.0, 1.0]])
 
 
 def plan_flange_poses(target, plan: ViewPlan, T_flange_cam) -> list[np.ndarray]:
@@ -71,13 +75,14 @@ def plan_flange_poses(target, plan: ViewPlan, T_flange_cam) -> list[np.ndarray]:
     View k looks at the target from elevation ``plan.elevations_deg[k]`` above
     the horizontal and azimuth ``plan.azimuths_deg[k]`` about the base z axis.
     """
-    target = np.asarray(target, dtype=np.float64)
+    tx, ty, tz = (float(v) for v in target)
     flange_from_cam = np.linalg.inv(np.asarray(T_flange_cam, dtype=np.float64))
     poses = []
     for elevation, azimuth in zip(plan.elevations_deg, plan.azimuths_deg):
         el, az = math.radians(elevation), math.radians(azimuth)
-        offset = plan.standoff * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-        poses.append(look_at(target + offset, target) @ flange_from_cam)
+        reach = plan.standoff * math.cos(el)
+        position = (tx + reach * math.cos(az), ty + reach * math.sin(az), tz + plan.standoff * math.sin(el))
+        poses.append(look_at(position, (tx, ty, tz)) @ flange_from_cam)
     return poses
 
 
