@@ -65,6 +65,7 @@ _RETRY_S = 0.5              # between two tries of a step whose part is away
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 _RECENT_RESULTS = 100       # results kept in memory to answer at once
+_QUIET_S = 0.2              # an ended job's recording waits at most this long for a job's slow wait
 
 
 class CellDaemon:
@@ -93,6 +94,7 @@ class CellDaemon:
         # gets it without a trip through the store's thread.
         self._recent_results: OrderedDict[str, str] = OrderedDict()
         self._journals: dict[str, Journal] = {}     # the recordings of the active jobs
+        self._ended_journals: list[Journal] = []    # of jobs that ended, not yet handed over
         self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)
         self._lane = MotionLane()
@@ -169,6 +171,7 @@ class CellDaemon:
             await self.pool.close()
             for journal in self._journals.values():  # jobs cut short keep what they recorded
                 journal.hand_over()
+            self._hand_over_ended()
 
     def _spawn(self, coroutine: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         task = asyncio.create_task(coroutine)
@@ -264,6 +267,13 @@ class CellDaemon:
 
     def hand_over(self, job: Job) -> None:
         self._journals[job.job_id].hand_over()
+        self._hand_over_ended()
+
+    def _hand_over_ended(self) -> None:
+        """The recordings of ended jobs, to the recorder: now is a good time (see ``cell.journal``)."""
+        for journal in self._ended_journals:
+            journal.hand_over()
+        self._ended_journals.clear()
 
     def note(self, job: Job, message: str) -> None:
         log.warning("job %s: %s", job.job_id, message)
@@ -310,6 +320,10 @@ class CellDaemon:
             del self._journals[job.job_id]
             self._active.pop(job.job_id, None)
             journal.close()
+            # Handed over at the next slow wait of a job, or once the cell has been quiet a moment:
+            # the recorder's work on it would otherwise compete with the next job's first moves.
+            self._ended_journals.append(journal)
+            asyncio.get_running_loop().call_later(_QUIET_S, self._hand_over_ended)
 
     def _publish(self, event: JobEvent) -> None:
         self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
@@ -442,7 +456,6 @@ class CellDaemon:
         self._db.post(self._jobs.save_result, result, now=event.time, event=event, durable=False)
         self._db.post(self._pictures.drop, job.job_id)
         self._publish(event)
-        # The client has its result: now the recording's share, whose hand-off would delay it.
         if job.reconstruction is not None and job.job_id in self._journals:
             reply, payload, at = job.reconstruction
             self._journals[job.job_id].reconstruction(reply.decode(), payload, at=at)

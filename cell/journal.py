@@ -1,10 +1,12 @@
 """A job's share of its Rerun recording, kept with the job until the job waits for something slow.
 
 Handing a message to the recorder process costs the event loop and the
-interpreter time, and a robot that moves at once answers in under a
-millisecond; so a job's recording messages wait in its :class:`Journal`, and go
-over while the job waits for a snapshot or for the reconstruction, and once
-its end is published.
+interpreter time, and the recorder's work costs a processor; a robot that moves
+at once answers in under a millisecond. So a job's recording messages wait in
+its :class:`Journal`, and go over while a job waits for a snapshot or for a
+reconstruction. A finished job's last messages (its reconstruction drawn, the
+file closed) wait the same way, for the next such wait of any job, or until the
+cell has been quiet a moment (the daemon decides when: :meth:`Journal.hand_over`).
 """
 
 from __future__ import annotations
@@ -18,6 +20,10 @@ from .recorder import Recorder
 
 __all__ = ["Journal"]
 
+# What a waiting entry may be besides a JobRecording method: the recorder's own steps.
+_RECONSTRUCTION = "<reconstruction>"
+_CLOSE = "<close>"
+
 
 class Journal:
     """The recording messages of job ``job_id``, timed from ``started`` by ``clock``."""
@@ -26,23 +32,29 @@ class Journal:
                  clock: Callable[[], float]) -> None:
         self._recorder, self.job_id, self._started, self._clock = recorder, job_id, started, clock
         self._waiting: list[tuple[float, str, tuple[Any, ...], dict[str, Any]]] = []
+        # At once: a job cut short, by a kill of the daemon say, still leaves a recording.
         later(recorder.open, job_id, path)
 
     def record(self, method: str, *args: Any, **kwargs: Any) -> None:
         """``JobRecording.<method>(*args, **kwargs)`` at the job time of now, when handed over."""
         self._waiting.append((self._clock() - self._started, method, args, kwargs))
 
-    def hand_over(self) -> None:
-        """Hand what waits to the recorder, when the event loop next looks round."""
-        for at, method, args, kwargs in self._waiting:
-            later(self._recorder.call, self.job_id, at, method, *args, **kwargs)
-        self._waiting.clear()
-
     def reconstruction(self, reply_json: str, payload: bytes, *, at: float) -> None:
-        """The reconstruction's silhouettes, clouds and meshes, drawn at job time ``at``."""
-        later(self._recorder.reconstruction, self.job_id, at, reply_json, payload)
+        """The reconstruction's silhouettes, clouds and meshes, drawn at job time ``at``, when handed over."""
+        self._waiting.append((at, _RECONSTRUCTION, (reply_json, payload), {}))
 
     def close(self) -> None:
-        """Hand over what waits, then close the recording (the recorder writes its footer)."""
-        self.hand_over()
-        later(self._recorder.close, self.job_id)
+        """The recording is closed (the recorder writes its footer) once what waits is handed over."""
+        self._waiting.append((0.0, _CLOSE, (), {}))
+
+    def hand_over(self) -> None:
+        """Hand what waits to the recorder, in order, when the event loop next looks round."""
+        recorder = self._recorder
+        for at, method, args, kwargs in self._waiting:
+            if method == _RECONSTRUCTION:
+                later(recorder.reconstruction, self.job_id, at, *args)
+            elif method == _CLOSE:
+                later(recorder.close, self.job_id)
+            else:
+                later(recorder.call, self.job_id, at, method, *args, **kwargs)
+        self._waiting.clear()
