@@ -8,29 +8,48 @@ cdef inline double _clip_unit(double v) noexcept nogil:
     return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
 
 
+cdef inline double _ratio(double power, double base) noexcept nogil:
+    """``base ** (a - 1)`` from ``power = base ** a`` (a > 1, base >= 0): one pow call fewer."""
+    return power / base if base > 0 else 0.0
+
+
 cdef inline double _chord(const double* s, double e1, double e2, int k, double* p, double* g) noexcept nogil:
     """Half-chord along axis k (scaled by s[k]) of the superquadric with semi-axes s at the
     point p (absolute values divided by the sizes; p[k] ignored, then set); NaN where the
-    line misses, else g is the outward normal (unnormalised, first octant)."""
-    cdef double S, B, h, common
-    cdef int other
+    line misses, else g is the outward normal (unnormalised, first octant).
+
+    The terms p[c] ** (2 / e) of the inside-outside function are computed once and reused
+    for the normal (pow is most of the cost here)."""
+    cdef double S, B, h, common, P0, P1, P2
     if k == 2:
-        S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
-        B = 1 - pow(S, e2 / e1) if S < 1 else -1.0
-        h = pow(B, e1 / 2) if B > 0 else NAN
+        P0, P1 = pow(p[0], 2 / e2), pow(p[1], 2 / e2)
+        S = P0 + P1
+        if not S < 1:
+            return NAN
+        common = pow(S, e2 / e1)
+        B = 1 - common
+        if not B > 0:
+            return NAN
+        h = pow(B, e1 / 2)
+        P2 = B  # h ** (2 / e1)
+        common = common / S if S > 0 else 0.0  # S ** (e2 / e1 - 1)
     else:
-        other = 1 - k
-        S = pow(p[2], 2 / e1)
-        B = pow(1 - S, e1 / e2) - pow(p[other], 2 / e2) if S < 1 else -1.0
-        h = pow(B, e2 / 2) if B > 0 else NAN
-    if h != h:
-        return NAN
+        P2 = pow(p[2], 2 / e1)
+        if not P2 < 1:
+            return NAN
+        P0 = pow(p[1 - k], 2 / e2)
+        B = pow(1 - P2, e1 / e2) - P0
+        if not B > 0:
+            return NAN
+        h = pow(B, e2 / 2)
+        P1 = B  # h ** (2 / e2)
+        if k == 0:
+            P0, P1 = P1, P0
+        common = pow(P0 + P1, e2 / e1 - 1)
     p[k] = h
-    S = pow(p[0], 2 / e2) + pow(p[1], 2 / e2)
-    common = pow(S, e2 / e1 - 1) if S > 0 else 0.0
-    g[0] = common * pow(p[0], 2 / e2 - 1) / s[0]
-    g[1] = common * pow(p[1], 2 / e2 - 1) / s[1]
-    g[2] = pow(p[2], 2 / e1 - 1) / s[2]
+    g[0] = common * _ratio(P0, p[0]) / s[0]
+    g[1] = common * _ratio(P1, p[1]) / s[1]
+    g[2] = _ratio(P2, p[2]) / s[2]
     return h * s[k]
 
 
@@ -260,3 +279,90 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                 out[a, b, 0] = half_open - (top if top > bottom else bottom)
                 out[a, b, 1] = cone - (angle1 if angle1 > angle2 else angle2)
                 out[a, b, 2] = 1.0
+
+
+cdef inline void _to_grasp(const double[:, :, ::1] R, Py_ssize_t m, double dx, double dy, double dz,
+                           double* x, double* y, double* z) noexcept nogil:
+    """(dx, dy, dz) in grasp m's axes (the columns of R[m])."""
+    x[0] = dx * R[m, 0, 0] + dy * R[m, 1, 0] + dz * R[m, 2, 0]
+    y[0] = dx * R[m, 0, 1] + dy * R[m, 1, 1] + dz * R[m, 2, 1]
+    z[0] = dx * R[m, 0, 2] + dy * R[m, 1, 2] + dz * R[m, 2, 2]
+
+
+def hull_reach(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
+               const double[::1] slide not None, double palm_half_width, double palm_half_span,
+               double finger_half_width, double half_open,
+               double[::1] nearest not None, double[::1] column not None):
+    """The hull's nearest points along each candidate's approach.
+
+    offsets (P, 3) the hull's points less the model's centre; R (M, 3, 3) the grasp axes
+    (columns); slide (M,) each candidate's offset along its x. Writes, in each candidate's
+    axes about the centre, the lowest z (+inf if none) of the points within the palm's
+    footprint (|x - slide| <= palm_half_width, |y| <= palm_half_span) into nearest (M,), and of
+    those between the fingers (|x - slide| <= finger_half_width, |y| <= half_open) into column (M,).
+    """
+    cdef Py_ssize_t m, p, n_points = offsets.shape[0]
+    cdef double x, y, z, near, col
+    with nogil:
+        for m in range(R.shape[0]):
+            near, col = INFINITY, INFINITY
+            for p in range(n_points):
+                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                x = fabs(x - slide[m])
+                y = fabs(y)
+                if x <= palm_half_width and y <= palm_half_span and z < near:
+                    near = z
+                if x <= finger_half_width and y <= half_open and z < col:
+                    col = z
+            nearest[m], column[m] = near, col
+
+
+def in_open_fingers(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
+                    const double[:, ::1] origin not None, double finger_half_width, double palm, double tip,
+                    double half_open, double finger_thickness, unsigned char[::1] hit not None):
+    """Whether any point lies where an open finger of a grasp goes.
+
+    offsets (P, 3) the points less the model's centre; R (M, 3, 3) the grasp axes; origin
+    (M, 3) each grasp's origin in its axes about the centre. Writes hit (M,): 1 where a point
+    has |x| <= finger_half_width, palm <= z <= tip and half_open <= |y| <= half_open +
+    finger_thickness in the grasp frame, else 0.
+    """
+    cdef Py_ssize_t m, p, n_points = offsets.shape[0]
+    cdef double x, y, z
+    with nogil:
+        for m in range(R.shape[0]):
+            hit[m] = 0
+            for p in range(n_points):
+                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                x, y, z = fabs(x - origin[m, 0]), fabs(y - origin[m, 1]), z - origin[m, 2]
+                if (x <= finger_half_width and z >= palm and z <= tip and y >= half_open
+                        and y <= half_open + finger_thickness):
+                    hit[m] = 1
+                    break
+
+
+def pad_extent(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
+               const double[:, ::1] origin not None, double finger_half_width, double pad_half_length,
+               double half_span, double[:, ::1] extent not None):
+    """The points' extent along the closing axis under each grasp's pads.
+
+    offsets (P, 3) the points less the model's centre; R (M, 3, 3) the grasp axes; origin
+    (M, 3) each grasp's origin in its axes about the centre. Of the points with |x| <=
+    finger_half_width, |z| <= pad_half_length and |y| <= half_span in the grasp frame, writes
+    extent (M, 3): the largest y, the largest -y (both -inf if none) and their count.
+    """
+    cdef Py_ssize_t m, p, n_points = offsets.shape[0]
+    cdef double x, y, z, top, bottom, count
+    with nogil:
+        for m in range(R.shape[0]):
+            top, bottom, count = -INFINITY, -INFINITY, 0.0
+            for p in range(n_points):
+                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                x, y, z = x - origin[m, 0], y - origin[m, 1], z - origin[m, 2]
+                if fabs(x) <= finger_half_width and fabs(z) <= pad_half_length and fabs(y) <= half_span:
+                    count += 1.0
+                    if y > top:
+                        top = y
+                    if -y > bottom:
+                        bottom = -y
+            extent[m, 0], extent[m, 1], extent[m, 2] = top, bottom, count

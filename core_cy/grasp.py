@@ -68,6 +68,9 @@ import numpy as np
 from scipy.special import ndtr
 
 from ._grasp_cy import half_chords as _half_chords
+from ._grasp_cy import hull_reach as _hull_reach
+from ._grasp_cy import in_open_fingers as _in_open_fingers
+from ._grasp_cy import pad_extent as _pad_extent
 from ._grasp_cy import perturbed_margins as _perturbed_margins
 from ._grasp_cy import surface_samples as _surface_samples
 from .errors import CoreError
@@ -104,6 +107,8 @@ _SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too lo
 # Sample grid of the surface facing each finger: across the finger, along the approach.
 _SAMPLES = (5, 7)
 _APPROACH_ORDER = ("top", "side", "tilted")
+# (closing axis, approach axis, approach sign) of a frame's candidates.
+_COMBOS = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
 
 
 def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_iou=None) -> tuple[float, float]:
@@ -296,29 +301,24 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     """Every (frame, closing axis i, approach axis j, approach sign, slide ``dx``) not
     approaching from below."""
     F, sizes, shapes, upright, own = _frames(sq, None if plane is None else -plane[:3])
-    combos = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
-    f = np.repeat(np.arange(len(F)), len(combos))
-    i, j, s = (np.tile(combos[:, c], len(F)) for c in range(3))
+    f = np.repeat(np.arange(len(F)), len(_COMBOS))
+    i, j, s = np.tile(_COMBOS, (len(F), 1)).T
     y = F[f, :, i]
     z = s[:, None] * F[f, :, j]
-    keep = np.ones(len(f), bool) if plane is None else z @ plane[:3] <= 0.1
-    x = _cross(y[keep], z[keep])
-    R_grasp = np.stack([x, y[keep], z[keep]], axis=2)
-    f, i, j, s = f[keep], i[keep], j[keep], s[keep]
-    c = {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i, "j": j, "k": 3 - i - j, "s": s,
-         "R": R_grasp, "upright": upright[f], "dx": np.zeros(len(f)), "pose": np.arange(len(f))}
+    if plane is not None:
+        keep = np.flatnonzero(z @ plane[:3] <= 0.1)
+        f, i, j, s, y, z = f[keep], i[keep], j[keep], s[keep], y[keep], z[keep]
+    k = 3 - i - j
     # In the object's own frame, also slide along the grasp's x axis (to take one end of a long
     # object, say, clear of what the model leaves out): halfway and all the way to either end.
-    reach = np.maximum(0.0, c["sizes"][np.arange(len(f)), c["k"]] - gripper.finger_width / 2)
-    slides = [c]
-    for fraction in _SLIDES:
-        slides_here = own[f] & (reach > 0.1 * c["sizes"].max(axis=1))
-        moved = _take(c, np.flatnonzero(slides_here))
-        moved["dx"] = fraction * reach[slides_here]
-        slides.append(moved)
-    c = {key: np.concatenate([part[key] for part in slides]) for key in c}
-    c["id"] = np.arange(len(c["dx"]))
-    return c
+    reach = np.maximum(0.0, sizes[f, k] - gripper.finger_width / 2)
+    sliding = np.flatnonzero(own[f] & (reach > 0.1 * sizes[f].max(axis=1)))
+    pose = np.concatenate([np.arange(len(f))] + [sliding] * len(_SLIDES))
+    dx = np.concatenate([np.zeros(len(f))] + [fraction * reach[sliding] for fraction in _SLIDES])
+    R_grasp = np.stack([_cross(y, z), y, z], axis=2)
+    f = f[pose]
+    return {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i[pose], "j": j[pose], "k": k[pose],
+            "s": s[pose], "R": R_grasp[pose], "upright": upright[f], "dx": dx, "pose": pose}
 
 
 def _radial(points: np.ndarray, sq: Superquadric) -> np.ndarray:
@@ -335,23 +335,16 @@ def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquad
     the palm within the palm's footprint, and within the column between the fingers (n,)
     each (``+inf`` with no points, ``-inf`` for the column without points); and the hull
     points the model leaves unexplained (``radial``, their distances outside it, above two
-    length errors) in each
-    candidate's axes about the model's centre, shape (U, n, 3).
+    length errors), less the model's centre, shape (U, 3).
     """
     n = len(c["i"])
     if points is None or radial is None or len(points) == 0:
-        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
-    centre = sq.T_world_object[:3, 3]
-    # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
-    local = ((points - centre) @ c["R"].transpose(1, 0, 2).reshape(3, 3 * n)).reshape(len(points), n, 3)
-    reach = gripper.max_opening / 2 + gripper.finger_thickness
-    inside = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.palm_width / 2)
-              & (np.abs(local[:, :, 1]) <= reach))
-    nearest = np.where(inside, local[:, :, 2], np.inf).min(axis=0)
-    between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
-               & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
-    column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
-    return nearest, column, local[radial > 2 * length]
+        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, 3))
+    offsets = points - sq.T_world_object[:3, 3]
+    nearest, column = np.empty(n), np.empty(n)
+    _hull_reach(offsets, c["R"], c["dx"], gripper.palm_width / 2, gripper.max_opening / 2 + gripper.finger_thickness,
+                gripper.finger_width / 2, gripper.max_opening / 2, nearest, column)
+    return nearest, column, offsets[radial > 2 * length]
 
 
 def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gripper, length: float,
@@ -368,15 +361,12 @@ def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gr
     if points is None or len(points) == 0:
         return np.ones(m)
     origin = np.stack([pairs["dx"], np.zeros(m), pairs["dz"]], axis=1)
-    # (P, M, 3): the points in each grasp's axes about its origin, one matrix product for all.
-    local = ((points - centre) @ pairs["R"].transpose(1, 0, 2).reshape(3, 3 * m)).reshape(len(points), m, 3) - origin
+    extent = np.empty((m, 3))
+    _pad_extent(points - centre, pairs["R"], origin, gripper.finger_width / 2, gripper.pad_length / 2,
+                gripper.max_opening / 2 + gripper.finger_thickness, extent)
     half = pairs["half"]
-    under = ((np.abs(local[:, :, 0]) <= gripper.finger_width / 2) & (np.abs(local[:, :, 2]) <= gripper.pad_length / 2)
-             & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2 + gripper.finger_thickness))
-    top = np.where(under, local[:, :, 1], -np.inf).max(axis=0)
-    bottom = np.where(under, -local[:, :, 1], -np.inf).max(axis=0)
-    apart = np.maximum(np.abs(top - half), np.abs(bottom - half))
-    return np.where(under.any(axis=0), ndtr((2 * length + bloat - apart) / length), 1.0)
+    apart = np.maximum(np.abs(extent[:, 0] - half), np.abs(extent[:, 1] - half))
+    return np.where(extent[:, 2] > 0, ndtr((2 * length + bloat - apart) / length), 1.0)
 
 
 def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
@@ -394,7 +384,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     rows = np.arange(n)
     # The model's near side between the fingers (where they slid to), and across the palm.
     u = np.zeros((n, 3))
-    u[rows, c["k"]] = np.maximum(0.0, np.abs(c["dx"]) - g.finger_width / 2)
+    u[rows, c["k"]] = slid = np.maximum(0.0, np.abs(c["dx"]) - g.finger_width / 2)
     s_j = np.nan_to_num(_half_chord(c["sizes"], c["shape"], c["j"], u)[0], nan=-np.inf)
     near = np.minimum(-c["sizes"][rows, c["j"]], hull_near)  # the hull's, if nearer
     clear = _PALM_CLEARANCE * g.finger_length
@@ -417,7 +407,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     depth = np.stack([shallowest, (shallowest + deepest) / 2, deepest, np.clip(equator, shallowest, deepest)], 1)
     pair = np.repeat(rows, depth.shape[1])
     depth = depth.ravel()
-    cp = _take(c, pair)
+    i, j = c["i"][pair], c["j"][pair]
     s_j = s_j[pair]
     dz = depth - g.pad_length / 2 - s_j
     ok = (deepest[pair] >= shallowest[pair]) & (s_j > 0)
@@ -429,10 +419,10 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     # The widest chord the fingers meet: nearest the centre, within their reach.
     u = np.zeros((len(pair), 3))
     index = np.arange(len(pair))
-    u[index, cp["j"]] = np.minimum(0.0, depth - s_j)
-    u[index, cp["k"]] = np.maximum(0.0, np.abs(cp["dx"]) - g.finger_width / 2)
-    half, normal = _half_chord(cp["sizes"], cp["shape"], cp["i"], u)
-    tilt = np.arctan2(np.abs(normal[index, cp["j"]]), normal[index, cp["i"]])
+    u[index, j] = np.minimum(0.0, depth - s_j)
+    u[index, c["k"][pair]] = slid[pair]
+    half, normal = _half_chord(c["sizes"][pair], c["shape"][pair], i, u)
+    tilt = np.arctan2(np.abs(normal[index, j]), normal[index, i])
     palm = depth - s_j - g.finger_length  # along the approach from the centre
     margins = np.stack([(g.max_opening / 2 - half) / length, (near[pair] - palm) / length,
                         (depth - g.pad_length / 2) / length, (_cone(g) - tilt) / angle], axis=1)
@@ -442,14 +432,14 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
         # What the hull has and the model lacks (a handle) must not be where an open finger is.
         # Checked last, on the pairs still standing: it weighs every such point against every pair.
         alive = np.flatnonzero(ok)
-        p = unexplained[:, pair[alive]] - np.stack([cp["dx"][alive], np.zeros(len(alive)), dz[alive]], axis=1)
-        in_finger = ((np.abs(p[:, :, 0]) <= g.finger_width / 2) & (p[:, :, 2] >= g.palm) & (p[:, :, 2] <= g.tip)
-                     & (np.abs(p[:, :, 1]) >= g.max_opening / 2)
-                     & (np.abs(p[:, :, 1]) <= g.max_opening / 2 + g.finger_thickness))
-        ok[alive] &= ~in_finger.any(axis=0)
+        hit = np.empty(len(alive), np.uint8)
+        origin = np.stack([c["dx"][pair[alive]], np.zeros(len(alive)), dz[alive]], 1)
+        _in_open_fingers(unexplained, c["R"][pair[alive]], origin,
+                         g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, g.finger_thickness, hit)
+        ok[alive] &= hit == 0
     keep = np.flatnonzero(ok)
-    out = _take(cp, keep)
-    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
+    out = _take(c, pair[keep])
+    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair[keep]],
                first=np.prod(ndtr(margins[keep]), axis=1))
     return out
 
