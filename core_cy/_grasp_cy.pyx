@@ -144,39 +144,51 @@ def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1]
 def perturbed_margins(const double[:, :, :, ::1] points not None,
                       const double[:, :, :, ::1] normals not None,
                       const unsigned char[:, :, ::1] valid not None,
-                      const long[::1] variant not None,
+                      const double[:, :, ::1] shapes not None,
+                      const double[:, ::1] sizes not None,
                       const double[:, :, ::1] frame not None,
+                      const long[::1] variant not None,
                       const double[:, :, ::1] scale not None,
-                      const double[:, :, :, ::1] rotation not None,
+                      const double[:, :, :, ::1] rotations not None,
+                      const long[::1] rotation_set not None,
+                      const double[:, :, ::1] axes not None,
                       const double[:, ::1] shift not None,
                       const double[:, ::1] centre not None,
+                      const double[::1] hull not None,
                       double half_width, double palm, double tip, double half_open,
-                      double compliance, double cone,
+                      double compliance, double cone, double length, double angle,
                       double[:, ::1] work not None,
                       double[:, :, ::1] turned not None,
                       double[:, :, ::1] out not None):
-    """Open-jaw and friction margins of each grasp under each perturbation of its model.
+    """The margins of each grasp under each perturbation of its model, in standard errors.
 
-    points, normals : (V, M, 2N, 3) surface samples of grasp m's model (shape variant v),
-        in the model's frame about its centre: the first N face the +y finger, the last N
-        the -y one.
+    points, normals : (V, M, 2N, 3) surface samples of grasp m's model (exponent variant
+        v), in the model's frame about its centre: the first N face the +y finger, the
+        last N the -y one; valid (V, M, 2N) 1 where a sample exists.
+    shapes : (V, M, 2) the variants' exponents (e1, e2); sizes (M, 3) the model's
+        semi-axes, in its frame (frame axis 2 carries e1).
     frame : (M, 3, 3) model-frame to grasp-frame rotation of each grasp.
-    valid : (V, M, 2N) 1 where a sample exists.
-    variant : (P,) shape variant of each perturbation; scale (P, M, 3) stretch of
-        the model about its centre along the grasp axes; rotation (P, M, 3, 3) about
-        the centre, in each grasp's frame; shift (P, 3).
-    centre : (M, 3) the model's centre in each grasp frame.
+    variant : (P,) exponent variant of each perturbation; scale (P, M, 3) stretch of the
+        model about its centre along the grasp axes.
+    rotations : (K, P, 3, 3) the perturbations' turns about the centre, in a frame in which
+        grasp m's axes are the columns of axes[m] (M, 3, 3); rotation_set (M,) which of
+        the K sets grasp m takes.
+    shift : (P, 3) of the centre, grasp axes; centre (M, 3) the model's centre in each
+        grasp frame; hull (M,) the hull's nearest point towards the palm, grasp z.
+    length, angle : the standard errors the margins are counted in.
     work : (2N, 4) and turned : (V, 2N, 6) scratch.
-    out : (M, P, 4) written: open-jaw margin (half_open minus the farthest touch),
-        friction margin (cone minus the contacts' worst angle off antipodal, radians),
-        1.0 if both fingers reach the object else 0.0 (the margins are then 0), and the
-        lowest z of the sampled surface across the fingers' width (+inf if none).
+    out : (M, P, 4) written: open jaws clear (half_open less the farthest touch), palm
+        clear (of the perturbed model's nearest point, by its support function, and of
+        the hull), the pads' centre line meets the object (minus the sampled surface's
+        lowest z across the fingers' width, at most 10), and antipodal (the cone less
+        the contacts' worst angle off the line between them, in ``angle``). The first
+        and the last are -1 where a finger does not reach the object.
     """
     cdef Py_ssize_t n_grasps = points.shape[1], n_samples = points.shape[2], half = n_samples // 2
     cdef Py_ssize_t n_perturbations = variant.shape[0]
     cdef Py_ssize_t a, b, k, v, side
     cdef double dx, dy, dz, qx, qy, qz, sx, sy, sz, ext
-    cdef double top, bottom, near, nx, ny, nz, length, line_x, line_y, line_z
+    cdef double top, bottom, near, nx, ny, nz, norm, line_x, line_y, line_z
     cdef double cx[2]
     cdef double cy[2]
     cdef double cz[2]
@@ -184,11 +196,12 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     cdef double my[2]
     cdef double mz[2]
     cdef double count[2]
-    cdef double angle1, angle2
+    cdef double angle1, angle2, w0, w1, w2, e1, e2, p, q, support, nearest
     cdef double r[3][3]
+    cdef double t[3][3]
     cdef double ox, oy, oz
     cdef bint reached_up, reached_down
-    cdef Py_ssize_t n_variants = points.shape[0], i, c
+    cdef Py_ssize_t n_variants = points.shape[0], i, c, j
     with nogil:
         for a in range(n_grasps):
             # The samples and their normals in the grasp's axes, once per grasp.
@@ -205,10 +218,31 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
             for b in range(n_perturbations):
                 v = variant[b]
                 sx, sy, sz = scale[b, a, 0], scale[b, a, 1], scale[b, a, 2]
+                # The turn in the grasp's axes: axes^T W axes.
                 for i in range(3):
                     for c in range(3):
-                        r[i][c] = rotation[b, a, i, c]
+                        t[i][c] = 0.0
+                        for j in range(3):
+                            t[i][c] += axes[a, j, i] * rotations[rotation_set[a], b, j, c]
+                for i in range(3):
+                    for c in range(3):
+                        r[i][c] = 0.0
+                        for j in range(3):
+                            r[i][c] += t[i][j] * axes[a, j, c]
                 ox, oy, oz = centre[a, 0] + shift[b, 0], centre[a, 1] + shift[b, 1], centre[a, 2] + shift[b, 2]
+                # The perturbed model's nearest point towards the palm: its support function in
+                # the direction frame^T (scale * r^T e_z), in the model's frame.
+                w0, w1, w2 = sx * r[2][0], sy * r[2][1], sz * r[2][2]
+                e1, e2 = shapes[v, a, 0], shapes[v, a, 1]
+                p, q = 2 / (2 - e2), 2 / (2 - e1)
+                dx = fabs((frame[a, 0, 0] * w0 + frame[a, 1, 0] * w1 + frame[a, 2, 0] * w2) * sizes[a, 0])
+                dy = fabs((frame[a, 0, 1] * w0 + frame[a, 1, 1] * w1 + frame[a, 2, 1] * w2) * sizes[a, 1])
+                dz = fabs((frame[a, 0, 2] * w0 + frame[a, 1, 2] * w1 + frame[a, 2, 2] * w2) * sizes[a, 2])
+                support = pow(pow(pow(dx, p) + pow(dy, p), q / p) + pow(dz, q), 1 / q)
+                nearest = oz - support
+                if hull[a] < nearest:
+                    nearest = hull[a]
+                out[a, b, 1] = (nearest - palm) / length
                 top, bottom, near = -INFINITY, -INFINITY, INFINITY
                 reached_up, reached_down = False, False
                 for k in range(n_samples):
@@ -234,9 +268,11 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                         reached_down = True
                         if -qy > bottom:
                             bottom = -qy
-                out[a, b, 3] = near
+                out[a, b, 2] = -near / length
+                if out[a, b, 2] > 10.0:
+                    out[a, b, 2] = 10.0
                 if not (reached_up and reached_down):
-                    out[a, b, 0], out[a, b, 1], out[a, b, 2] = 0.0, 0.0, 0.0
+                    out[a, b, 0], out[a, b, 3] = -1.0, -1.0
                     continue
                 for side in range(2):
                     cx[side], cy[side], cz[side] = 0.0, 0.0, 0.0
@@ -254,11 +290,11 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                     nx = r[0][0] * dx + r[0][1] * dy + r[0][2] * dz
                     ny = r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
                     nz = r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
-                    length = sqrt(nx * nx + ny * ny + nz * nz)
-                    if length > 0:
-                        mx[side] += nx / length
-                        my[side] += ny / length
-                        mz[side] += nz / length
+                    norm = sqrt(nx * nx + ny * ny + nz * nz)
+                    if norm > 0:
+                        mx[side] += nx / norm
+                        my[side] += ny / norm
+                        mz[side] += nz / norm
                     cx[side] += work[k, 0]
                     cy[side] += work[k, 1]
                     cz[side] += work[k, 2]
@@ -266,19 +302,18 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                 line_x = cx[0] / count[0] - cx[1] / count[1]
                 line_y = cy[0] / count[0] - cy[1] / count[1]
                 line_z = cz[0] / count[0] - cz[1] / count[1]
-                length = sqrt(line_x * line_x + line_y * line_y + line_z * line_z)
+                norm = sqrt(line_x * line_x + line_y * line_y + line_z * line_z)
                 angle1, angle2 = 3.141592653589793, 3.141592653589793
-                if length > 0:
-                    line_x, line_y, line_z = line_x / length, line_y / length, line_z / length
-                    length = sqrt(mx[0] * mx[0] + my[0] * my[0] + mz[0] * mz[0])
-                    if length > 0:
-                        angle1 = acos(_clip_unit((mx[0] * line_x + my[0] * line_y + mz[0] * line_z) / length))
-                    length = sqrt(mx[1] * mx[1] + my[1] * my[1] + mz[1] * mz[1])
-                    if length > 0:
-                        angle2 = acos(_clip_unit(-(mx[1] * line_x + my[1] * line_y + mz[1] * line_z) / length))
-                out[a, b, 0] = half_open - (top if top > bottom else bottom)
-                out[a, b, 1] = cone - (angle1 if angle1 > angle2 else angle2)
-                out[a, b, 2] = 1.0
+                if norm > 0:
+                    line_x, line_y, line_z = line_x / norm, line_y / norm, line_z / norm
+                    norm = sqrt(mx[0] * mx[0] + my[0] * my[0] + mz[0] * mz[0])
+                    if norm > 0:
+                        angle1 = acos(_clip_unit((mx[0] * line_x + my[0] * line_y + mz[0] * line_z) / norm))
+                    norm = sqrt(mx[1] * mx[1] + my[1] * my[1] + mz[1] * mz[1])
+                    if norm > 0:
+                        angle2 = acos(_clip_unit(-(mx[1] * line_x + my[1] * line_y + mz[1] * line_z) / norm))
+                out[a, b, 0] = (half_open - (top if top > bottom else bottom)) / length
+                out[a, b, 3] = (cone - (angle1 if angle1 > angle2 else angle2)) / angle
 
 
 cdef inline void _to_grasp(const double[:, :, ::1] R, Py_ssize_t m, double dx, double dy, double dz,

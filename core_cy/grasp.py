@@ -164,16 +164,6 @@ def _half_chord(sizes, shape, axis, u):
     return half, normal
 
 
-def _support(sizes, shape, w):
-    """Support function (max of ``w . u``) of a centred superquadric, frame coordinates.
-
-    ``sizes`` (..., 3), ``shape`` (..., 2), ``w`` (..., 3): the nested dual norm.
-    """
-    p, q = 2 / (2 - shape[..., 1]), 2 / (2 - shape[..., 0])
-    v = np.abs(w * sizes)
-    return ((v[..., 0] ** p + v[..., 1] ** p) ** (q / p) + v[..., 2] ** q) ** (1 / q)
-
-
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross products along the last axis (np.cross costs more than the product here)."""
     return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
@@ -449,6 +439,10 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
 _DRAWS = np.random.default_rng(20171).standard_normal((_ERROR_DRAWS, 10))
 
 
+# The exponents of each draw: 0 nominal, 1 rounder, 2 boxier (each about a third of the draws).
+_VARIANT = np.where(_DRAWS[:, 9] > 0.43, 1, np.where(_DRAWS[:, 9] < -0.43, 2, 0)).astype(np.int_)
+
+
 def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp: np.ndarray,
                    upright: np.ndarray, plane: np.ndarray | None):
     """The model's error drawn ``_ERROR_DRAWS`` times (fixed draws, so planning is repeatable).
@@ -459,9 +453,9 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     about the two horizontal axes by it too, or by ``_TILT_ERROR`` for a frame set
     upright; without a plane, about each grasp axis by the angle error.
 
-    Returns variant (P,): 0 nominal exponents, 1 rounder, 2 boxier (each a third of the
-    draws); scale (P, M, 3) of the semi-axes along the grasp axes; rotation (P, M, 3, 3)
-    in each grasp frame; shift (P, 3).
+    Returns scale (P, M, 3) of the semi-axes along the grasp axes; rotations (K, P, 3, 3),
+    the set (M,) of the K each grasp takes, and the axes (M, 3, 3) of each grasp in the
+    rotations' frame (the world's, or its own without a plane); shift (P, 3).
     """
     length, angle = error
     draws = _DRAWS
@@ -470,19 +464,16 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     scale = np.maximum(0.3, 1 + (draws[:, None, 0:3] - _SIZE_BIAS) * length / sizes_grasp[None, :, :])
     shift = draws[:, 3:6] * length
     if plane is None:
-        rotation = np.broadcast_to(_rotations(draws[:, None, 6:9] * angle), (len(draws), len(R_grasp), 3, 3))
-    else:
-        normal = plane[:3]
-        side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
-        side /= np.linalg.norm(side)
-        basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
-        # World rotations of a free frame and of an upright one, then in each grasp's axes.
-        world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
-                                     draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
-        W = world[upright.astype(np.intp)]  # (M, P, 3, 3)
-        rotation = np.swapaxes(np.swapaxes(R_grasp, 1, 2)[:, None] @ W @ R_grasp[:, None], 0, 1)
-    variant = np.where(draws[:, 9] > 0.43, 1, np.where(draws[:, 9] < -0.43, 2, 0))
-    return variant.astype(np.int_), np.ascontiguousarray(scale), np.ascontiguousarray(rotation), shift
+        own_axes = np.ascontiguousarray(np.broadcast_to(np.eye(3), R_grasp.shape))
+        return scale, _rotations(draws[None, :, 6:9] * angle), np.zeros(len(R_grasp), np.int_), own_axes, shift
+    normal = plane[:3]
+    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
+    side /= np.linalg.norm(side)
+    basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
+    # World rotations of a free frame and of an upright one.
+    world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
+                                 draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
+    return scale, world, upright.astype(np.int_), np.ascontiguousarray(R_grasp), shift
 
 
 def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray | None):
@@ -517,24 +508,15 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
     M = np.ascontiguousarray(np.einsum("mab,mac->mbc", c["R"], c["F"]))
     centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
-
-    variant, scale, rotation, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
-                                                     c["upright"], plane)
-    out = np.empty((m, len(variant), 4))
-    _perturbed_margins(points, normals, valid, variant, M, scale, rotation, shift, centre,
-                       g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, _COMPLIANCE * g.pad_length,
-                       _cone(g), np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), out)
-    # The perturbed model's nearest point towards the palm, from its support function in
-    # direction M^T D R^T e_z (frame coordinates); the hull does not move.
-    w = np.einsum("mba,pmb->pma", M, scale * rotation[:, :, 2, :])
-    nearest = centre[None, :, 2] + shift[:, None, 2] - _support(c["sizes"][None], variants[variant], w)
-    nearest = np.minimum(nearest, (c["hull"] - c["dz"])[None, :])
-    touches = out[:, :, 2].T > 0
-    margins = np.stack([np.where(touches, out[:, :, 0].T / length, -1.0),  # open jaws clear
-                        (nearest - g.palm) / length,  # palm clear
-                        np.minimum(-out[:, :, 3].T / length, 10.0),  # the pads' centre line meets the object
-                        np.where(touches, out[:, :, 1].T / angle, -1.0)], axis=2)  # antipodal
-    return ndtr(4 * margins).prod(axis=2).mean(axis=0)
+    scale, rotations, rotation_set, axes, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
+                                                                 c["upright"], plane)
+    margins = np.empty((m, _ERROR_DRAWS, 4))
+    # The hull does not move with the model's error.
+    _perturbed_margins(points, normals, valid, variants, c["sizes"], M, _VARIANT, scale, rotations, rotation_set,
+                       axes, shift, centre, c["hull"] - c["dz"], g.finger_width / 2, g.palm, g.tip,
+                       g.max_opening / 2, _COMPLIANCE * g.pad_length, _cone(g), length, angle,
+                       np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), margins)
+    return ndtr(4 * margins).prod(axis=2).mean(axis=1)
 
 
 def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
