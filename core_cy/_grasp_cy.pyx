@@ -1,7 +1,7 @@
 # cython: boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Kernel of core_cy.grasp: a grasp's margins on perturbed copies of the model's sampled surface."""
 
-from libc.math cimport acos, fabs, pow, sqrt, INFINITY, NAN
+from libc.math cimport acos, atan2, fabs, pow, sqrt, INFINITY, NAN
 
 
 cdef inline double _clip_unit(double v) noexcept nogil:
@@ -53,39 +53,115 @@ cdef inline double _chord(const double* s, double e1, double e2, int k, double* 
     return h * s[k]
 
 
-def half_chords(const double[:, ::1] sizes not None, const double[:, ::1] shape not None,
-                const long[::1] axis not None, const double[:, ::1] u not None,
-                double[::1] half not None, double[:, ::1] normal not None):
-    """Half-chords of centred, axis-aligned superquadrics along a frame axis, and the normals.
-
-    sizes (M, 3), shape (M, 2) as (e1, e2), with frame axis 2 carrying e1; axis (M,) the
-    chord's axis; u (M, 3) the point's other two coordinates (``u[axis]`` is ignored).
-    Writes half (M,), NaN where the line misses, and normal (M, 3): the unit outward
-    normal at the surface point whose ``axis`` coordinate is ``+half``, the others ``u``'s.
-    """
-    cdef Py_ssize_t row, n = u.shape[0], c
-    cdef double s[3]
+cdef inline double _half_chord(const double* s, double e1, double e2, int k, const double* u,
+                               double* normal) noexcept nogil:
+    """Half the chord along axis k of the centred superquadric with semi-axes s at the point
+    u (frame coordinates, u[k] ignored); NaN where the line misses, else normal is the unit
+    outward normal at the surface point whose k coordinate is +half, the others u's."""
     cdef double p[3]
     cdef double g[3]
     cdef double h, length
-    cdef int k
+    cdef int c
+    for c in range(3):
+        p[c] = fabs(u[c]) / s[c]
+    h = _chord(s, e1, e2, k, p, g)
+    if h != h:
+        normal[0], normal[1], normal[2] = 0.0, 0.0, 0.0
+        return h
+    for c in range(3):
+        if c != k and u[c] < 0:
+            g[c] = -g[c]
+    length = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    for c in range(3):
+        normal[c] = g[c] / length if length > 0 else 0.0
+    return h
+
+
+cdef inline double _min(double a, double b) noexcept nogil:
+    return a if a < b else b
+
+
+def nominal_margins(const double[:, ::1] sizes not None, const double[:, ::1] shape not None,
+                    const long[:, ::1] axes not None, const double[::1] slide not None,
+                    const double[::1] hull_near not None, const double[::1] column not None,
+                    const double[:, ::1] plane_height not None, bint on_plane,
+                    double finger_length, double pad_length, double half_open, double half_finger_width,
+                    double palm_clearance, double table_clearance, double cone, double length, double angle,
+                    double[:, ::1] depth not None, double[:, ::1] dz not None, double[:, ::1] half not None,
+                    double[:, :, ::1] margins not None, unsigned char[:, ::1] ok not None):
+    """Closed-form checks of each candidate at its four depths.
+
+    sizes (M, 3), shape (M, 2) the candidate's model in its frame (frame axis 2 carries e1);
+    axes (M, 3) its closing, approach and across axes; slide (M,) its offset along the
+    grasp's x; hull_near (M,) and column (M,) the hull's nearest point towards the palm
+    across the palm and between the fingers (grasp z about the model's centre).
+    plane_height (M, 3), read if on_plane: the grasp origin's height above the support
+    plane at the model's centre, the plane normal's grasp z, and the lowest gripper
+    corner's height relative to the grasp origin.
+    Writes, per candidate and depth (the pads' centre just inside, halfway, the deepest the
+    palm and the plane allow, on the model's widest section): depth (M, 4) past the model's
+    near side, dz (M, 4) of the grasp origin from the centre along the approach, half (M, 4)
+    the model's half-width between the pads, margins (M, 4, 4) in standard errors (open
+    jaws, palm, origin inside, friction cone; -1 where the jaws miss the model), and
+    ok (M, 4) 1 where every check passes.
+    """
+    cdef Py_ssize_t row, d
+    cdef double s[3]
+    cdef double u[3]
+    cdef double normal[3]
+    cdef double s_j, near, deepest, shallowest, limit, height, nz, lowest, tilt, palm, h
+    cdef double depths[4]
+    cdef int i, j, k, c
+    cdef bint passes
     with nogil:
-        for row in range(n):
-            k = <int>axis[row]
+        for row in range(sizes.shape[0]):
+            i, j, k = <int>axes[row, 0], <int>axes[row, 1], <int>axes[row, 2]
             for c in range(3):
                 s[c] = sizes[row, c]
-                p[c] = fabs(u[row, c]) / s[c]
-            h = _chord(s, shape[row, 0], shape[row, 1], k, p, g)
-            half[row] = h
-            if h != h:
-                normal[row, 0], normal[row, 1], normal[row, 2] = 0.0, 0.0, 0.0
-                continue
-            for c in range(3):
-                if c != k and u[row, c] < 0:
-                    g[c] = -g[c]
-            length = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-            for c in range(3):
-                normal[row, c] = g[c] / length if length > 0 else 0.0
+                u[c] = 0.0
+            # The model's near side between the fingers (where they slid to), and across the palm.
+            u[k] = fabs(slide[row]) - half_finger_width
+            if u[k] < 0:
+                u[k] = 0.0
+            s_j = _half_chord(s, shape[row, 0], shape[row, 1], j, u, normal)
+            if s_j != s_j:
+                s_j = -INFINITY
+            near = _min(-s[j], hull_near[row])  # the hull's, if nearer
+            deepest = _min(finger_length - palm_clearance + s_j + near, 2 * s_j + pad_length / 2)
+            height, nz, lowest = plane_height[row, 0], plane_height[row, 1], plane_height[row, 2]
+            if on_plane and nz < -1e-9:
+                # The lowest corner at reach e: height + (e - pad/2 - s_j) nz + lowest >= clearance.
+                limit = (height + lowest - table_clearance) / -nz + pad_length / 2 + s_j
+                deepest = _min(deepest, limit)
+            # The grasp's origin (the pads' centre) lies inside the object, with a margin.
+            shallowest = pad_length / 2 + length
+            depths[0], depths[1], depths[2] = shallowest, (shallowest + deepest) / 2, deepest
+            h = s_j + pad_length / 2  # the pads centred on the model's widest section
+            depths[3] = _min(h if h > shallowest else shallowest, deepest)
+            for d in range(4):
+                depth[row, d] = depths[d]
+                dz[row, d] = depths[d] - pad_length / 2 - s_j
+                passes = deepest >= shallowest and s_j > 0
+                # The hull holds the object: between the fingers it must reach the model's near
+                # side (else the model claims more than the views saw), and past the pads' centre.
+                passes = passes and column[row] <= -s_j + 0.5 * length and column[row] < dz[row, d]
+                if on_plane:
+                    passes = passes and height + dz[row, d] * nz + lowest >= table_clearance * 0.999
+                # The widest chord the fingers meet: nearest the centre, within their reach.
+                u[j] = _min(0.0, depths[d] - s_j)
+                h = _half_chord(s, shape[row, 0], shape[row, 1], i, u, normal)
+                half[row, d] = h
+                tilt = atan2(fabs(normal[j]), normal[i])
+                palm = depths[d] - s_j - finger_length  # along the approach from the centre
+                margins[row, d, 0] = (half_open - h) / length
+                margins[row, d, 1] = (near - palm) / length
+                margins[row, d, 2] = (depths[d] - pad_length / 2) / length
+                margins[row, d, 3] = (cone - tilt) / angle
+                for c in range(4):
+                    if margins[row, d, c] != margins[row, d, c]:
+                        margins[row, d, c] = -1.0
+                    passes = passes and margins[row, d, c] > 0
+                ok[row, d] = passes
 
 
 def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1] shapes not None,

@@ -67,9 +67,9 @@ import numbers
 import numpy as np
 from scipy.special import ndtr
 
-from ._grasp_cy import half_chords as _half_chords
 from ._grasp_cy import hull_reach as _hull_reach
 from ._grasp_cy import in_open_fingers as _in_open_fingers
+from ._grasp_cy import nominal_margins as _nominal_margins
 from ._grasp_cy import pad_extent as _pad_extent
 from ._grasp_cy import perturbed_margins as _perturbed_margins
 from ._grasp_cy import surface_samples as _surface_samples
@@ -140,28 +140,6 @@ def _cone(gripper: Gripper) -> float:
     """The friction cone's half angle the planner holds contacts to: ``_CONE_MARGIN`` inside
     the gripper's, for what the sampled model cannot show (a face flatter than fitted)."""
     return math.atan(gripper.friction) - _CONE_MARGIN
-
-
-def _half_chord(sizes, shape, axis, u):
-    """Half the chord of a centred, axis-aligned superquadric along frame axis ``axis``.
-
-    Frame axis 2 carries e1. ``sizes`` (M, 3), ``shape`` (M, 2), ``axis`` (M,) int,
-    ``u`` (M, 3) frame coordinates (``u[axis]`` is ignored). Returns the half-chord
-    (M,), NaN where the line misses, and the unit outward normal (M, 3) at the
-    surface point with ``u[axis] = +half``.
-
-    Examples
-    --------
-    >>> sizes, shape = np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 1.0]])
-    >>> half, normal = _half_chord(sizes, shape, np.array([0]), np.array([[0.0, 0.0, 1.5]]))
-    >>> round(float(half[0]), 6), normal.round(6).tolist()
-    (0.866025, [[0.981981, 0.0, 0.188982]])
-    """
-    half, normal = np.empty(len(u)), np.empty((len(u), 3))
-    _half_chords(np.ascontiguousarray(sizes, dtype=np.float64), np.ascontiguousarray(shape, dtype=np.float64),
-                 np.ascontiguousarray(axis, dtype=np.int_), np.ascontiguousarray(u, dtype=np.float64),
-                 half, normal)
-    return half, normal
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -360,7 +338,7 @@ def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gr
 
 
 def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
-    """Closed-form checks of every candidate at its depths.
+    """Closed-form checks of every candidate at its depths (kernel in Cython).
 
     Returns the passing (candidate, depth) pairs with their reach ``e`` past the
     model's near side, the offset ``dz`` of the grasp origin from the centre along
@@ -371,53 +349,20 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     length, angle = error
     hull_near, column, unexplained = hull
     n = len(c["i"])
-    rows = np.arange(n)
-    # The model's near side between the fingers (where they slid to), and across the palm.
-    u = np.zeros((n, 3))
-    u[rows, c["k"]] = slid = np.maximum(0.0, np.abs(c["dx"]) - g.finger_width / 2)
-    s_j = np.nan_to_num(_half_chord(c["sizes"], c["shape"], c["j"], u)[0], nan=-np.inf)
-    near = np.minimum(-c["sizes"][rows, c["j"]], hull_near)  # the hull's, if nearer
-    clear = _PALM_CLEARANCE * g.finger_length
-    deepest = np.minimum(g.finger_length - clear + s_j + near, 2 * s_j + g.pad_length / 2)
-    clearance = _TABLE_CLEARANCE * g.finger_length
+    plane_height = np.zeros((n, 3))
     if plane is not None:
         normal_grasp = np.einsum("nab,a->nb", c["R"], plane[:3])  # the plane's normal in each grasp frame
-        lowest = (normal_grasp @ g.corners().T).min(axis=1)
-        height = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
-        nz = normal_grasp[:, 2]
-        # The lowest corner at reach e: height + (e - pad/2 - s_j) nz + lowest >= clearance.
-        going_down = nz < -1e-9
-        table_limit = np.full(n, np.inf)
-        table_limit[going_down] = ((height[going_down] + lowest[going_down] - clearance) / -nz[going_down]
-                                   + g.pad_length / 2 + s_j[going_down])
-        deepest = np.minimum(deepest, table_limit)
-    # The grasp's origin (the pads' centre) lies inside the object, with a margin.
-    shallowest = np.full(n, g.pad_length / 2 + length)
-    equator = s_j + g.pad_length / 2  # the pads centred on the model's widest section
-    depth = np.stack([shallowest, (shallowest + deepest) / 2, deepest, np.clip(equator, shallowest, deepest)], 1)
-    pair = np.repeat(rows, depth.shape[1])
-    depth = depth.ravel()
-    i, j = c["i"][pair], c["j"][pair]
-    s_j = s_j[pair]
-    dz = depth - g.pad_length / 2 - s_j
-    ok = (deepest[pair] >= shallowest[pair]) & (s_j > 0)
-    # The hull holds the object: between the fingers it must reach the model's near side
-    # (else the model claims more than the views saw), and past the pads' centre.
-    ok &= (column[pair] <= -s_j + 0.5 * length) & (column[pair] < dz)
-    if plane is not None:
-        ok &= height[pair] + dz * nz[pair] + lowest[pair] >= clearance * 0.999
-    # The widest chord the fingers meet: nearest the centre, within their reach.
-    u = np.zeros((len(pair), 3))
-    index = np.arange(len(pair))
-    u[index, j] = np.minimum(0.0, depth - s_j)
-    u[index, c["k"][pair]] = slid[pair]
-    half, normal = _half_chord(c["sizes"][pair], c["shape"][pair], i, u)
-    tilt = np.arctan2(np.abs(normal[index, j]), normal[index, i])
-    palm = depth - s_j - g.finger_length  # along the approach from the centre
-    margins = np.stack([(g.max_opening / 2 - half) / length, (near[pair] - palm) / length,
-                        (depth - g.pad_length / 2) / length, (_cone(g) - tilt) / angle], axis=1)
-    margins = np.nan_to_num(margins, nan=-1.0)
-    ok &= np.all(margins > 0, axis=1)
+        plane_height[:, 0] = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
+        plane_height[:, 1] = normal_grasp[:, 2]
+        plane_height[:, 2] = (normal_grasp @ g.corners().T).min(axis=1)
+    depth, dz, half = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
+    margins, ok = np.empty((n, 4, 4)), np.empty((n, 4), np.uint8)
+    _nominal_margins(c["sizes"], c["shape"], np.stack([c["i"], c["j"], c["k"]], 1), c["dx"], hull_near, column,
+                     plane_height, plane is not None, g.finger_length, g.pad_length, g.max_opening / 2,
+                     g.finger_width / 2, _PALM_CLEARANCE * g.finger_length, _TABLE_CLEARANCE * g.finger_length,
+                     _cone(g), length, angle, depth, dz, half, margins, ok)
+    pair = np.repeat(np.arange(n), 4)
+    depth, dz, half, margins, ok = depth.ravel(), dz.ravel(), half.ravel(), margins.reshape(-1, 4), ok.ravel() > 0
     if unexplained.shape[0]:
         # What the hull has and the model lacks (a handle) must not be where an open finger is.
         # Checked last, on the pairs still standing: it weighs every such point against every pair.
