@@ -392,12 +392,19 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                 out[a, b, 3] = (cone - (angle1 if angle1 > angle2 else angle2)) / angle
 
 
-cdef inline void _to_grasp(const double[:, :, ::1] R, Py_ssize_t m, double dx, double dy, double dz,
+cdef inline void _load(const double[:, :, ::1] R, Py_ssize_t m, double* r) noexcept nogil:
+    """Grasp m's axes (the columns of R[m]) into r (9,), row by row, once per grasp."""
+    cdef int c
+    for c in range(9):
+        r[c] = R[m, c // 3, c % 3]
+
+
+cdef inline void _to_grasp(const double* r, double dx, double dy, double dz,
                            double* x, double* y, double* z) noexcept nogil:
-    """(dx, dy, dz) in grasp m's axes (the columns of R[m])."""
-    x[0] = dx * R[m, 0, 0] + dy * R[m, 1, 0] + dz * R[m, 2, 0]
-    y[0] = dx * R[m, 0, 1] + dy * R[m, 1, 1] + dz * R[m, 2, 1]
-    z[0] = dx * R[m, 0, 2] + dy * R[m, 1, 2] + dz * R[m, 2, 2]
+    """(dx, dy, dz) in the axes r (from :func:`_load`)."""
+    x[0] = dx * r[0] + dy * r[3] + dz * r[6]
+    y[0] = dx * r[1] + dy * r[4] + dz * r[7]
+    z[0] = dx * r[2] + dy * r[5] + dz * r[8]
 
 
 def hull_reach(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
@@ -414,11 +421,13 @@ def hull_reach(const double[:, ::1] offsets not None, const double[:, :, ::1] R 
     """
     cdef Py_ssize_t m, p, n_points = offsets.shape[0]
     cdef double x, y, z, near, col
+    cdef double r[9]
     with nogil:
         for m in range(R.shape[0]):
             near, col = INFINITY, INFINITY
+            _load(R, m, r)
             for p in range(n_points):
-                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
                 x = fabs(x - slide[m])
                 y = fabs(y)
                 if x <= palm_half_width and y <= palm_half_span and z < near:
@@ -440,11 +449,13 @@ def in_open_fingers(const double[:, ::1] offsets not None, const double[:, :, ::
     """
     cdef Py_ssize_t m, p, n_points = offsets.shape[0]
     cdef double x, y, z
+    cdef double r[9]
     with nogil:
         for m in range(R.shape[0]):
             hit[m] = 0
+            _load(R, m, r)
             for p in range(n_points):
-                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
                 x, y, z = fabs(x - origin[m, 0]), fabs(y - origin[m, 1]), z - origin[m, 2]
                 if (x <= finger_half_width and z >= palm and z <= tip and y >= half_open
                         and y <= half_open + finger_thickness):
@@ -464,11 +475,13 @@ def pad_extent(const double[:, ::1] offsets not None, const double[:, :, ::1] R 
     """
     cdef Py_ssize_t m, p, n_points = offsets.shape[0]
     cdef double x, y, z, top, bottom, count
+    cdef double r[9]
     with nogil:
         for m in range(R.shape[0]):
             top, bottom, count = -INFINITY, -INFINITY, 0.0
+            _load(R, m, r)
             for p in range(n_points):
-                _to_grasp(R, m, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
                 x, y, z = x - origin[m, 0], y - origin[m, 1], z - origin[m, 2]
                 if fabs(x) <= finger_half_width and fabs(z) <= pad_half_length and fabs(y) <= half_span:
                     count += 1.0

@@ -106,6 +106,7 @@ _CONE_MARGIN = math.radians(3.0)
 _SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too long
 # Sample grid of the surface facing each finger: across the finger, along the approach.
 _SAMPLES = (5, 7)
+_ACROSS, _ALONG = np.linspace(-1, 1, _SAMPLES[0]), np.linspace(0, 1, _SAMPLES[1])
 _APPROACH_ORDER = ("top", "side", "tilted")
 # (closing axis, approach axis, approach sign) of a frame's candidates.
 _COMBOS = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
@@ -431,27 +432,24 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     g = gripper
     length, angle = error
     m = len(c["i"])
-    rows = np.arange(m)
-    nk, nw = _SAMPLES
-    s_i, s_j, s_k = (c["sizes"][rows, c[key]] for key in ("i", "j", "k"))
+    n = _SAMPLES[0] * _SAMPLES[1]
+    frame_axes = np.stack([c["i"], c["j"], c["k"]], 1)  # closing, approach, across
+    s_i, s_j, s_k = np.take_along_axis(c["sizes"], frame_axes, 1).T
     # Sample the surface facing the fingers, a little beyond their reach (the draws move it).
-    slack = np.minimum(2 * length, g.finger_width / 2)
-    across = np.linspace(-1, 1, nk) * (g.finger_width / 2 + slack)
+    across = _ACROSS * (g.finger_width / 2 + min(2 * length, g.finger_width / 2))
     near = -s_j * (1 - 1e-6)
     far = np.minimum(s_j * (1 - 1e-6), c["e"] - s_j + 2 * length)
-    along = near[:, None] + np.linspace(0, 1, nw)[None, :] * (far - near)[:, None]
-    n = nk * nw
+    along = near[:, None] + _ALONG[None, :] * (far - near)[:, None]
     # Frame coordinate k is +-x of the grasp: sample across the finger where it slid to.
-    sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][rows, :, c["k"]])
+    sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][np.arange(m), :, c["k"]])
     across = sign_k[:, None] * (c["dx"][:, None] + across[None, :])
-    variants = np.stack([c["shape"]] + [np.clip(c["shape"] + change, *_SHAPE_LIMITS) for change in _SHAPE_ERROR])
+    variants = np.stack([c["shape"]] + [np.minimum(np.maximum(c["shape"] + change, _SHAPE_LIMITS[0]), _SHAPE_LIMITS[1])
+                                        for change in _SHAPE_ERROR])
     points, normals = np.empty((len(variants), m, 2 * n, 3)), np.empty((len(variants), m, 2 * n, 3))
     valid = np.empty((len(variants), m, 2 * n), np.uint8)
-    _surface_samples(c["sizes"], variants, np.stack([c["i"], c["j"], c["k"]], 1).astype(np.int_),
-                     np.ascontiguousarray(across), np.ascontiguousarray(c["s"][:, None] * along),
-                     points, normals, valid)
+    _surface_samples(c["sizes"], variants, frame_axes, across, c["s"][:, None] * along, points, normals, valid)
     # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
-    M = np.ascontiguousarray(np.einsum("mab,mac->mbc", c["R"], c["F"]))
+    M = np.einsum("mab,mac->mbc", c["R"], c["F"])
     centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
     scale, rotations, rotation_set, axes, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
                                                                  c["upright"], plane)
@@ -469,12 +467,14 @@ def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
     (within 0.05, approaches from above first), the best of each orientation before the
     second best of any (slides and depths of one orientation are much alike)."""
     order = np.lexsort((preference, -np.round(pairs["first"] / _SCORE_STEP)))
-    rank = np.empty(len(order), dtype=np.intp)
-    seen: dict[int, int] = {}
-    for position, index in enumerate(order):
-        rank[index] = seen.get(pairs["pose"][index], 0)
-        seen[pairs["pose"][index]] = rank[index] + 1
-    return order[np.argsort(rank[order], kind="stable")][:_ROBUST_KEEP]
+    # Each pair's rank among those of its orientation, in that order.
+    pose = pairs["pose"][order]
+    grouped = np.argsort(pose, kind="stable")
+    count = len(order)
+    starts = np.r_[True, pose[grouped][1:] != pose[grouped][:-1]]
+    rank = np.empty(count, dtype=np.intp)
+    rank[grouped] = np.arange(count) - np.maximum.accumulate(np.where(starts, np.arange(count), 0))
+    return order[np.argsort(rank, kind="stable")][:_ROBUST_KEEP]
 
 
 def _alike(R: np.ndarray, origin: np.ndarray, tolerance: float) -> np.ndarray:
