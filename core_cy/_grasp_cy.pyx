@@ -4,6 +4,10 @@
 from libc.math cimport acos, atan2, fabs, pow, sqrt, INFINITY, NAN
 
 
+cdef enum:
+    _MAX_GRID = 32  # samples across or along a finger's face
+
+
 cdef inline double _clip_unit(double v) noexcept nogil:
     return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
 
@@ -13,17 +17,31 @@ cdef inline double _ratio(double power, double base) noexcept nogil:
     return power / base if base > 0 else 0.0
 
 
+cdef inline double _power(double p, double e1, double e2, int axis) noexcept nogil:
+    """The inside-outside function's term of a coordinate: p ** (2 / e), e = e1 on frame axis 2."""
+    return pow(p, 2 / e1) if axis == 2 else pow(p, 2 / e2)
+
+
 cdef inline double _chord(const double* s, double e1, double e2, int k, double* p, double* g) noexcept nogil:
     """Half-chord along axis k (scaled by s[k]) of the superquadric with semi-axes s at the
     point p (absolute values divided by the sizes; p[k] ignored, then set); NaN where the
-    line misses, else g is the outward normal (unnormalised, first octant).
+    line misses, else g is the outward normal (unnormalised, first octant)."""
+    cdef double P[3]
+    cdef int c
+    for c in range(3):
+        if c != k:
+            P[c] = _power(p[c], e1, e2, c)
+    return _chord_of(s, e1, e2, k, p, P, g)
 
-    The terms p[c] ** (2 / e) of the inside-outside function are computed once and reused
-    for the normal (pow is most of the cost here)."""
-    cdef double S, B, h, common, P0, P1, P2
+
+cdef inline double _chord_of(const double* s, double e1, double e2, int k, double* p, double* P,
+                             double* g) noexcept nogil:
+    """:func:`_chord` given the terms P[c] = :func:`_power` of p[c] for c != k (P[k] is set).
+
+    The terms are reused for the normal (pow is most of the cost here)."""
+    cdef double S, B, h, common
     if k == 2:
-        P0, P1 = pow(p[0], 2 / e2), pow(p[1], 2 / e2)
-        S = P0 + P1
+        S = P[0] + P[1]
         if not S < 1:
             return NAN
         common = pow(S, e2 / e1)
@@ -31,25 +49,21 @@ cdef inline double _chord(const double* s, double e1, double e2, int k, double* 
         if not B > 0:
             return NAN
         h = pow(B, e1 / 2)
-        P2 = B  # h ** (2 / e1)
         common = common / S if S > 0 else 0.0  # S ** (e2 / e1 - 1)
     else:
-        P2 = pow(p[2], 2 / e1)
-        if not P2 < 1:
+        if not P[2] < 1:
             return NAN
-        P0 = pow(p[1 - k], 2 / e2)
-        B = pow(1 - P2, e1 / e2) - P0
+        B = pow(1 - P[2], e1 / e2) - P[1 - k]
         if not B > 0:
             return NAN
         h = pow(B, e2 / 2)
-        P1 = B  # h ** (2 / e2)
-        if k == 0:
-            P0, P1 = P1, P0
-        common = pow(P0 + P1, e2 / e1 - 1)
+    P[k] = B  # h ** (2 / e)
+    if k != 2:
+        common = pow(P[0] + P[1], e2 / e1 - 1)
     p[k] = h
-    g[0] = common * _ratio(P0, p[0]) / s[0]
-    g[1] = common * _ratio(P1, p[1]) / s[1]
-    g[2] = _ratio(P2, p[2]) / s[2]
+    g[0] = common * _ratio(P[0], p[0]) / s[0]
+    g[1] = common * _ratio(P[1], p[1]) / s[1]
+    g[2] = _ratio(P[2], p[2]) / s[2]
     return h * s[k]
 
 
@@ -183,21 +197,33 @@ def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1]
     cdef double p[3]
     cdef double g[3]
     cdef double q[3]
-    cdef double h, length
+    cdef double P[3]
+    # The terms of the grid's across and along coordinates, once per model (pow is costly).
+    cdef double across_terms[_MAX_GRID]
+    cdef double along_terms[_MAX_GRID]
+    cdef double h, length, e1, e2
     cdef int i, j, k
+    if A > _MAX_GRID or W > _MAX_GRID:
+        raise ValueError(f"at most {_MAX_GRID} grid samples across and along, got {A} and {W}")
     with nogil:
         for v in range(V):
             for m in range(M):
                 i, j, k = <int>axes[m, 0], <int>axes[m, 1], <int>axes[m, 2]
+                e1, e2 = shapes[v, m, 0], shapes[v, m, 1]
                 for c in range(3):
                     s[c] = sizes[m, c]
+                for a in range(A):
+                    across_terms[a] = _power(fabs(across[m, a]) / s[k], e1, e2, k)
+                for w in range(W):
+                    along_terms[w] = _power(fabs(along[m, w]) / s[j], e1, e2, j)
                 for a in range(A):
                     for w in range(W):
                         n = a * W + w
                         q[i], q[j], q[k] = 0.0, along[m, w], across[m, a]
                         for c in range(3):
                             p[c] = fabs(q[c]) / s[c]
-                        h = _chord(s, shapes[v, m, 0], shapes[v, m, 1], i, p, g)
+                        P[j], P[k] = along_terms[w], across_terms[a]
+                        h = _chord_of(s, e1, e2, i, p, P, g)
                         if h != h:
                             valid[v, m, n], valid[v, m, N + n] = 0, 0
                             for c in range(3):
