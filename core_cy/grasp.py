@@ -108,6 +108,7 @@ _SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too lo
 _SAMPLES = (5, 7)
 _ACROSS, _ALONG = np.linspace(-1, 1, _SAMPLES[0]), np.linspace(0, 1, _SAMPLES[1])
 _APPROACH_ORDER = ("top", "side", "tilted")
+_EYE, _X, _Y = np.eye(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
 # (closing axis, approach axis, approach sign) of a frame's candidates.
 _COMBOS = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
 
@@ -129,7 +130,7 @@ def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_io
     >>> [round(v, 4) for v in model_error(sq, 0.002, [0.95, 0.95, 0.95])]
     [0.002, 0.0949]
     """
-    mean_size = float(np.mean(superquadric.size))
+    mean_size = float(np.sum(superquadric.size) / 3)
     miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
     miss = min(max(miss, 0.0), 1.0)
     length = max(0.65 * residual, 1.3 * miss * mean_size, 0.02 * mean_size)
@@ -145,30 +146,45 @@ def _cone(gripper: Gripper) -> float:
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross products along the last axis (np.cross costs more than the product here)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def _norm(v: np.ndarray) -> float:
+    """Length of a vector (np.linalg.norm's value, without its overhead)."""
+    return math.sqrt(v @ v)
+
+
+def _level_axes(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit axes perpendicular to the unit ``normal``, and to each other (right-handed with it)."""
+    side = _cross(normal, _X if abs(normal[0]) < 0.9 else _Y)
+    side /= _norm(side)
+    return side, _cross(normal, side)
 
 
 def _rotations(vectors: np.ndarray) -> np.ndarray:
     """Rodrigues: rotation matrices (..., 3, 3) of rotation vectors (..., 3) (axis times angle)."""
-    theta = np.linalg.norm(vectors, axis=-1)
+    theta = np.sqrt((vectors * vectors).sum(axis=-1))
     axis = vectors / np.maximum(theta, 1e-300)[..., None]
     K = np.zeros(vectors.shape + (3,))
     K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
     K -= np.swapaxes(K, -1, -2)
-    return np.eye(3) + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
+    return _EYE + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    return _EYE + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
 def _turned(frame: np.ndarray, current: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The frame turned by the smallest rotation taking unit vector ``current`` to ``target``."""
     turn_axis = _cross(current, target)
-    sine = np.linalg.norm(turn_axis)
+    sine = _norm(turn_axis)
     if sine < 1e-12:
         return frame
     return _rotation(turn_axis / sine, math.atan2(sine, current @ target)) @ frame
@@ -187,7 +203,7 @@ def _upright(frame: np.ndarray, down: np.ndarray, round_axis: int | None) -> tup
         return _turned(frame, frame[:, axis] * np.sign(cosines[axis]), down), True
     if round_axis is not None and abs(cosines[round_axis]) <= math.sin(_SNAP):
         level = frame[:, round_axis] - cosines[round_axis] * down
-        return _turned(frame, frame[:, round_axis], level / np.linalg.norm(level)), True
+        return _turned(frame, frame[:, round_axis], level / _norm(level)), True
     return frame, False
 
 
@@ -226,7 +242,7 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
         start = 0.0
         if down is not None:
             along = down - (down @ R[:, axis]) * R[:, axis]
-            if np.linalg.norm(along) > 0.1:
+            if _norm(along) > 0.1:
                 start = math.atan2(along @ R[:, v], along @ R[:, u])
         for step in range(round(math.pi / _RING_STEP)):
             turn = _rotation(R[:, axis], start + step * _RING_STEP)
@@ -410,12 +426,10 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     scale = np.maximum(0.3, 1 + (draws[:, None, 0:3] - _SIZE_BIAS) * length / sizes_grasp[None, :, :])
     shift = draws[:, 3:6] * length
     if plane is None:
-        own_axes = np.ascontiguousarray(np.broadcast_to(np.eye(3), R_grasp.shape))
+        own_axes = np.ascontiguousarray(np.broadcast_to(_EYE, R_grasp.shape))
         return scale, _rotations(draws[None, :, 6:9] * angle), np.zeros(len(R_grasp), np.int_), own_axes, shift
     normal = plane[:3]
-    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
-    side /= np.linalg.norm(side)
-    basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
+    basis = np.stack([normal, *_level_axes(normal)])  # rows: world axes of the draws
     # World rotations of a free frame and of an upright one.
     world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
                                  draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
@@ -471,7 +485,7 @@ def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
     pose = pairs["pose"][order]
     grouped = np.argsort(pose, kind="stable")
     count = len(order)
-    starts = np.r_[True, pose[grouped][1:] != pose[grouped][:-1]]
+    starts = np.concatenate([[True], pose[grouped][1:] != pose[grouped][:-1]])
     rank = np.empty(count, dtype=np.intp)
     rank[grouped] = np.arange(count) - np.maximum.accumulate(np.where(starts, np.arange(count), 0))
     return order[np.argsort(rank, kind="stable")][:_ROBUST_KEEP]
@@ -572,9 +586,7 @@ def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
     """The box around the hull's points standing on the plane, its horizontal axes the
     points' principal axes in the plane."""
     normal = plane[:3]
-    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
-    side /= np.linalg.norm(side)
-    basis = np.stack([side, _cross(normal, side)], axis=1)  # (3, 2)
+    basis = np.stack(_level_axes(normal), axis=1)  # (3, 2)
     flat = points @ basis
     _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
     first = basis @ vectors[:, 1]
@@ -603,7 +615,7 @@ def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper
         # The hull's typical distance from the model (the median's, scaled to a standard
         # deviation's): the model's own error, apart from what it leaves out (a handle),
         # which the hull checks cover; and how far the hull bulges past the object.
-        bloat = 1.4826 * float(np.median(np.abs(radial)))
+        bloat = 1.4826 * _median(np.abs(radial))
         residual = min(residual, bloat)
     error = model_error(superquadric, residual, silhouette_iou)
     centre = superquadric.T_world_object[:3, 3]
@@ -614,27 +626,36 @@ def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)
-    kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
-    pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
+    pairs, preference = _take(pairs, keep), preference[keep]
     score = _robust(pairs, gripper, error, plane) * _agreement(pairs, points, centre, gripper, error[0], bloat)
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
     R = pairs["R"]
     origin = centre + np.einsum("mab,mb->ma", R, np.stack([pairs["dx"], np.zeros(len(R)), pairs["dz"]], 1))
     alike = _alike(R, origin, 0.05 * gripper.finger_length)
+    T = np.zeros((len(R), 4, 4))
+    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, origin, 1.0
+    scores, widths, alike = score.tolist(), (2 * pairs["half"]).tolist(), alike.tolist()
     grasps: list[Grasp] = []
     chosen: list[int] = []
-    for index in order:
-        if score[index] < min_score or len(grasps) == max_grasps:
+    for index in order.tolist():
+        if scores[index] < min_score or len(grasps) == max_grasps:
             break
-        if chosen and alike[index, chosen].any():  # the same grasp but for its depth, ranked higher
+        if any(alike[index][other] for other in chosen):  # the same grasp but for its depth, ranked higher
             continue
         chosen.append(index)
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R[index], origin[index]
-        grasps.append(Grasp(T, float(2 * pairs["half"][index]), float(score[index]), str(kinds[index])))
+        grasps.append(Grasp(T[index].copy(), widths[index], scores[index], _APPROACH_ORDER[preference[index]]))
     return grasps
+
+
+def _median(values: np.ndarray) -> float:
+    """np.median of a 1-D array without NaNs, without its overhead."""
+    half = len(values) // 2
+    if len(values) % 2:
+        return float(np.partition(values, half)[half])
+    low, high = np.partition(values, [half - 1, half])[half - 1:half + 1]
+    return float((low + high) / 2)
 
 
 def _approach_preference(approach: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
