@@ -434,28 +434,41 @@ cdef inline void _to_grasp(const double* r, double dx, double dy, double dz,
 
 
 def hull_reach(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
-               const double[::1] slide not None, double palm_half_width, double palm_half_span,
-               double finger_half_width, double half_open,
-               double[::1] nearest not None, double[::1] column not None):
+               const double[::1] slide not None, const long[::1] by_axes not None,
+               double palm_half_width, double palm_half_span, double finger_half_width, double half_open,
+               double[:, ::1] local not None, double[::1] nearest not None, double[::1] column not None):
     """The hull's nearest points along each candidate's approach.
 
     offsets (P, 3) the hull's points less the model's centre; R (M, 3, 3) the grasp axes
-    (columns); slide (M,) each candidate's offset along its x. Writes, in each candidate's
-    axes about the centre, the lowest z (+inf if none) of the points within the palm's
-    footprint (|x - slide| <= palm_half_width, |y| <= palm_half_span) into nearest (M,), and of
-    those between the fingers (|x - slide| <= finger_half_width, |y| <= half_open) into column (M,).
+    (columns); slide (M,) each candidate's offset along its x; by_axes (M,) the candidates
+    ordered so that those with the same axes (slides of one grasp) follow each other:
+    the points are turned once for them. Writes, in each candidate's axes about the
+    centre, the lowest z (+inf if none) of the points within the palm's footprint
+    (|x - slide| <= palm_half_width, |y| <= palm_half_span) into nearest (M,), and of those
+    between the fingers (|x - slide| <= finger_half_width, |y| <= half_open) into column (M,).
+    local (P, 3) is scratch.
     """
-    cdef Py_ssize_t m, p, n_points = offsets.shape[0]
+    cdef Py_ssize_t t, m, previous = -1, p, n_points = offsets.shape[0]
     cdef double x, y, z, near, col
     cdef double r[9]
+    cdef bint same
+    cdef int c
     with nogil:
-        for m in range(R.shape[0]):
+        for t in range(by_axes.shape[0]):
+            m = by_axes[t]
+            same = previous >= 0
+            for c in range(9):
+                same = same and R[m, c // 3, c % 3] == R[previous, c // 3, c % 3]
+            if not same:
+                _load(R, m, r)
+                for p in range(n_points):
+                    _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &local[p, 0], &local[p, 1], &local[p, 2])
+            previous = m
             near, col = INFINITY, INFINITY
-            _load(R, m, r)
             for p in range(n_points):
-                _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
-                x = fabs(x - slide[m])
-                y = fabs(y)
+                x = fabs(local[p, 0] - slide[m])
+                y = fabs(local[p, 1])
+                z = local[p, 2]
                 if x <= palm_half_width and y <= palm_half_span and z < near:
                     near = z
                 if x <= finger_half_width and y <= half_open and z < col:

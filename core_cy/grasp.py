@@ -61,6 +61,7 @@ more room in the jaws.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 
@@ -263,6 +264,14 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
     return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright), slides
 
 
+@functools.lru_cache(maxsize=8)
+def _corners(gripper: Gripper) -> np.ndarray:
+    """The gripper's corners as columns (3, 20) (:meth:`Gripper.corners`), made once per gripper."""
+    corners = np.ascontiguousarray(gripper.corners().T)
+    corners.setflags(write=False)
+    return corners
+
+
 def _check_plane(support_plane) -> np.ndarray | None:
     if support_plane is None:
         return None
@@ -327,8 +336,10 @@ def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquad
         return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, 3))
     offsets = points - sq.T_world_object[:3, 3]
     nearest, column = np.empty(n), np.empty(n)
-    _hull_reach(offsets, c["R"], c["dx"], gripper.palm_width / 2, gripper.max_opening / 2 + gripper.finger_thickness,
-                gripper.finger_width / 2, gripper.max_opening / 2, nearest, column)
+    # Slides of one pose share its axes: the kernel turns the points once for them.
+    _hull_reach(offsets, c["R"], c["dx"], np.argsort(c["pose"], kind="stable"), gripper.palm_width / 2,
+                gripper.max_opening / 2 + gripper.finger_thickness, gripper.finger_width / 2, gripper.max_opening / 2,
+                np.empty_like(offsets), nearest, column)
     return nearest, column, offsets[radial > 2 * length]
 
 
@@ -371,7 +382,7 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
         normal_grasp = np.einsum("nab,a->nb", c["R"], plane[:3])  # the plane's normal in each grasp frame
         plane_height[:, 0] = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
         plane_height[:, 1] = normal_grasp[:, 2]
-        plane_height[:, 2] = (normal_grasp @ g.corners().T).min(axis=1)
+        plane_height[:, 2] = (normal_grasp @ _corners(g)).min(axis=1)
     depth, dz, half = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
     margins, ok = np.empty((n, 4, 4)), np.empty((n, 4), np.uint8)
     _nominal_margins(c["sizes"], c["shape"], np.stack([c["i"], c["j"], c["k"]], 1), c["dx"], hull_near, column,
