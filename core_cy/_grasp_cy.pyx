@@ -6,6 +6,7 @@ from libc.math cimport acos, atan2, fabs, pow, sqrt, INFINITY, NAN
 
 cdef enum:
     _MAX_GRID = 32  # samples across or along a finger's face
+    _MAX_SAMPLES = 2 * _MAX_GRID * _MAX_GRID
 
 
 cdef inline double _clip_unit(double v) noexcept nogil:
@@ -303,7 +304,11 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     cdef double t[3][3]
     cdef double ox, oy, oz
     cdef bint reached_up, reached_down
-    cdef Py_ssize_t n_variants = points.shape[0], i, c, j
+    cdef Py_ssize_t n_variants = points.shape[0], i, c, j, n, touching
+    cdef double* sample
+    cdef Py_ssize_t[_MAX_SAMPLES] touch
+    if n_samples > _MAX_SAMPLES:
+        raise ValueError(f"at most {_MAX_SAMPLES} surface samples per grasp, got {n_samples}")
     with nogil:
         for a in range(n_grasps):
             # The samples and their normals in the grasp's axes, once per grasp.
@@ -347,21 +352,25 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                 out[a, b, 1] = (nearest - palm) / length
                 top, bottom, near = -INFINITY, -INFINITY, INFINITY
                 reached_up, reached_down = False, False
+                touching = 0
+                sample = &turned[v, 0, 0]
                 for k in range(n_samples):
-                    work[k, 3] = 0.0
                     if not valid[v, a, k]:
                         continue
-                    dx, dy, dz = turned[v, k, 0] * sx, turned[v, k, 1] * sy, turned[v, k, 2] * sz
+                    dx, dy, dz = sample[6 * k] * sx, sample[6 * k + 1] * sy, sample[6 * k + 2] * sz
                     qx = ox + r[0][0] * dx + r[0][1] * dy + r[0][2] * dz
-                    qy = oy + r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
-                    qz = oz + r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
                     if fabs(qx) > half_width:
                         continue
+                    qz = oz + r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
                     if qz < near:
                         near = qz
                     if qz < palm or qz > tip:
                         continue
-                    work[k, 0], work[k, 1], work[k, 2], work[k, 3] = qx, qy, qz, 1.0
+                    qy = oy + r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
+                    # Within the pads' reach: kept for the contacts.
+                    touch[touching] = k
+                    touching += 1
+                    work[k, 0], work[k, 1], work[k, 2] = qx, qy, qz
                     if k < half:
                         reached_up = True
                         if qy > top:
@@ -380,15 +389,14 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                     cx[side], cy[side], cz[side] = 0.0, 0.0, 0.0
                     mx[side], my[side], mz[side] = 0.0, 0.0, 0.0
                     count[side] = 0.0
-                for k in range(n_samples):
-                    if work[k, 3] == 0.0:
-                        continue
+                for n in range(touching):
+                    k = touch[n]
                     side = 0 if k < half else 1
                     ext = top - work[k, 1] if side == 0 else bottom + work[k, 1]
                     if ext > compliance:
                         continue
                     # The normal: inverse-stretched, turned, normalised.
-                    dx, dy, dz = turned[v, k, 3] / sx, turned[v, k, 4] / sy, turned[v, k, 5] / sz
+                    dx, dy, dz = sample[6 * k + 3] / sx, sample[6 * k + 4] / sy, sample[6 * k + 5] / sz
                     nx = r[0][0] * dx + r[0][1] * dy + r[0][2] * dz
                     ny = r[1][0] * dx + r[1][1] * dy + r[1][2] * dz
                     nz = r[2][0] * dx + r[2][1] * dy + r[2][2] * dz
