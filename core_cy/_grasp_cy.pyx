@@ -1,7 +1,7 @@
 # cython: boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Kernel of core_cy.grasp: a grasp's margins on perturbed copies of the model's sampled surface."""
 
-from libc.math cimport acos, atan2, fabs, pow, sqrt, INFINITY, NAN
+from libc.math cimport acos, atan2, cos, erf, erfc, fabs, pow, sin, sqrt, INFINITY, NAN
 
 
 cdef enum:
@@ -252,7 +252,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                       const double[:, :, ::1] frame not None,
                       const long[::1] variant not None,
                       const double[:, :, ::1] scale not None,
-                      const double[:, :, :, ::1] rotations not None,
+                      const double[:, :, ::1] turns not None,
                       const long[::1] rotation_set not None,
                       const double[:, :, ::1] axes not None,
                       const double[:, ::1] shift not None,
@@ -262,8 +262,10 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                       double compliance, double cone, double length, double angle,
                       double[:, ::1] work not None,
                       double[:, :, ::1] turned not None,
-                      double[:, :, ::1] out not None):
-    """The margins of each grasp under each perturbation of its model, in standard errors.
+                      double[:, :, :, ::1] rotations not None,
+                      double[::1] score not None):
+    """How often each grasp holds under the perturbations of its model: the mean over them
+    of the product over its margins m (in standard errors) of the normal CDF of 4 m.
 
     points, normals : (V, M, 2N, 3) surface samples of grasp m's model (exponent variant
         v), in the model's frame about its centre: the first N face the +y finger, the
@@ -273,19 +275,19 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     frame : (M, 3, 3) model-frame to grasp-frame rotation of each grasp.
     variant : (P,) exponent variant of each perturbation; scale (P, M, 3) stretch of the
         model about its centre along the grasp axes.
-    rotations : (K, P, 3, 3) the perturbations' turns about the centre, in a frame in which
-        grasp m's axes are the columns of axes[m] (M, 3, 3); rotation_set (M,) which of
-        the K sets grasp m takes.
+    turns : (K, P, 3) the perturbations' turns about the centre (rotation vectors), in a
+        frame in which grasp m's axes are the columns of axes[m] (M, 3, 3); rotation_set
+        (M,) which of the K sets grasp m takes.
     shift : (P, 3) of the centre, grasp axes; centre (M, 3) the model's centre in each
         grasp frame; hull (M,) the hull's nearest point towards the palm, grasp z.
     length, angle : the standard errors the margins are counted in.
-    work : (2N, 4) and turned : (V, 2N, 6) scratch.
-    out : (M, P, 4) written: open jaws clear (half_open less the farthest touch), palm
-        clear (of the perturbed model's nearest point, by its support function, and of
-        the hull), the pads' centre line meets the object (minus the sampled surface's
-        lowest z across the fingers' width, at most 10), and antipodal (the cone less
-        the contacts' worst angle off the line between them, in ``angle``). The first
-        and the last are -1 where a finger does not reach the object.
+    work : (2N, 4), turned : (V, 2N, 6) and rotations (K, P, 3, 3) scratch.
+    score : (M,) written. The margins: open jaws clear (half_open less the farthest
+        touch), palm clear (of the perturbed model's nearest point, by its support
+        function, and of the hull), the pads' centre line meets the object (minus the
+        sampled surface's lowest z across the fingers' width, at most 10), and antipodal
+        (the cone less the contacts' worst angle off the line between them, in
+        ``angle``). The first and the last are -1 where a finger does not reach the object.
     """
     cdef Py_ssize_t n_grasps = points.shape[1], n_samples = points.shape[2], half = n_samples // 2
     cdef Py_ssize_t n_perturbations = variant.shape[0]
@@ -309,8 +311,14 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     cdef Py_ssize_t[_MAX_SAMPLES] touch
     if n_samples > _MAX_SAMPLES:
         raise ValueError(f"at most {_MAX_SAMPLES} surface samples per grasp, got {n_samples}")
+    cdef double margin[4]
+    cdef double holds
     with nogil:
+        for i in range(turns.shape[0]):
+            for b in range(n_perturbations):
+                _rodrigues(&turns[i, b, 0], &rotations[i, b, 0, 0])
         for a in range(n_grasps):
+            score[a] = 0.0
             # The samples and their normals in the grasp's axes, once per grasp.
             for v in range(n_variants):
                 for k in range(n_samples):
@@ -349,7 +357,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                 nearest = oz - support
                 if hull[a] < nearest:
                     nearest = hull[a]
-                out[a, b, 1] = (nearest - palm) / length
+                margin[1] = (nearest - palm) / length
                 top, bottom, near = -INFINITY, -INFINITY, INFINITY
                 reached_up, reached_down = False, False
                 touching = 0
@@ -379,11 +387,12 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                         reached_down = True
                         if -qy > bottom:
                             bottom = -qy
-                out[a, b, 2] = -near / length
-                if out[a, b, 2] > 10.0:
-                    out[a, b, 2] = 10.0
+                margin[2] = -near / length
+                if margin[2] > 10.0:
+                    margin[2] = 10.0
                 if not (reached_up and reached_down):
-                    out[a, b, 0], out[a, b, 3] = -1.0, -1.0
+                    margin[0], margin[3] = -1.0, -1.0
+                    score[a] += _holds(margin)
                     continue
                 for side in range(2):
                     cx[side], cy[side], cz[side] = 0.0, 0.0, 0.0
@@ -422,8 +431,42 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
                     norm = sqrt(mx[1] * mx[1] + my[1] * my[1] + mz[1] * mz[1])
                     if norm > 0:
                         angle2 = acos(_clip_unit(-(mx[1] * line_x + my[1] * line_y + mz[1] * line_z) / norm))
-                out[a, b, 0] = (half_open - (top if top > bottom else bottom)) / length
-                out[a, b, 3] = (cone - (angle1 if angle1 > angle2 else angle2)) / angle
+                margin[0] = (half_open - (top if top > bottom else bottom)) / length
+                margin[3] = (cone - (angle1 if angle1 > angle2 else angle2)) / angle
+                score[a] += _holds(margin)
+            score[a] /= n_perturbations
+
+
+cdef inline double _ndtr(double a) noexcept nogil:
+    """The standard normal CDF (as scipy.special.ndtr computes it, with the C library's erf)."""
+    cdef double x = a * 0.7071067811865476, y
+    if a != a:
+        return a
+    if fabs(x) < 0.7071067811865476:
+        return 0.5 + 0.5 * erf(x)
+    y = 0.5 * erfc(fabs(x))
+    return 1.0 - y if x > 0 else y
+
+
+cdef inline double _holds(const double* margin) noexcept nogil:
+    """The smoothed "holds" of four margins in standard errors: the product of ndtr(4 m)."""
+    return _ndtr(4 * margin[0]) * _ndtr(4 * margin[1]) * _ndtr(4 * margin[2]) * _ndtr(4 * margin[3])
+
+
+cdef inline void _rodrigues(const double* vector, double* R) noexcept nogil:
+    """R (3 x 3, row-major): the rotation by the rotation vector (axis times angle)."""
+    cdef double theta = sqrt(vector[0] * vector[0] + vector[1] * vector[1] + vector[2] * vector[2])
+    cdef double K[9]
+    cdef double x, y, z, sine = sin(theta), versine = 1 - cos(theta)
+    cdef int i, j
+    x, y, z = (vector[0] / theta, vector[1] / theta, vector[2] / theta) if theta > 1e-300 else (0.0, 0.0, 0.0)
+    K[0], K[1], K[2] = 0.0, -z, y
+    K[3], K[4], K[5] = z, 0.0, -x
+    K[6], K[7], K[8] = -y, x, 0.0
+    for i in range(3):
+        for j in range(3):
+            R[3 * i + j] = ((1.0 if i == j else 0.0) + sine * K[3 * i + j]
+                            + versine * (K[3 * i] * K[j] + K[3 * i + 1] * K[3 + j] + K[3 * i + 2] * K[6 + j]))
 
 
 cdef inline void _load(const double[:, :, ::1] R, Py_ssize_t m, double* r) noexcept nogil:

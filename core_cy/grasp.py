@@ -166,16 +166,6 @@ def _level_axes(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return side, _cross(normal, side)
 
 
-def _rotations(vectors: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotation matrices (..., 3, 3) of rotation vectors (..., 3) (axis times angle)."""
-    theta = np.sqrt((vectors * vectors).sum(axis=-1))
-    axis = vectors / np.maximum(theta, 1e-300)[..., None]
-    K = np.zeros(vectors.shape + (3,))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
-    K -= np.swapaxes(K, -1, -2)
-    return _EYE + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
-
-
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
@@ -426,9 +416,9 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     about the two horizontal axes by it too, or by ``_TILT_ERROR`` for a frame set
     upright; without a plane, about each grasp axis by the angle error.
 
-    Returns scale (P, M, 3) of the semi-axes along the grasp axes; rotations (K, P, 3, 3),
-    the set (M,) of the K each grasp takes, and the axes (M, 3, 3) of each grasp in the
-    rotations' frame (the world's, or its own without a plane); shift (P, 3).
+    Returns scale (P, M, 3) of the semi-axes along the grasp axes; turns (K, P, 3) as
+    rotation vectors, the set (M,) of the K each grasp takes, and the axes (M, 3, 3) of
+    each grasp in the turns' frame (the world's, or its own without a plane); shift (P, 3).
     """
     length, angle = error
     draws = _DRAWS
@@ -438,12 +428,11 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     shift = draws[:, 3:6] * length
     if plane is None:
         own_axes = np.ascontiguousarray(np.broadcast_to(_EYE, R_grasp.shape))
-        return scale, _rotations(draws[None, :, 6:9] * angle), np.zeros(len(R_grasp), np.int_), own_axes, shift
+        return scale, draws[None, :, 6:9] * angle, np.zeros(len(R_grasp), np.int_), own_axes, shift
     normal = plane[:3]
     basis = np.stack([normal, *_level_axes(normal)])  # rows: world axes of the draws
-    # World rotations of a free frame and of an upright one.
-    world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
-                                 draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
+    # World turns of a free frame and of an upright one.
+    world = np.stack([draws[:, 6:9] * [angle, angle, angle], draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis
     return scale, world, upright.astype(np.int_), np.ascontiguousarray(R_grasp), shift
 
 
@@ -476,15 +465,15 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
     M = np.einsum("mab,mac->mbc", c["R"], c["F"])
     centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
-    scale, rotations, rotation_set, axes, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
-                                                                 c["upright"], plane)
-    margins = np.empty((m, _ERROR_DRAWS, 4))
+    scale, turns, rotation_set, axes, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
+                                                             c["upright"], plane)
+    score = np.empty(m)
     # The hull does not move with the model's error.
-    _perturbed_margins(points, normals, valid, variants, c["sizes"], M, _VARIANT, scale, rotations, rotation_set,
+    _perturbed_margins(points, normals, valid, variants, c["sizes"], M, _VARIANT, scale, turns, rotation_set,
                        axes, shift, centre, c["hull"] - c["dz"], g.finger_width / 2, g.palm, g.tip,
                        g.max_opening / 2, _COMPLIANCE * g.pad_length, _cone(g), length, angle,
-                       np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), margins)
-    return ndtr(4 * margins).prod(axis=2).mean(axis=1)
+                       np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), np.empty(turns.shape + (3,)), score)
+    return score
 
 
 def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
