@@ -373,14 +373,16 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
         plane_height[:, 0] = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
         plane_height[:, 1] = normal_grasp[:, 2]
         plane_height[:, 2] = (normal_grasp @ _corners(g)).min(axis=1)
-    depth, dz, half = np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4))
-    margins, ok = np.empty((n, 4, 4)), np.empty((n, 4), np.uint8)
+    # Per (candidate, depth) pair, the kernel writing them as (n, 4) views.
+    depth, dz, half = np.empty(4 * n), np.empty(4 * n), np.empty(4 * n)
+    margins, passed = np.empty((4 * n, 4)), np.empty(4 * n, np.uint8)
     _nominal_margins(c["sizes"], c["shape"], np.stack([c["i"], c["j"], c["k"]], 1), c["dx"], hull_near, column,
                      plane_height, plane is not None, g.finger_length, g.pad_length, g.max_opening / 2,
                      g.finger_width / 2, _PALM_CLEARANCE * g.finger_length, _TABLE_CLEARANCE * g.finger_length,
-                     _cone(g), length, angle, depth, dz, half, margins, ok)
+                     _cone(g), length, angle, depth.reshape(n, 4), dz.reshape(n, 4), half.reshape(n, 4),
+                     margins.reshape(n, 4, 4), passed.reshape(n, 4))
     pair = np.repeat(np.arange(n), 4)
-    depth, dz, half, margins, ok = depth.ravel(), dz.ravel(), half.ravel(), margins.reshape(-1, 4), ok.ravel() > 0
+    ok = passed > 0
     if unexplained.shape[0]:
         # What the hull has and the model lacks (a handle) must not be where an open finger is.
         # Checked last, on the pairs still standing: it weighs every such point against every pair.
