@@ -132,11 +132,19 @@ def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_io
     [0.002, 0.0949]
     """
     mean_size = float(np.sum(superquadric.size) / 3)
-    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    miss = _miss(silhouette_iou)
     miss = min(max(miss, 0.0), 1.0)
     length = max(0.65 * residual, 1.3 * miss * mean_size, 0.02 * mean_size)
     angle = math.radians(2.0) + 1.2 * miss
     return length, angle
+
+
+def _miss(silhouette_iou) -> float:
+    """The share of the silhouettes the model misses: 1 - their mean IoU (0 without any)."""
+    if silhouette_iou is None or len(silhouette_iou) == 0:
+        return 0.0
+    iou = np.asarray(silhouette_iou, dtype=np.float64)
+    return 1.0 - float(iou.sum() / iou.size)
 
 
 def _cone(gripper: Gripper) -> float:
@@ -574,7 +582,7 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
     grasps = _plan(superquadric, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score)
-    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    miss = _miss(silhouette_iou)
     if plane is not None and points is not None and len(points) >= 4 and miss > _POOR_COVER:
         # The superquadric describes the object poorly (an L): plan on the hull's upright box
         # too. The box bounds all the views saw; the hull checks keep its grasps where the
