@@ -32,12 +32,19 @@ cdef inline double _chord(const double* s, double e1, double e2, int k, double* 
     for c in range(3):
         if c != k:
             P[c] = _power(p[c], e1, e2, c)
-    return _chord_of(s, e1, e2, k, p, P, g)
+    return _chord_of(s, e1, e2, k, p, P, _level_term(P[2], e1, e2), g)
+
+
+cdef inline double _level_term(double P2, double e1, double e2) noexcept nogil:
+    """(1 - P2) ** (e1 / e2): where the superquadric's section at the height of term P2 ends
+    (NaN above the top)."""
+    return pow(1 - P2, e1 / e2) if P2 < 1 else NAN
 
 
 cdef inline double _chord_of(const double* s, double e1, double e2, int k, double* p, double* P,
-                             double* g) noexcept nogil:
-    """:func:`_chord` given the terms P[c] = :func:`_power` of p[c] for c != k (P[k] is set).
+                             double level, double* g) noexcept nogil:
+    """:func:`_chord` given the terms P[c] = :func:`_power` of p[c] for c != k (P[k] is set)
+    and, for k != 2, level = :func:`_level_term` of P[2].
 
     The terms are reused for the normal (pow is most of the cost here)."""
     cdef double S, B, h, common
@@ -54,13 +61,13 @@ cdef inline double _chord_of(const double* s, double e1, double e2, int k, doubl
     else:
         if not P[2] < 1:
             return NAN
-        B = pow(1 - P[2], e1 / e2) - P[1 - k]
+        B = level - P[1 - k]
         if not B > 0:
             return NAN
         h = pow(B, e2 / 2)
+        # (P[0] + P[1]) ** (e2 / e1 - 1), with P[0] + P[1] = level on the surface.
+        common = (1 - P[2]) / level
     P[k] = B  # h ** (2 / e)
-    if k != 2:
-        common = pow(P[0] + P[1], e2 / e1 - 1)
     p[k] = h
     g[0] = common * _ratio(P[0], p[0]) / s[0]
     g[1] = common * _ratio(P[1], p[1]) / s[1]
@@ -202,6 +209,8 @@ def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1]
     # The terms of the grid's across and along coordinates, once per model (pow is costly).
     cdef double across_terms[_MAX_GRID]
     cdef double along_terms[_MAX_GRID]
+    cdef double across_levels[_MAX_GRID]
+    cdef double along_levels[_MAX_GRID]
     cdef double h, length, e1, e2
     cdef int i, j, k
     if A > _MAX_GRID or W > _MAX_GRID:
@@ -215,8 +224,10 @@ def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1]
                     s[c] = sizes[m, c]
                 for a in range(A):
                     across_terms[a] = _power(fabs(across[m, a]) / s[k], e1, e2, k)
+                    across_levels[a] = _level_term(across_terms[a], e1, e2) if k == 2 else 0.0
                 for w in range(W):
                     along_terms[w] = _power(fabs(along[m, w]) / s[j], e1, e2, j)
+                    along_levels[w] = _level_term(along_terms[w], e1, e2) if j == 2 else 0.0
                 for a in range(A):
                     for w in range(W):
                         n = a * W + w
@@ -224,7 +235,7 @@ def surface_samples(const double[:, ::1] sizes not None, const double[:, :, ::1]
                         for c in range(3):
                             p[c] = fabs(q[c]) / s[c]
                         P[j], P[k] = along_terms[w], across_terms[a]
-                        h = _chord_of(s, e1, e2, i, p, P, g)
+                        h = _chord_of(s, e1, e2, i, p, P, across_levels[a] if k == 2 else along_levels[w], g)
                         if h != h:
                             valid[v, m, n], valid[v, m, N + n] = 0, 0
                             for c in range(3):
