@@ -174,10 +174,11 @@ def _level_axes(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return side, _cross(normal, side)
 
 
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
+def _rotation(axis: np.ndarray, angle):
+    """Rodrigues: rotations (..., 3, 3) by ``angle`` (a number, or an array of them) about the unit ``axis``."""
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return _EYE + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    sine, versine = np.sin(angle)[..., None, None], (1 - np.cos(angle))[..., None, None]
+    return _EYE + sine * K + (versine * K) @ K
 
 
 def _turned(frame: np.ndarray, current: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -243,11 +244,10 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
             along = down - (down @ R[:, axis]) * R[:, axis]
             if _norm(along) > 0.1:
                 start = math.atan2(along @ R[:, v], along @ R[:, u])
-        for step in range(round(math.pi / _RING_STEP)):
-            turn = _rotation(R[:, axis], start + step * _RING_STEP)
-            frames.append(turn @ R)
-            sizes.append(ring_size)
-            shapes.append(ring_shape)
+        steps = round(math.pi / _RING_STEP)
+        frames.extend(_rotation(R[:, axis], start + np.arange(steps) * _RING_STEP) @ R)
+        sizes.extend([ring_size] * steps)
+        shapes.extend([ring_shape] * steps)
     own = [0]  # frames along the object's own axes, where the jaws also slide
     if down is not None and not upright:
         # Fitted more than 25 degrees off upright: an object at rest rarely is, but a single
