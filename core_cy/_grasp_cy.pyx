@@ -1,5 +1,6 @@
 # cython: boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-"""Kernel of core_cy.grasp: a grasp's margins on perturbed copies of the model's sampled surface."""
+"""Kernels of core_cy.grasp: the candidates' nominal checks, the hull's points against them, and a
+grasp's margins on perturbed copies of the model's sampled surface."""
 
 from libc.math cimport acos, atan2, cos, erf, erfc, fabs, pow, sin, sqrt, INFINITY, NAN
 
@@ -292,7 +293,7 @@ def perturbed_margins(const double[:, :, :, ::1] points not None,
     shift : (P, 3) of the centre, grasp axes; centre (M, 3) the model's centre in each
         grasp frame; hull (M,) the hull's nearest point towards the palm, grasp z.
     length, angle : the standard errors the margins are counted in.
-    work : (2N, 4), turned : (V, 2N, 6) and rotations (K, P, 3, 3) scratch.
+    work : (2N, 3), turned : (V, 2N, 6) and rotations (K, P, 3, 3) scratch.
     score : (M,) written. The margins: open jaws clear (half_open less the farthest
         touch), palm clear (of the perturbed model's nearest point, by its support
         function, and of the hull), the pads' centre line meets the object (minus the

@@ -482,7 +482,7 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     _perturbed_margins(points, normals, valid, variants, c["sizes"], M, _VARIANT, scale, turns, rotation_set,
                        axes, shift, centre, c["hull"] - c["dz"], g.finger_width / 2, g.palm, g.tip,
                        g.max_opening / 2, _COMPLIANCE * g.pad_length, _cone(g), length, angle,
-                       np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), np.empty(turns.shape + (3,)), score)
+                       np.empty((2 * n, 3)), np.empty((len(variants), 2 * n, 6)), np.empty(turns.shape + (3,)), score)
     return score
 
 
