@@ -61,13 +61,17 @@ more room in the jaws.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 
 import numpy as np
 from scipy.special import ndtr
 
-from ._grasp_cy import half_chords as _half_chords
+from ._grasp_cy import hull_reach as _hull_reach
+from ._grasp_cy import in_open_fingers as _in_open_fingers
+from ._grasp_cy import nominal_margins as _nominal_margins
+from ._grasp_cy import pad_extent as _pad_extent
 from ._grasp_cy import perturbed_margins as _perturbed_margins
 from ._grasp_cy import surface_samples as _surface_samples
 from .errors import CoreError
@@ -103,7 +107,11 @@ _CONE_MARGIN = math.radians(3.0)
 _SIZE_BIAS = 0.5  # standard errors by which a fitted semi-axis is likely too long
 # Sample grid of the surface facing each finger: across the finger, along the approach.
 _SAMPLES = (5, 7)
+_ACROSS, _ALONG = np.linspace(-1, 1, _SAMPLES[0]), np.linspace(0, 1, _SAMPLES[1])
 _APPROACH_ORDER = ("top", "side", "tilted")
+_EYE, _X, _Y = np.eye(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+# (closing axis, approach axis, approach sign) of a frame's candidates.
+_COMBOS = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
 
 
 def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_iou=None) -> tuple[float, float]:
@@ -123,12 +131,20 @@ def model_error(superquadric: Superquadric, residual: float = 0.0, silhouette_io
     >>> [round(v, 4) for v in model_error(sq, 0.002, [0.95, 0.95, 0.95])]
     [0.002, 0.0949]
     """
-    mean_size = float(np.mean(superquadric.size))
-    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    mean_size = float(np.sum(superquadric.size) / 3)
+    miss = _miss(silhouette_iou)
     miss = min(max(miss, 0.0), 1.0)
     length = max(0.65 * residual, 1.3 * miss * mean_size, 0.02 * mean_size)
     angle = math.radians(2.0) + 1.2 * miss
     return length, angle
+
+
+def _miss(silhouette_iou) -> float:
+    """The share of the silhouettes the model misses: 1 - their mean IoU (0 without any)."""
+    if silhouette_iou is None or len(silhouette_iou) == 0:
+        return 0.0
+    iou = np.asarray(silhouette_iou, dtype=np.float64)
+    return 1.0 - float(iou.sum() / iou.size)
 
 
 def _cone(gripper: Gripper) -> float:
@@ -137,64 +153,38 @@ def _cone(gripper: Gripper) -> float:
     return math.atan(gripper.friction) - _CONE_MARGIN
 
 
-def _half_chord(sizes, shape, axis, u):
-    """Half the chord of a centred, axis-aligned superquadric along frame axis ``axis``.
-
-    Frame axis 2 carries e1. ``sizes`` (M, 3), ``shape`` (M, 2), ``axis`` (M,) int,
-    ``u`` (M, 3) frame coordinates (``u[axis]`` is ignored). Returns the half-chord
-    (M,), NaN where the line misses, and the unit outward normal (M, 3) at the
-    surface point with ``u[axis] = +half``.
-
-    Examples
-    --------
-    >>> sizes, shape = np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 1.0]])
-    >>> half, normal = _half_chord(sizes, shape, np.array([0]), np.array([[0.0, 0.0, 1.5]]))
-    >>> round(float(half[0]), 6), normal.round(6).tolist()
-    (0.866025, [[0.981981, 0.0, 0.188982]])
-    """
-    half, normal = np.empty(len(u)), np.empty((len(u), 3))
-    _half_chords(np.ascontiguousarray(sizes, dtype=np.float64), np.ascontiguousarray(shape, dtype=np.float64),
-                 np.ascontiguousarray(axis, dtype=np.int_), np.ascontiguousarray(u, dtype=np.float64),
-                 half, normal)
-    return half, normal
-
-
-def _support(sizes, shape, w):
-    """Support function (max of ``w . u``) of a centred superquadric, frame coordinates.
-
-    ``sizes`` (..., 3), ``shape`` (..., 2), ``w`` (..., 3): the nested dual norm.
-    """
-    p, q = 2 / (2 - shape[..., 1]), 2 / (2 - shape[..., 0])
-    v = np.abs(w * sizes)
-    return ((v[..., 0] ** p + v[..., 1] ** p) ** (q / p) + v[..., 2] ** q) ** (1 / q)
-
-
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross products along the last axis (np.cross costs more than the product here)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
-def _rotations(vectors: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotation matrices (..., 3, 3) of rotation vectors (..., 3) (axis times angle)."""
-    theta = np.linalg.norm(vectors, axis=-1)
-    axis = vectors / np.maximum(theta, 1e-300)[..., None]
-    K = np.zeros(vectors.shape + (3,))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
-    K -= np.swapaxes(K, -1, -2)
-    return np.eye(3) + np.sin(theta)[..., None, None] * K + (1 - np.cos(theta))[..., None, None] * (K @ K)
+def _norm(v: np.ndarray) -> float:
+    """Length of a vector (np.linalg.norm's value, without its overhead)."""
+    return math.sqrt(v @ v)
 
 
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: (3, 3) rotation by ``angle`` about the unit ``axis``."""
+def _level_axes(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit axes perpendicular to the unit ``normal``, and to each other (right-handed with it)."""
+    side = _cross(normal, _X if abs(normal[0]) < 0.9 else _Y)
+    side /= _norm(side)
+    return side, _cross(normal, side)
+
+
+def _rotation(axis: np.ndarray, angle):
+    """Rodrigues: rotations (..., 3, 3) by ``angle`` (a number, or an array of them) about the unit ``axis``."""
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    sine, versine = np.sin(angle)[..., None, None], (1 - np.cos(angle))[..., None, None]
+    return _EYE + sine * K + (versine * K) @ K
 
 
 def _turned(frame: np.ndarray, current: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The frame turned by the smallest rotation taking unit vector ``current`` to ``target``."""
     turn_axis = _cross(current, target)
-    sine = np.linalg.norm(turn_axis)
+    sine = _norm(turn_axis)
     if sine < 1e-12:
         return frame
     return _rotation(turn_axis / sine, math.atan2(sine, current @ target)) @ frame
@@ -213,7 +203,7 @@ def _upright(frame: np.ndarray, down: np.ndarray, round_axis: int | None) -> tup
         return _turned(frame, frame[:, axis] * np.sign(cosines[axis]), down), True
     if round_axis is not None and abs(cosines[round_axis]) <= math.sin(_SNAP):
         level = frame[:, round_axis] - cosines[round_axis] * down
-        return _turned(frame, frame[:, round_axis], level / np.linalg.norm(level)), True
+        return _turned(frame, frame[:, round_axis], level / _norm(level)), True
     return frame, False
 
 
@@ -252,13 +242,12 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
         start = 0.0
         if down is not None:
             along = down - (down @ R[:, axis]) * R[:, axis]
-            if np.linalg.norm(along) > 0.1:
+            if _norm(along) > 0.1:
                 start = math.atan2(along @ R[:, v], along @ R[:, u])
-        for step in range(round(math.pi / _RING_STEP)):
-            turn = _rotation(R[:, axis], start + step * _RING_STEP)
-            frames.append(turn @ R)
-            sizes.append(ring_size)
-            shapes.append(ring_shape)
+        steps = round(math.pi / _RING_STEP)
+        frames.extend(_rotation(R[:, axis], start + np.arange(steps) * _RING_STEP) @ R)
+        sizes.extend([ring_size] * steps)
+        shapes.extend([ring_shape] * steps)
     own = [0]  # frames along the object's own axes, where the jaws also slide
     if down is not None and not upright:
         # Fitted more than 25 degrees off upright: an object at rest rarely is, but a single
@@ -271,6 +260,14 @@ def _frames(sq: Superquadric, down: np.ndarray | None):
     slides = np.zeros(len(frames), bool)
     slides[own] = True
     return np.array(frames), np.array(sizes), np.array(shapes), np.full(len(frames), upright), slides
+
+
+@functools.lru_cache(maxsize=8)
+def _corners(gripper: Gripper) -> np.ndarray:
+    """The gripper's corners as columns (3, 20) (:meth:`Gripper.corners`), made once per gripper."""
+    corners = np.ascontiguousarray(gripper.corners().T)
+    corners.setflags(write=False)
+    return corners
 
 
 def _check_plane(support_plane) -> np.ndarray | None:
@@ -296,29 +293,24 @@ def _candidates(sq: Superquadric, plane: np.ndarray | None, gripper: Gripper) ->
     """Every (frame, closing axis i, approach axis j, approach sign, slide ``dx``) not
     approaching from below."""
     F, sizes, shapes, upright, own = _frames(sq, None if plane is None else -plane[:3])
-    combos = np.array([(i, j, s) for i in range(3) for j in range(3) if j != i for s in (1, -1)])
-    f = np.repeat(np.arange(len(F)), len(combos))
-    i, j, s = (np.tile(combos[:, c], len(F)) for c in range(3))
+    f = np.repeat(np.arange(len(F)), len(_COMBOS))
+    i, j, s = np.tile(_COMBOS, (len(F), 1)).T
     y = F[f, :, i]
     z = s[:, None] * F[f, :, j]
-    keep = np.ones(len(f), bool) if plane is None else z @ plane[:3] <= 0.1
-    x = _cross(y[keep], z[keep])
-    R_grasp = np.stack([x, y[keep], z[keep]], axis=2)
-    f, i, j, s = f[keep], i[keep], j[keep], s[keep]
-    c = {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i, "j": j, "k": 3 - i - j, "s": s,
-         "R": R_grasp, "upright": upright[f], "dx": np.zeros(len(f)), "pose": np.arange(len(f))}
+    if plane is not None:
+        keep = np.flatnonzero(z @ plane[:3] <= 0.1)
+        f, i, j, s, y, z = f[keep], i[keep], j[keep], s[keep], y[keep], z[keep]
+    k = 3 - i - j
     # In the object's own frame, also slide along the grasp's x axis (to take one end of a long
     # object, say, clear of what the model leaves out): halfway and all the way to either end.
-    reach = np.maximum(0.0, c["sizes"][np.arange(len(f)), c["k"]] - gripper.finger_width / 2)
-    slides = [c]
-    for fraction in _SLIDES:
-        slides_here = own[f] & (reach > 0.1 * c["sizes"].max(axis=1))
-        moved = _take(c, np.flatnonzero(slides_here))
-        moved["dx"] = fraction * reach[slides_here]
-        slides.append(moved)
-    c = {key: np.concatenate([part[key] for part in slides]) for key in c}
-    c["id"] = np.arange(len(c["dx"]))
-    return c
+    reach = np.maximum(0.0, sizes[f, k] - gripper.finger_width / 2)
+    sliding = np.flatnonzero(own[f] & (reach > 0.1 * sizes[f].max(axis=1)))
+    pose = np.concatenate([np.arange(len(f))] + [sliding] * len(_SLIDES))
+    dx = np.concatenate([np.zeros(len(f))] + [fraction * reach[sliding] for fraction in _SLIDES])
+    R_grasp = np.stack([_cross(y, z), y, z], axis=2)
+    f = f[pose]
+    return {"F": F[f], "sizes": sizes[f], "shape": shapes[f], "i": i[pose], "j": j[pose], "k": k[pose],
+            "s": s[pose], "R": R_grasp[pose], "upright": upright[f], "dx": dx, "pose": pose}
 
 
 def _radial(points: np.ndarray, sq: Superquadric) -> np.ndarray:
@@ -335,23 +327,18 @@ def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquad
     the palm within the palm's footprint, and within the column between the fingers (n,)
     each (``+inf`` with no points, ``-inf`` for the column without points); and the hull
     points the model leaves unexplained (``radial``, their distances outside it, above two
-    length errors) in each
-    candidate's axes about the model's centre, shape (U, n, 3).
+    length errors), less the model's centre, shape (U, 3).
     """
     n = len(c["i"])
     if points is None or radial is None or len(points) == 0:
-        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, n, 3))
-    centre = sq.T_world_object[:3, 3]
-    # One matrix product for all candidates: (points, candidates, 3) in grasp axes.
-    local = ((points - centre) @ c["R"].transpose(1, 0, 2).reshape(3, 3 * n)).reshape(len(points), n, 3)
-    reach = gripper.max_opening / 2 + gripper.finger_thickness
-    inside = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.palm_width / 2)
-              & (np.abs(local[:, :, 1]) <= reach))
-    nearest = np.where(inside, local[:, :, 2], np.inf).min(axis=0)
-    between = ((np.abs(local[:, :, 0] - c["dx"]) <= gripper.finger_width / 2)
-               & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2))
-    column = np.where(between, local[:, :, 2], np.inf).min(axis=0)
-    return nearest, column, local[radial > 2 * length]
+        return np.full(n, np.inf), np.full(n, -np.inf), np.zeros((0, 3))
+    offsets = points - sq.T_world_object[:3, 3]
+    nearest, column = np.empty(n), np.empty(n)
+    # Slides of one pose share its axes: the kernel turns the points once for them.
+    _hull_reach(offsets, c["R"], c["dx"], np.argsort(c["pose"], kind="stable"), gripper.palm_width / 2,
+                gripper.max_opening / 2 + gripper.finger_thickness, gripper.finger_width / 2, gripper.max_opening / 2,
+                np.empty_like(offsets), nearest, column)
+    return nearest, column, offsets[radial > 2 * length]
 
 
 def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gripper, length: float,
@@ -368,19 +355,16 @@ def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gr
     if points is None or len(points) == 0:
         return np.ones(m)
     origin = np.stack([pairs["dx"], np.zeros(m), pairs["dz"]], axis=1)
-    # (P, M, 3): the points in each grasp's axes about its origin, one matrix product for all.
-    local = ((points - centre) @ pairs["R"].transpose(1, 0, 2).reshape(3, 3 * m)).reshape(len(points), m, 3) - origin
+    extent = np.empty((m, 3))
+    _pad_extent(points - centre, pairs["R"], origin, gripper.finger_width / 2, gripper.pad_length / 2,
+                gripper.max_opening / 2 + gripper.finger_thickness, extent)
     half = pairs["half"]
-    under = ((np.abs(local[:, :, 0]) <= gripper.finger_width / 2) & (np.abs(local[:, :, 2]) <= gripper.pad_length / 2)
-             & (np.abs(local[:, :, 1]) <= gripper.max_opening / 2 + gripper.finger_thickness))
-    top = np.where(under, local[:, :, 1], -np.inf).max(axis=0)
-    bottom = np.where(under, -local[:, :, 1], -np.inf).max(axis=0)
-    apart = np.maximum(np.abs(top - half), np.abs(bottom - half))
-    return np.where(under.any(axis=0), ndtr((2 * length + bloat - apart) / length), 1.0)
+    apart = np.maximum(np.abs(extent[:, 0] - half), np.abs(extent[:, 1] - half))
+    return np.where(extent[:, 2] > 0, ndtr((2 * length + bloat - apart) / length), 1.0)
 
 
 def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
-    """Closed-form checks of every candidate at its depths.
+    """Closed-form checks of every candidate at its depths (kernel in Cython).
 
     Returns the passing (candidate, depth) pairs with their reach ``e`` past the
     model's near side, the offset ``dz`` of the grasp origin from the centre along
@@ -391,65 +375,34 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
     length, angle = error
     hull_near, column, unexplained = hull
     n = len(c["i"])
-    rows = np.arange(n)
-    # The model's near side between the fingers (where they slid to), and across the palm.
-    u = np.zeros((n, 3))
-    u[rows, c["k"]] = np.maximum(0.0, np.abs(c["dx"]) - g.finger_width / 2)
-    s_j = np.nan_to_num(_half_chord(c["sizes"], c["shape"], c["j"], u)[0], nan=-np.inf)
-    near = np.minimum(-c["sizes"][rows, c["j"]], hull_near)  # the hull's, if nearer
-    clear = _PALM_CLEARANCE * g.finger_length
-    deepest = np.minimum(g.finger_length - clear + s_j + near, 2 * s_j + g.pad_length / 2)
-    clearance = _TABLE_CLEARANCE * g.finger_length
+    plane_height = np.zeros((n, 3))
     if plane is not None:
         normal_grasp = np.einsum("nab,a->nb", c["R"], plane[:3])  # the plane's normal in each grasp frame
-        lowest = (normal_grasp @ g.corners().T).min(axis=1)
-        height = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
-        nz = normal_grasp[:, 2]
-        # The lowest corner at reach e: height + (e - pad/2 - s_j) nz + lowest >= clearance.
-        going_down = nz < -1e-9
-        table_limit = np.full(n, np.inf)
-        table_limit[going_down] = ((height[going_down] + lowest[going_down] - clearance) / -nz[going_down]
-                                   + g.pad_length / 2 + s_j[going_down])
-        deepest = np.minimum(deepest, table_limit)
-    # The grasp's origin (the pads' centre) lies inside the object, with a margin.
-    shallowest = np.full(n, g.pad_length / 2 + length)
-    equator = s_j + g.pad_length / 2  # the pads centred on the model's widest section
-    depth = np.stack([shallowest, (shallowest + deepest) / 2, deepest, np.clip(equator, shallowest, deepest)], 1)
-    pair = np.repeat(rows, depth.shape[1])
-    depth = depth.ravel()
-    cp = _take(c, pair)
-    s_j = s_j[pair]
-    dz = depth - g.pad_length / 2 - s_j
-    ok = (deepest[pair] >= shallowest[pair]) & (s_j > 0)
-    # The hull holds the object: between the fingers it must reach the model's near side
-    # (else the model claims more than the views saw), and past the pads' centre.
-    ok &= (column[pair] <= -s_j + 0.5 * length) & (column[pair] < dz)
-    if plane is not None:
-        ok &= height[pair] + dz * nz[pair] + lowest[pair] >= clearance * 0.999
-    # The widest chord the fingers meet: nearest the centre, within their reach.
-    u = np.zeros((len(pair), 3))
-    index = np.arange(len(pair))
-    u[index, cp["j"]] = np.minimum(0.0, depth - s_j)
-    u[index, cp["k"]] = np.maximum(0.0, np.abs(cp["dx"]) - g.finger_width / 2)
-    half, normal = _half_chord(cp["sizes"], cp["shape"], cp["i"], u)
-    tilt = np.arctan2(np.abs(normal[index, cp["j"]]), normal[index, cp["i"]])
-    palm = depth - s_j - g.finger_length  # along the approach from the centre
-    margins = np.stack([(g.max_opening / 2 - half) / length, (near[pair] - palm) / length,
-                        (depth - g.pad_length / 2) / length, (_cone(g) - tilt) / angle], axis=1)
-    margins = np.nan_to_num(margins, nan=-1.0)
-    ok &= np.all(margins > 0, axis=1)
+        plane_height[:, 0] = centre @ plane[:3] + plane[3] + c["dx"] * normal_grasp[:, 0]
+        plane_height[:, 1] = normal_grasp[:, 2]
+        plane_height[:, 2] = (normal_grasp @ _corners(g)).min(axis=1)
+    # Per (candidate, depth) pair, the kernel writing them as (n, 4) views.
+    depth, dz, half = np.empty(4 * n), np.empty(4 * n), np.empty(4 * n)
+    margins, passed = np.empty((4 * n, 4)), np.empty(4 * n, np.uint8)
+    _nominal_margins(c["sizes"], c["shape"], np.stack([c["i"], c["j"], c["k"]], 1), c["dx"], hull_near, column,
+                     plane_height, plane is not None, g.finger_length, g.pad_length, g.max_opening / 2,
+                     g.finger_width / 2, _PALM_CLEARANCE * g.finger_length, _TABLE_CLEARANCE * g.finger_length,
+                     _cone(g), length, angle, depth.reshape(n, 4), dz.reshape(n, 4), half.reshape(n, 4),
+                     margins.reshape(n, 4, 4), passed.reshape(n, 4))
+    pair = np.repeat(np.arange(n), 4)
+    ok = passed > 0
     if unexplained.shape[0]:
         # What the hull has and the model lacks (a handle) must not be where an open finger is.
         # Checked last, on the pairs still standing: it weighs every such point against every pair.
         alive = np.flatnonzero(ok)
-        p = unexplained[:, pair[alive]] - np.stack([cp["dx"][alive], np.zeros(len(alive)), dz[alive]], axis=1)
-        in_finger = ((np.abs(p[:, :, 0]) <= g.finger_width / 2) & (p[:, :, 2] >= g.palm) & (p[:, :, 2] <= g.tip)
-                     & (np.abs(p[:, :, 1]) >= g.max_opening / 2)
-                     & (np.abs(p[:, :, 1]) <= g.max_opening / 2 + g.finger_thickness))
-        ok[alive] &= ~in_finger.any(axis=0)
+        hit = np.empty(len(alive), np.uint8)
+        origin = np.stack([c["dx"][pair[alive]], np.zeros(len(alive)), dz[alive]], 1)
+        _in_open_fingers(unexplained, c["R"][pair[alive]], origin,
+                         g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, g.finger_thickness, hit)
+        ok[alive] &= hit == 0
     keep = np.flatnonzero(ok)
-    out = _take(cp, keep)
-    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair][keep],
+    out = _take(c, pair[keep])
+    out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair[keep]],
                first=np.prod(ndtr(margins[keep]), axis=1))
     return out
 
@@ -457,6 +410,10 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
 # Fixed draws of the model's error, in standard errors: semi-axes along the grasp
 # x, y, z (3), centre (3), rotation vector (3), the exponents (1).
 _DRAWS = np.random.default_rng(20171).standard_normal((_ERROR_DRAWS, 10))
+
+
+# The exponents of each draw: 0 nominal, 1 rounder, 2 boxier (each about a third of the draws).
+_VARIANT = np.where(_DRAWS[:, 9] > 0.43, 1, np.where(_DRAWS[:, 9] < -0.43, 2, 0)).astype(np.int_)
 
 
 def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp: np.ndarray,
@@ -469,9 +426,9 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     about the two horizontal axes by it too, or by ``_TILT_ERROR`` for a frame set
     upright; without a plane, about each grasp axis by the angle error.
 
-    Returns variant (P,): 0 nominal exponents, 1 rounder, 2 boxier (each a third of the
-    draws); scale (P, M, 3) of the semi-axes along the grasp axes; rotation (P, M, 3, 3)
-    in each grasp frame; shift (P, 3).
+    Returns scale (P, M, 3) of the semi-axes along the grasp axes; turns (K, P, 3) as
+    rotation vectors, the set (M,) of the K each grasp takes, and the axes (M, 3, 3) of
+    each grasp in the turns' frame (the world's, or its own without a plane); shift (P, 3).
     """
     length, angle = error
     draws = _DRAWS
@@ -480,19 +437,13 @@ def _perturbations(error: tuple[float, float], sizes_grasp: np.ndarray, R_grasp:
     scale = np.maximum(0.3, 1 + (draws[:, None, 0:3] - _SIZE_BIAS) * length / sizes_grasp[None, :, :])
     shift = draws[:, 3:6] * length
     if plane is None:
-        rotation = np.broadcast_to(_rotations(draws[:, None, 6:9] * angle), (len(draws), len(R_grasp), 3, 3))
-    else:
-        normal = plane[:3]
-        side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
-        side /= np.linalg.norm(side)
-        basis = np.stack([normal, side, _cross(normal, side)])  # rows: world axes of the draws
-        # World rotations of a free frame and of an upright one, then in each grasp's axes.
-        world = _rotations(np.stack([draws[:, 6:9] * [angle, angle, angle],
-                                     draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis)
-        W = world[upright.astype(np.intp)]  # (M, P, 3, 3)
-        rotation = np.swapaxes(np.swapaxes(R_grasp, 1, 2)[:, None] @ W @ R_grasp[:, None], 0, 1)
-    variant = np.where(draws[:, 9] > 0.43, 1, np.where(draws[:, 9] < -0.43, 2, 0))
-    return variant.astype(np.int_), np.ascontiguousarray(scale), np.ascontiguousarray(rotation), shift
+        own_axes = np.ascontiguousarray(np.broadcast_to(_EYE, R_grasp.shape))
+        return scale, draws[None, :, 6:9] * angle, np.zeros(len(R_grasp), np.int_), own_axes, shift
+    normal = plane[:3]
+    basis = np.stack([normal, *_level_axes(normal)])  # rows: world axes of the draws
+    # World turns of a free frame and of an upright one.
+    world = np.stack([draws[:, 6:9] * [angle, angle, angle], draws[:, 6:9] * [angle, _TILT_ERROR, _TILT_ERROR]]) @ basis
+    return scale, world, upright.astype(np.int_), np.ascontiguousarray(R_grasp), shift
 
 
 def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray | None):
@@ -505,46 +456,34 @@ def _robust(c, gripper: Gripper, error: tuple[float, float], plane: np.ndarray |
     g = gripper
     length, angle = error
     m = len(c["i"])
-    rows = np.arange(m)
-    nk, nw = _SAMPLES
-    s_i, s_j, s_k = (c["sizes"][rows, c[key]] for key in ("i", "j", "k"))
+    n = _SAMPLES[0] * _SAMPLES[1]
+    frame_axes = np.stack([c["i"], c["j"], c["k"]], 1)  # closing, approach, across
+    s_i, s_j, s_k = np.take_along_axis(c["sizes"], frame_axes, 1).T
     # Sample the surface facing the fingers, a little beyond their reach (the draws move it).
-    slack = np.minimum(2 * length, g.finger_width / 2)
-    across = np.linspace(-1, 1, nk) * (g.finger_width / 2 + slack)
+    across = _ACROSS * (g.finger_width / 2 + min(2 * length, g.finger_width / 2))
     near = -s_j * (1 - 1e-6)
     far = np.minimum(s_j * (1 - 1e-6), c["e"] - s_j + 2 * length)
-    along = near[:, None] + np.linspace(0, 1, nw)[None, :] * (far - near)[:, None]
-    n = nk * nw
+    along = near[:, None] + _ALONG[None, :] * (far - near)[:, None]
     # Frame coordinate k is +-x of the grasp: sample across the finger where it slid to.
-    sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][rows, :, c["k"]])
+    sign_k = np.einsum("ma,ma->m", c["R"][:, :, 0], c["F"][np.arange(m), :, c["k"]])
     across = sign_k[:, None] * (c["dx"][:, None] + across[None, :])
-    variants = np.stack([c["shape"]] + [np.clip(c["shape"] + change, *_SHAPE_LIMITS) for change in _SHAPE_ERROR])
+    variants = np.stack([c["shape"]] + [np.minimum(np.maximum(c["shape"] + change, _SHAPE_LIMITS[0]), _SHAPE_LIMITS[1])
+                                        for change in _SHAPE_ERROR])
     points, normals = np.empty((len(variants), m, 2 * n, 3)), np.empty((len(variants), m, 2 * n, 3))
     valid = np.empty((len(variants), m, 2 * n), np.uint8)
-    _surface_samples(c["sizes"], variants, np.stack([c["i"], c["j"], c["k"]], 1).astype(np.int_),
-                     np.ascontiguousarray(across), np.ascontiguousarray(c["s"][:, None] * along),
-                     points, normals, valid)
+    _surface_samples(c["sizes"], variants, frame_axes, across, c["s"][:, None] * along, points, normals, valid)
     # Frame-to-grasp rotation of each pair; the model's centre in its grasp frame.
-    M = np.ascontiguousarray(np.einsum("mab,mac->mbc", c["R"], c["F"]))
+    M = np.einsum("mab,mac->mbc", c["R"], c["F"])
     centre = np.stack([-c["dx"], np.zeros(m), -c["dz"]], axis=1)
-
-    variant, scale, rotation, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
-                                                     c["upright"], plane)
-    out = np.empty((m, len(variant), 4))
-    _perturbed_margins(points, normals, valid, variant, M, scale, rotation, shift, centre,
-                       g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, _COMPLIANCE * g.pad_length,
-                       _cone(g), np.empty((2 * n, 4)), np.empty((len(variants), 2 * n, 6)), out)
-    # The perturbed model's nearest point towards the palm, from its support function in
-    # direction M^T D R^T e_z (frame coordinates); the hull does not move.
-    w = np.einsum("mba,pmb->pma", M, scale * rotation[:, :, 2, :])
-    nearest = centre[None, :, 2] + shift[:, None, 2] - _support(c["sizes"][None], variants[variant], w)
-    nearest = np.minimum(nearest, (c["hull"] - c["dz"])[None, :])
-    touches = out[:, :, 2].T > 0
-    margins = np.stack([np.where(touches, out[:, :, 0].T / length, -1.0),  # open jaws clear
-                        (nearest - g.palm) / length,  # palm clear
-                        np.minimum(-out[:, :, 3].T / length, 10.0),  # the pads' centre line meets the object
-                        np.where(touches, out[:, :, 1].T / angle, -1.0)], axis=2)  # antipodal
-    return ndtr(4 * margins).prod(axis=2).mean(axis=0)
+    scale, turns, rotation_set, axes, shift = _perturbations(error, np.stack([s_k, s_i, s_j], axis=1), c["R"],
+                                                             c["upright"], plane)
+    score = np.empty(m)
+    # The hull does not move with the model's error.
+    _perturbed_margins(points, normals, valid, variants, c["sizes"], M, _VARIANT, scale, turns, rotation_set,
+                       axes, shift, centre, c["hull"] - c["dz"], g.finger_width / 2, g.palm, g.tip,
+                       g.max_opening / 2, _COMPLIANCE * g.pad_length, _cone(g), length, angle,
+                       np.empty((2 * n, 3)), np.empty((len(variants), 2 * n, 6)), np.empty(turns.shape + (3,)), score)
+    return score
 
 
 def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
@@ -552,12 +491,14 @@ def _diverse(pairs, preference: np.ndarray) -> np.ndarray:
     (within 0.05, approaches from above first), the best of each orientation before the
     second best of any (slides and depths of one orientation are much alike)."""
     order = np.lexsort((preference, -np.round(pairs["first"] / _SCORE_STEP)))
-    rank = np.empty(len(order), dtype=np.intp)
-    seen: dict[int, int] = {}
-    for position, index in enumerate(order):
-        rank[index] = seen.get(pairs["pose"][index], 0)
-        seen[pairs["pose"][index]] = rank[index] + 1
-    return order[np.argsort(rank[order], kind="stable")][:_ROBUST_KEEP]
+    # Each pair's rank among those of its orientation, in that order.
+    pose = pairs["pose"][order]
+    grouped = np.argsort(pose, kind="stable")
+    count = len(order)
+    starts = np.concatenate([[True], pose[grouped][1:] != pose[grouped][:-1]])
+    rank = np.empty(count, dtype=np.intp)
+    rank[grouped] = np.arange(count) - np.maximum.accumulate(np.where(starts, np.arange(count), 0))
+    return order[np.argsort(rank, kind="stable")][:_ROBUST_KEEP]
 
 
 def _alike(R: np.ndarray, origin: np.ndarray, tolerance: float) -> np.ndarray:
@@ -641,7 +582,7 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
     grasps = _plan(superquadric, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score)
-    miss = 0.0 if silhouette_iou is None or len(silhouette_iou) == 0 else 1.0 - float(np.mean(silhouette_iou))
+    miss = _miss(silhouette_iou)
     if plane is not None and points is not None and len(points) >= 4 and miss > _POOR_COVER:
         # The superquadric describes the object poorly (an L): plan on the hull's upright box
         # too. The box bounds all the views saw; the hull checks keep its grasps where the
@@ -655,9 +596,7 @@ def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
     """The box around the hull's points standing on the plane, its horizontal axes the
     points' principal axes in the plane."""
     normal = plane[:3]
-    side = _cross(normal, np.array([1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0]))
-    side /= np.linalg.norm(side)
-    basis = np.stack([side, _cross(normal, side)], axis=1)  # (3, 2)
+    basis = np.stack(_level_axes(normal), axis=1)  # (3, 2)
     flat = points @ basis
     _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
     first = basis @ vectors[:, 1]
@@ -686,7 +625,7 @@ def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper
         # The hull's typical distance from the model (the median's, scaled to a standard
         # deviation's): the model's own error, apart from what it leaves out (a handle),
         # which the hull checks cover; and how far the hull bulges past the object.
-        bloat = 1.4826 * float(np.median(np.abs(radial)))
+        bloat = 1.4826 * _median(np.abs(radial))
         residual = min(residual, bloat)
     error = model_error(superquadric, residual, silhouette_iou)
     centre = superquadric.T_world_object[:3, 3]
@@ -697,27 +636,36 @@ def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)
-    kinds = np.array(_APPROACH_ORDER)[preference]
     keep = _diverse(pairs, preference)
-    pairs, kinds, preference = _take(pairs, keep), kinds[keep], preference[keep]
+    pairs, preference = _take(pairs, keep), preference[keep]
     score = _robust(pairs, gripper, error, plane) * _agreement(pairs, points, centre, gripper, error[0], bloat)
     # Grasps about as likely to hold: from above first, then the one with more room in the jaws.
     order = np.lexsort((pairs["half"], preference, -np.round(score / _SCORE_STEP)))
     R = pairs["R"]
     origin = centre + np.einsum("mab,mb->ma", R, np.stack([pairs["dx"], np.zeros(len(R)), pairs["dz"]], 1))
     alike = _alike(R, origin, 0.05 * gripper.finger_length)
+    T = np.zeros((len(R), 4, 4))
+    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, origin, 1.0
+    scores, widths, alike = score.tolist(), (2 * pairs["half"]).tolist(), alike.tolist()
     grasps: list[Grasp] = []
     chosen: list[int] = []
-    for index in order:
-        if score[index] < min_score or len(grasps) == max_grasps:
+    for index in order.tolist():
+        if scores[index] < min_score or len(grasps) == max_grasps:
             break
-        if chosen and alike[index, chosen].any():  # the same grasp but for its depth, ranked higher
+        if any(alike[index][other] for other in chosen):  # the same grasp but for its depth, ranked higher
             continue
         chosen.append(index)
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R[index], origin[index]
-        grasps.append(Grasp(T, float(2 * pairs["half"][index]), float(score[index]), str(kinds[index])))
+        grasps.append(Grasp(T[index].copy(), widths[index], scores[index], _APPROACH_ORDER[preference[index]]))
     return grasps
+
+
+def _median(values: np.ndarray) -> float:
+    """np.median of a 1-D array without NaNs, without its overhead."""
+    half = len(values) // 2
+    if len(values) % 2:
+        return float(np.partition(values, half)[half])
+    low, high = np.partition(values, [half - 1, half])[half - 1:half + 1]
+    return float((low + high) / 2)
 
 
 def _approach_preference(approach: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
