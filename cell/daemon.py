@@ -27,6 +27,7 @@ reconstruction from them (``cell.pictures``), a job caught during its views take
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import logging
 import time
@@ -41,7 +42,7 @@ from core_cy.plan import plan_flange_poses, workspace_violation
 from wire import keys
 from wire.config import CellConfig
 from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, ConfigError, LinkDown,
-                         NoResponder, RemoteError, TransportError, TransportTimeout, wire_kind)
+                         NoResponder, RemoteError, StoreError, TransportError, TransportTimeout, wire_kind)
 from wire.messages import CellStatus, FailedJob, JobEvent, JobState, JobStatus, Message, ScanRequest, parse
 from wire.transport import Reply, Request, RequestError, Response, Transport
 
@@ -55,7 +56,7 @@ from .presence import Absent, Presence
 from .recorder import Recorder
 from .pictures import Pictures
 from .steps import Step, StepFailed, job_steps
-from .store import JobStore, queued_event
+from .store import JobStore, job_id_for, queued_event, queued_status
 
 __all__ = ["CellDaemon"]
 
@@ -66,6 +67,7 @@ _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 _RECENT_RESULTS = 100       # results kept in memory to answer at once
 _QUIET_S = 0.2              # an ended job's recording waits at most this long for a job's slow wait
+_REQUEST_IDS = 10_000       # request_ids of this run's jobs kept in memory (older ones: the store finds them)
 
 
 class CellDaemon:
@@ -100,7 +102,10 @@ class CellDaemon:
         self._lane = MotionLane()
         self.pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
         self._background: set[asyncio.Task[Any]] = set()
-        self._submitting = 0                        # submits between the queue check and the queue
+        self._last_seq = 0                          # the number of the latest job (see run())
+        # The jobs submitted with a request_id in this run, newest last: a second submit of a request
+        # finds its job here even before the store has it.
+        self._request_ids: OrderedDict[str, str] = OrderedDict()
         self._started = clock()
 
     @property
@@ -130,6 +135,7 @@ class CellDaemon:
         try:
             await self._refuse_a_second_daemon()
             self._store = await self._db.call(JobStore, self._store_path)
+            self._last_seq = await self._db.call(self._jobs.last_seq)
             self._recorder.start()
             try:
                 await self._recover()
@@ -480,26 +486,62 @@ class CellDaemon:
                     raise RequestError(f"pick.place: {'xy'[axis]} = {value:g} m is outside the workspace's "
                                        f"{low:g} to {high:g} m")
         if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
-            known = await self._db.call(self._jobs.find_request, scan.request_id)
+            known = await self._known_request(scan.request_id)
             if known is not None:
+                await self._db.call(self._jobs.sync)
                 return Response(known.model_dump_json())
-        # Submits on their way to the store count: a burst cannot slip past the bound.
-        if len(self._queued) + self._submitting >= self.config.max_queued:
+        if len(self._queued) >= self.config.max_queued:
             raise RequestError(f"the queue is full ({self.config.max_queued} jobs waiting): try again later")
-        self._submitting += 1
+        # Numbered here, not by the store: the job starts now, while the store's thread writes it.
+        seq, now = self._last_seq + 1, self.clock()
+        self._last_seq = seq
+        status = queued_status(job_id_for(seq, now), scan, n_views=len(poses), now=now)
+        added = self._db.call(self._jobs.add, scan, n_views=len(poses), now=now, seq=seq, durable=False)
+        job = Job(status.job_id, scan, poses)
+        self._enqueue(job)
+        later(self._publish, queued_event(status))
+        if scan.request_id is not None:
+            self._request_ids[scan.request_id] = status.job_id
+            if len(self._request_ids) > _REQUEST_IDS:
+                self._request_ids.popitem(last=False)
         try:
-            status, created = await self._db.call(self._jobs.add, scan, n_views=len(poses), now=self.clock(),
-                                                  durable=False)
-        finally:
-            self._submitting -= 1
-        if created:  # the store added the job's "queued" event with it
-            later(self._publish, queued_event(status))
-            self._enqueue(Job(status.job_id, scan, poses))
+            stored, created = await added
+        except StoreError as exc:
+            why = f"the job store could not take the job: {exc}"
+            self._withdraw(job, why)
+            raise StoreError(why) from None
+        if not created:  # the store knew the request_id after all: its job it is
+            self._withdraw(job, f"the store has request {scan.request_id} as job {stored.job_id}")
+            return Response(stored.model_dump_json())
         # On disk before the answer, so an answered submit survives a crash; the job need not wait
         # for the disk to start. (A crash before the answer may leave the job, unanswered, to run
         # after the restart: a client's retry with the same request_id finds it.)
         await self._db.call(self._jobs.sync)
         return Response(status.model_dump_json())
+
+    async def _known_request(self, request_id: str) -> JobStatus | None:
+        """The job submitted with ``request_id`` before, in its state now; None if there is none."""
+        job_id = self._request_ids.get(request_id)
+        if job_id is None:  # not in this run (or long ago): the store knows
+            known = await self._db.call(self._jobs.find_request, request_id)
+            if known is not None:
+                return known
+            job_id = self._request_ids.get(request_id)  # submitted while the store looked
+            if job_id is None:
+                return None
+        return await self._status(job_id)
+
+    def _withdraw(self, job: Job, why: str) -> None:
+        """Take back a job the store did not take, wherever it is: it fails, told to those who
+        listen and to its recording, not to the store, which does not have it."""
+        log.error("job %s: withdrawn: %s", job.job_id, why)
+        self._queued.pop(job.job_id, None)
+        if job.task is not None:
+            job.task.cancel()  # not a cancel by request: its steps end without another word
+        with contextlib.suppress(IllegalTransition):  # it cannot have ended yet; should it have, so be it
+            event = job.transition(JobState.FAILED, why, now=self.clock())
+            self._write_down(job, event)
+            self._publish(event)
 
     async def _on_status(self, request: Request) -> Response:
         try:

@@ -37,15 +37,22 @@ class Serial:
         self.name = name
         self._executor = ThreadPoolExecutor(1, thread_name_prefix=name)
 
-    async def call(self, function: Callable[..., _T], *args: Any, **kwargs: Any) -> _T:
-        """Run ``function`` in the thread after everything posted before; its result."""
-        handed: asyncio.Future[Future[_T]] = asyncio.get_running_loop().create_future()
-        later(self._hand, functools.partial(function, *args, **kwargs), handed)
-        return await asyncio.wrap_future(await handed)
+    def call(self, function: Callable[..., _T], *args: Any, **kwargs: Any) -> asyncio.Future[_T]:
+        """Run ``function`` in the thread after everything posted before; the future of its result.
 
-    def _hand(self, call: Callable[[], _T], handed: asyncio.Future[Future[_T]]) -> None:
-        if not handed.cancelled():  # the caller gave up before the call was handed over: skip it
-            handed.set_result(self._executor.submit(call))
+        The call is posted now, not when the future is awaited: what is posted after it runs
+        after it, even while the caller does something else before awaiting the answer.
+        """
+        loop = asyncio.get_running_loop()
+        answer: asyncio.Future[_T] = loop.create_future()
+        later(self._hand, functools.partial(function, *args, **kwargs), answer, loop)
+        return answer
+
+    def _hand(self, call: Callable[[], _T], answer: asyncio.Future[_T], loop: asyncio.AbstractEventLoop) -> None:
+        if answer.cancelled():  # the caller gave up before the call was handed over: skip it
+            return
+        self._executor.submit(call).add_done_callback(
+            lambda done: loop.call_soon_threadsafe(_settle, answer, done))
 
     def post(self, function: Callable[..., Any], *args: Any, then: Callable[[], None] | None = None,
              **kwargs: Any) -> None:
@@ -70,3 +77,13 @@ class Serial:
     def close(self) -> None:
         """Run what is posted, then end the thread."""
         self._executor.shutdown(wait=True)
+
+
+def _settle(answer: asyncio.Future[_T], done: Future[_T]) -> None:
+    if answer.cancelled():
+        return
+    exc = done.exception()
+    if exc is None:
+        answer.set_result(done.result())
+    else:
+        answer.set_exception(exc)

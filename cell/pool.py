@@ -33,6 +33,7 @@ import logging
 import time
 from collections.abc import Collection
 from dataclasses import dataclass, field
+from typing import Any
 
 from wire import keys
 from wire.errors import CellError, LinkDown, NoResponder, RemoteError, TransportError, TransportTimeout
@@ -272,9 +273,9 @@ class ReconstructorPool:
         record = await self._acquire(ticket, avoid, wait_s)
         losses = self._transport.link_losses
         lost = record.lost
-        query = asyncio.ensure_future(self._transport.query(
-            keys.reconstructor(record.worker), payload, attachment=attachment, timeout=timeout))
-        gone = asyncio.ensure_future(lost.wait())
+        query = self._transport.start_query(keys.reconstructor(record.worker), payload, attachment=attachment,
+                                            timeout=timeout)
+        gone: asyncio.Future[Any] = asyncio.ensure_future(lost.wait())
         try:
             await asyncio.wait({query, gone}, return_when=asyncio.FIRST_COMPLETED)
         finally:

@@ -34,7 +34,7 @@ from pydantic import ValidationError
 from wire.errors import StoreError
 from wire.messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
 
-__all__ = ["JobStore", "SCHEMA_VERSION", "queued_event"]
+__all__ = ["JobStore", "SCHEMA_VERSION", "job_id_for", "queued_status", "queued_event"]
 
 #: Kept in ``PRAGMA user_version``; a file of an older version is upgraded, a newer one refused.
 SCHEMA_VERSION = 2
@@ -120,17 +120,23 @@ class JobStore:
 
     # --- writing ----------------------------------------------------------------------------
 
-    def add(self, request: ScanRequest, *, n_views: int, now: float, durable: bool = True) -> tuple[JobStatus, bool]:
+    def add(self, request: ScanRequest, *, n_views: int, now: float, seq: int | None = None,
+            durable: bool = True) -> tuple[JobStatus, bool]:
         """Queue a new job, with its first event ("queued"); returns ``(status, True)``.
 
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
-        Not ``durable``: on disk only after :meth:`sync` (or the next durable commit).
+        ``seq``: the job's number (see :func:`job_id_for`), given by a caller that numbers the jobs
+        itself (the daemon: its jobs start before the store has them); by default the next
+        after :meth:`last_seq`. Not ``durable``: on disk only after :meth:`sync` (or the next
+        durable commit).
 
         Raises
         ------
         ValueError
             ``n_views`` is below 1.
+        StoreError
+            ``seq`` is taken already (or the database fails).
         """
         if n_views < 1:
             raise ValueError(f"n_views must be at least 1, got {n_views}")
@@ -142,17 +148,21 @@ class JobStore:
                                  (request.request_id,)).fetchone()
                 if row is not None:
                     return _status(row), False
-            seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
-            job_id = f"{time.strftime('%Y%m%d', time.gmtime(now))}-{seq:06d}"
+            if seq is None:
+                seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
+            status = queued_status(job_id_for(seq, now), request, n_views=n_views, now=now)
             db.execute(
                 "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request)"
                 " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (seq, job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
+                (seq, status.job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
                  request.model_dump_json()),
             )
-            status = self._get(db, job_id)
             self._insert_event(db, queued_event(status))
             return status, True
+
+    def last_seq(self) -> int:
+        """The highest job number so far (0: no job yet)."""
+        return self._read("SELECT COALESCE(MAX(seq), 0) FROM jobs", [], lambda row: int(row[0]))[0]
 
     def sync(self) -> None:
         """Put every commit so far on disk, as a durable commit does its own: the WAL file
@@ -344,6 +354,17 @@ class JobStore:
             raise KeyError(f"no job {job_id!r}")
         if JobState(row[0]).finished:
             raise ValueError(f"job {job_id} is {row[0]}, which is final: it cannot become {new.value}")
+
+
+def job_id_for(seq: int, now: float) -> str:
+    """The id of job number ``seq``, submitted at ``now``: ``20261122-000042``."""
+    return f"{time.strftime('%Y%m%d', time.gmtime(now))}-{seq:06d}"
+
+
+def queued_status(job_id: str, request: ScanRequest, *, n_views: int, now: float) -> JobStatus:
+    """A new job's status, as :meth:`JobStore.add` stores it."""
+    return JobStatus(job_id=job_id, state=JobState.QUEUED, n_views=n_views, created=now, updated=now,
+                     request=request)
 
 
 def queued_event(status: JobStatus) -> JobEvent:

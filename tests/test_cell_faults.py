@@ -11,13 +11,16 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
+import time
 
 import pytest
 
-from wire.errors import NoResponder, RemoteError
+from wire.errors import NoResponder, RemoteError, StoreError
 from wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
-                           Superquadric)
+                           ScanRequest, Superquadric)
 from wire.transport import Transport
+from cell.job import WORKING
+from cell.store import JobStore, job_id_for
 
 from tests.cell_fixtures import (GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell, cell_config,
                                  running_cell, wait_until)
@@ -312,3 +315,22 @@ def test_a_made_up_reconstruction_is_refused(rig):
         rig.reconstructor.announce()
     assert error.startswith("reconstructing: the answer of liar is refused: camera 0 would be inside it")
     assert cell.client.status(job_id).error_kind == "ImplausibleResult"
+
+
+def test_a_job_the_store_cannot_take_is_refused_and_the_cell_goes_on(rig):
+    """The daemon numbers a job and starts it while the store's thread writes it: if the store
+    refuses it (here: another writer took its number), the submit gets the store's error, the job
+    ends failed wherever it had got to, and the next job runs."""
+    cell = rig.cell
+    with JobStore(cell.config.run_dir / "jobs.sqlite") as store:
+        taken = store.last_seq() + 1
+        blocker, _ = store.add(ScanRequest(target=[0.6, 0.0, 0.05]), n_views=3, now=time.time(), seq=taken)
+        store.update(blocker.job_id, JobState.FAILED, error="put there by a test", now=time.time())
+    with pytest.raises(StoreError, match="the job store could not take the job"):
+        cell.submit()
+    assert "withdrawn: the job store could not take the job" in cell.log("daemon")
+    status = cell.submit()
+    assert status.job_id == job_id_for(taken + 1, status.created)
+    assert cell.wait(status.job_id).state is JobState.SUCCEEDED
+    assert cell.status().queued == 0
+    assert not cell.client.list({JobState.QUEUED, *WORKING, JobState.CANCELLING})

@@ -282,6 +282,18 @@ def test_job_queries_list_idempotency_and_unknown_jobs(cell, scanned):
     again = cell.client.submit(cell.scan_request(request_id="same-request"))
     assert again.job_id == first.job_id
     assert cell.wait(first.job_id).state is JobState.SUCCEEDED
+    at_once = cell.loop.run(_submit_together(cell, cell.scan_request(request_id="at-once"), 5))
+    assert len({status.job_id for status in at_once}) == 1
+    assert [job.job_id for job in cell.client.list(limit=1000) if job.request.request_id == "at-once"] \
+        == [at_once[0].job_id]
+    assert cell.wait(at_once[0].job_id).state is JobState.SUCCEEDED
+    assert "withdrawn" not in cell.log("daemon")  # found as the same request, not by the store's backstop
+
+
+async def _submit_together(cell, request: ScanRequest, n: int):
+    """``n`` submits of one request, all sent before any is answered."""
+    async with await AsyncCellClient.connect(cell.router, cell.config.cell_id) as client:
+        return await asyncio.gather(*(client.submit(request) for _ in range(n)))
 
 
 def test_every_query_gets_exactly_one_answer(cell, scanned):

@@ -267,9 +267,28 @@ class Transport:
             If the responder answered with an error: the class it raised where this side knows
             it (``MoveRefused``, say), else ``RemoteError``; its message is the error's text.
         """
+        sent = self._send(key, payload, timeout=timeout, attachment=attachment, encoding=encoding,
+                          parameters=parameters)
+        return await self._reply(sent)
+
+    def start_query(self, key: str, payload: bytes | str | None = None, *, timeout: float,
+                    attachment: bytes | str | None = None, encoding: str = JSON) -> asyncio.Future[Reply]:
+        """:meth:`query`, sent before this returns (a task would send it only when the event loop
+        next looks round, behind whatever else is ready): the future of its reply, or of its
+        error, :meth:`query`'s errors."""
+        try:
+            sent = self._send(key, payload, timeout=timeout, attachment=attachment, encoding=encoding)
+        except CellError as exc:
+            failed: asyncio.Future[Reply] = self._loop.create_future()
+            failed.set_exception(exc)
+            return failed
+        return asyncio.ensure_future(self._reply(sent))
+
+    def _send(self, key: str, payload: bytes | str | None, *, timeout: float, attachment: bytes | str | None,
+              encoding: str, parameters: str = "") -> _Sent:
         loop = self._loop
-        done = loop.create_future()
-        replies: list[tuple[bool, Reply]] = []
+        sent = _Sent(key, timeout, loop.create_future())
+        replies, done = sent.replies, sent.done
 
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
@@ -286,7 +305,6 @@ class Transport:
 
         if not self._link.is_set():
             raise LinkDown(f"the link to the Zenoh router at {self.endpoint} is down: nothing sent on {key}")
-        lost = asyncio.ensure_future(self._link_lost.wait())
         selector = f"{key}?{parameters}" if parameters else key
         kwargs: dict[str, Any] = {"timeout": timeout, "encoding": zenoh.Encoding(encoding)}
         if payload is not None:
@@ -295,15 +313,26 @@ class Transport:
             kwargs["attachment"] = attachment
         try:
             self._session.get(selector, _direct(on_reply, on_finished), **kwargs)
+        except zenoh.ZError as exc:
+            raise TransportError(f"query on {key} failed: {_zenoh_message(exc)}") from exc
+        # Watched from the moment it is sent: a link lost before the answer comes ends the wait.
+        sent.lost = asyncio.ensure_future(self._link_lost.wait())
+        return sent
+
+    async def _reply(self, sent: _Sent) -> Reply:
+        key, timeout, done, lost, replies = sent.key, sent.timeout, sent.done, sent.lost, sent.replies
+        assert lost is not None, "set by _send"
+        try:
             # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
             # Not asyncio.wait_for: on Python 3.11 it swallows a cancel that comes with the answer.
             async with asyncio.timeout(timeout + 5.0):
                 await asyncio.wait({done, lost}, return_when=asyncio.FIRST_COMPLETED)
-        except zenoh.ZError as exc:
-            raise TransportError(f"query on {key} failed: {_zenoh_message(exc)}") from exc
         except asyncio.TimeoutError:
             lost.cancel()
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s") from None
+        except BaseException:
+            lost.cancel()
+            raise
         try:
             if not done.done():  # its answer, should it come, is dropped with the query
                 raise LinkDown(f"the link to the Zenoh router at {self.endpoint} went down before the answer "
@@ -442,6 +471,17 @@ class Transport:
         async with asyncio.timeout(timeout + 5.0):
             await done
         return sorted(keys)
+
+
+@dataclass
+class _Sent:
+    """A query on its way: what :meth:`Transport._reply` waits on."""
+
+    key: str
+    timeout: float
+    done: asyncio.Future[None]              # Zenoh has finalised the query
+    replies: list[tuple[bool, Reply]] = field(default_factory=list)
+    lost: asyncio.Future[Any] | None = None  # the link went down
 
 
 def _settle(done: asyncio.Future[None]) -> None:
