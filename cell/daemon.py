@@ -17,7 +17,9 @@ What must outlive a crash is awaited before anyone hears of it: a job is on disk
 before its submit is answered (it may start meanwhile), a job's failure or cancel before
 its event is published. What a restart can redo is not waited for: a step's state, and a
 success (the job stays reconstructing on disk, its pictures kept, until the result is
-stored behind the event). A step's bookkeeping is done once its query to the worker is on its way; what the
+stored behind the event); those writes wait for the next slow wait of a job, so that the
+store's thread does not compete with the round trips of instant moves (``cell.executor``).
+A step's bookkeeping is done once its query to the worker is on its way; what the
 event loop remembers of the jobs (the queue, the jobs in flight) is what its
 decisions need, so no decision waits for the store. After a crash, the restarted
 daemon carries every accepted job on to its end: a job whose pictures were all taken resumes its
@@ -177,7 +179,7 @@ class CellDaemon:
             await self.pool.close()
             for journal in self._journals.values():  # jobs cut short keep what they recorded
                 journal.hand_over()
-            self._hand_over_ended()
+            self._catch_up()
 
     def _spawn(self, coroutine: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         task = asyncio.create_task(coroutine)
@@ -273,10 +275,12 @@ class CellDaemon:
 
     def hand_over(self, job: Job) -> None:
         self._journals[job.job_id].hand_over()
-        self._hand_over_ended()
+        self._catch_up()
 
-    def _hand_over_ended(self) -> None:
-        """The recordings of ended jobs, to the recorder: now is a good time (see ``cell.journal``)."""
+    def _catch_up(self) -> None:
+        """The store's deferred writes, and the recordings of ended jobs (see ``cell.journal``), to
+        their threads: the cell waits for something slow, or has been quiet a moment."""
+        self._db.flush()
         for journal in self._ended_journals:
             journal.hand_over()
         self._ended_journals.clear()
@@ -308,9 +312,11 @@ class CellDaemon:
         elif to.finished:
             self._db.post(self._pictures.drop, job.job_id)
         durable = to.finished or to is JobState.RECONSTRUCTING
-        self._db.post(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
-                      error=None if error is None else message, error_kind=None if error is None else error.kind,
-                      durable=durable, then=published if to.finished else None)
+        # A step's state waits for the job's next slow wait (or a reader): see cell.executor.
+        write = self._db.post if durable else self._db.defer
+        write(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
+              error=None if error is None else message, error_kind=None if error is None else error.kind,
+              durable=durable, then=published if to.finished else None)
         if not to.finished:
             later(self._publish, event)
         return event
@@ -329,7 +335,7 @@ class CellDaemon:
             # Handed over at the next slow wait of a job, or once the cell has been quiet a moment:
             # the recorder's work on it would otherwise compete with the next job's first moves.
             self._ended_journals.append(journal)
-            asyncio.get_running_loop().call_later(_QUIET_S, self._hand_over_ended)
+            asyncio.get_running_loop().call_later(_QUIET_S, self._catch_up)
 
     def _publish(self, event: JobEvent) -> None:
         self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
@@ -375,7 +381,7 @@ class CellDaemon:
         path = self._recording_path(job.job_id)
         checked: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         job.recording_checked = checked
-        self._db.post(self._check_recording, job, path, then=functools.partial(checked.set_result, None))
+        self._db.defer(self._check_recording, job, path, then=functools.partial(checked.set_result, None))
         journal = Journal(self._recorder, job.job_id, path, started=job.started, clock=self.clock)
         self._journals[job.job_id] = journal
         if resumed:  # the recording starts again: the pictures first
@@ -456,11 +462,12 @@ class CellDaemon:
         if len(self._recent_results) > _RECENT_RESULTS:
             self._recent_results.popitem(last=False)
         # Published, then stored without waiting: a success is not worth a wait for the disk or
-        # the store's thread. If the daemon dies between the two, the job is still reconstructing
-        # in the store, with its pictures kept, and the restarted daemon reconstructs it again.
-        # Whoever asks the store after hearing the event asks behind the save (one thread, in order).
-        self._db.post(self._jobs.save_result, result, now=event.time, event=event, durable=False)
-        self._db.post(self._pictures.drop, job.job_id)
+        # the store's thread, and its writes wait for the next job's slow wait (the next job's first
+        # moves come at once). If the daemon dies before, the job is still reconstructing in the
+        # store, with its pictures kept, and the restarted daemon reconstructs it again. Whoever
+        # asks the store after hearing the event asks behind the save (a read flushes what waits).
+        self._db.defer(self._jobs.save_result, result, now=event.time, event=event, durable=False)
+        self._db.defer(self._pictures.drop, job.job_id)
         self._publish(event)
         if job.reconstruction is not None and job.job_id in self._journals:
             reply, payload, at = job.reconstruction
@@ -496,7 +503,8 @@ class CellDaemon:
         seq, now = self._last_seq + 1, self.clock()
         self._last_seq = seq
         status = queued_status(job_id_for(seq, now), scan, n_views=len(poses), now=now)
-        added = self._db.call(self._jobs.add, scan, n_views=len(poses), now=now, seq=seq, durable=False)
+        # Ahead of the writes deferred for other jobs: the next job's first moves need no company.
+        added = self._db.call(self._jobs.add, scan, n_views=len(poses), now=now, seq=seq, durable=False, ahead=True)
         job = Job(status.job_id, scan, poses)
         self._enqueue(job)
         later(self._publish, queued_event(status))
@@ -516,14 +524,14 @@ class CellDaemon:
         # On disk before the answer, so an answered submit survives a crash; the job need not wait
         # for the disk to start. (A crash before the answer may leave the job, unanswered, to run
         # after the restart: a client's retry with the same request_id finds it.)
-        await self._db.call(self._jobs.sync)
+        await self._db.call(self._jobs.sync, ahead=True)
         return Response(status.model_dump_json())
 
     async def _known_request(self, request_id: str) -> JobStatus | None:
         """The job submitted with ``request_id`` before, in its state now; None if there is none."""
         job_id = self._request_ids.get(request_id)
         if job_id is None:  # not in this run (or long ago): the store knows
-            known = await self._db.call(self._jobs.find_request, request_id)
+            known = await self._db.call(self._jobs.find_request, request_id, ahead=True)
             if known is not None:
                 return known
             job_id = self._request_ids.get(request_id)  # submitted while the store looked

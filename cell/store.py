@@ -12,10 +12,17 @@ with its own; after a power cut (not a ``kill -9``, which loses nothing written)
 daemon may find the job a step behind, and takes it up from there (a success lost that way
 is reconstructed again from the pictures kept: nothing a restart cannot redo waits for the disk).
 
+The daemon writes a step of a job and a success later still: when the cell next waits for
+something slow (a snapshot, a reconstruction), when it has been quiet 0.2 s, or before
+anything reads the store through it (``cell.executor``). A ``kill -9`` may therefore find a
+job a step behind too; a program reading this file while the daemon runs may see a job's
+last step late by as much.
+
 Job ids look like ``20261122-000042``: the UTC day the job was submitted, then
-the store's job counter (the row number; jobs are never deleted). They are
-unique within a store because the counter is, and sort in submission order as
-long as the clock does not step back over midnight.
+the job counter (the row number; jobs are never deleted). They are unique within a
+store because the counter is, and sort in submission order as long as the clock does not
+step back over midnight. The daemon numbers its jobs itself, from :meth:`JobStore.last_seq`
+on (it is the store's only writer: ``cell.lock``), so that a job starts before it is stored.
 """
 
 from __future__ import annotations

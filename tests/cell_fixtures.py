@@ -173,7 +173,10 @@ class RunningCell:
         return wait_until(check, timeout=timeout, interval=0.005, what=f"job {job_id} in {states}")
 
     def events(self, job_id: str) -> list[JobEvent]:
-        """The job's events as the daemon stored them."""
+        """The job's events as the daemon stored them, once it has written what it held back (a
+        query that reads the store makes it: see ``cell.executor``; a daemon that stops writes it)."""
+        if self.daemon_running():
+            self.client.status(job_id)
         with JobStore(self.config.run_dir / "jobs.sqlite") as store:
             return store.events(job_id)
 

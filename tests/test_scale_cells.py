@@ -46,8 +46,7 @@ def _pool(cell: RunningCell) -> dict[str, tuple[int, int]]:
 
 
 def _ended(cell: RunningCell, job_id: str) -> float:
-    with JobStore(cell.config.run_dir / "jobs.sqlite") as store:
-        return next(event.time for event in store.events(job_id) if event.state is JobState.SUCCEEDED)
+    return next(event.time for event in cell.events(job_id) if event.state is JobState.SUCCEEDED)
 
 
 def test_two_cells_share_the_workers_and_see_each_others_load(cells):
