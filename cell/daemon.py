@@ -57,6 +57,7 @@ from .pool import ReconstructorPool
 from .presence import Absent, Presence
 from .recorder import Recorder
 from .pictures import Pictures
+from .publisher import Publisher
 from .steps import Step, StepFailed, job_steps
 from .store import JobStore, job_id_for, queued_event, queued_status
 
@@ -101,6 +102,7 @@ class CellDaemon:
         self._ended_journals: list[Journal] = []    # of jobs that ended, not yet handed over
         self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)
+        self._publisher = Publisher(transport)
         self._lane = MotionLane()
         self.pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
         self._background: set[asyncio.Task[Any]] = set()
@@ -139,6 +141,7 @@ class CellDaemon:
             self._store = await self._db.call(JobStore, self._store_path)
             self._last_seq = await self._db.call(self._jobs.last_seq)
             self._recorder.start()
+            self._publisher.start()
             try:
                 await self._recover()
                 await self._serve(stop)
@@ -146,6 +149,8 @@ class CellDaemon:
                 await asyncio.sleep(0)  # what is handed over later goes out first
                 await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
                 await self._db.call(self._jobs.close)
+                await asyncio.sleep(0)  # the events published once stored, to the publisher
+                await asyncio.to_thread(self._publisher.close)
         finally:
             await asyncio.to_thread(self._db.close)
             lock.release()
@@ -338,7 +343,7 @@ class CellDaemon:
             asyncio.get_running_loop().call_later(_QUIET_S, self._catch_up)
 
     def _publish(self, event: JobEvent) -> None:
-        self._transport.put(keys.events(self.cell, event.job_id), event.model_dump_json())
+        self._publisher.put(keys.events(self.cell, event.job_id), event.model_dump_json())
 
     def _recording_path(self, job_id: str) -> Path:
         return self.run_dir / f"{job_id}.rrd"
