@@ -12,9 +12,10 @@ prints tables; asserts nothing.
     of this design: the same job's round trips (one in place of the submit,
     then 3 moves and 3 captures) made back to back by this process straight
     to the same workers, with no daemon, store, events or recording, overhead
-    counted the same way, measured in the same run (so that the ratio does
-    not depend on the machine's load). Target: median overhead <= 1.5 x the
-    floor.
+    counted the same way. Jobs and bare jobs alternate in one run, each after
+    half a second of quiet, so that both meet the same machine (the ratio
+    then does not depend on the machine's load, nor on its drift during the
+    run). Target: median overhead <= 1.5 x the floor.
 (b) Pipelining: every move takes 1 s; N jobs submitted together. Bound:
     N x (3 moves + 3 captures) + one reconstruction, with the moves and
     captures as the workers reported them (a snapshot's time varies with what
@@ -52,6 +53,11 @@ from wire.transport import Transport  # noqa: E402
 from robocell.up import CellProcesses  # noqa: E402
 
 
+#: Quiet before each measured job: the daemon writes a job's last steps and hands its recording
+#: over within 0.2 s of quiet (cell.daemon), and the recorder draws it.
+_SETTLE_S = 0.5
+
+
 def _config(run_dir: Path, **robot) -> CellConfig:
     return local_config(run_dir, cell_id="bench", robot={"speed": 0.0, "rotation_speed_deg": 0.0, **robot})
 
@@ -79,37 +85,39 @@ async def _round_trip(config: CellConfig, n: int = 50) -> float:
     return statistics.median(times)
 
 
-async def _bare_jobs(config: CellConfig, request: ScanRequest, n: int) -> list[float]:
-    """Overhead, in seconds, of ``n`` jobs' round trips made straight to the workers, no daemon."""
-    poses = plan_flange_poses(request.target, config.scan.plan, config.T_flange_cam)
-    cell, overheads = config.cell_id, []
-    async with await Transport.open(config.zenoh.router) as transport:
-        for _ in range(n):
-            began = time.perf_counter()
-            await transport.query(keys.robot_state(cell), timeout=5.0)  # in place of the submit
-            waited = 0.0
-            for pose in poses:
-                reply = await transport.query(keys.robot_move(cell), MoveRequest(T_base_flange=pose.tolist())
-                                              .model_dump_json(), timeout=5.0)
-                waited += parse(MoveReply, reply.payload).duration_s
-                reply = await transport.query(keys.camera_capture(cell), CaptureRequest().model_dump_json(),
-                                              timeout=10.0)
-                waited += parse(CaptureInfo, reply.attachment).duration_s
-            overheads.append(time.perf_counter() - began - waited)
-    return overheads
+async def _bare_job(transport: Transport, cell: str, poses) -> float:
+    """Overhead, in seconds, of one job's round trips made straight to the workers, no daemon."""
+    began = time.perf_counter()
+    await transport.query(keys.robot_state(cell), timeout=5.0)  # in place of the submit
+    waited = 0.0
+    for pose in poses:
+        reply = await transport.query(keys.robot_move(cell), MoveRequest(T_base_flange=pose.tolist())
+                                      .model_dump_json(), timeout=5.0)
+        waited += parse(MoveReply, reply.payload).duration_s
+        reply = await transport.query(keys.camera_capture(cell), CaptureRequest().model_dump_json(), timeout=10.0)
+        waited += parse(CaptureInfo, reply.attachment).duration_s
+    return time.perf_counter() - began - waited
 
 
 async def overhead(n_jobs: int, run_dir: Path) -> float:
-    """Print table (a); the median seconds of a job's worker round trips (the floor, less the submit)."""
+    """Print table (a); the median seconds of a job's worker round trips (the floor, less the submit).
+
+    Jobs and bare jobs alternate, each after a moment of quiet (``_SETTLE_S``: the recorder
+    and the store catch up after a job), so that both meet the same machine.
+    """
     config = _config(run_dir)
     cell = CellProcesses(config)
     try:
         await cell.start()
-        async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
+        async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client, \
+                await Transport.open(config.zenoh.router) as transport:
             request = ScanRequest(target=target_from_config(config.sim))
+            poses = plan_flange_poses(request.target, config.scan.plan, config.T_flange_cam)
             await _one_job(client, request)  # warm-up: imports, first connections
-            rows = []
+            await _bare_job(transport, config.cell_id, poses)
+            rows, bare = [], []
             for _ in range(n_jobs):
+                await asyncio.sleep(_SETTLE_S)
                 total, result = await _one_job(client, request)
                 d = result.durations_s
                 moves = sum(v for k, v in d.items() if k.startswith("move"))
@@ -117,8 +125,9 @@ async def overhead(n_jobs: int, run_dir: Path) -> float:
                 rows.append({"total": total, "moves": moves, "captures": captures,
                              "reconstruct": d["reconstruct"], "core": result.timings_ms["total"] / 1000,
                              "overhead": total - moves - captures - d["reconstruct"]})
+                await asyncio.sleep(_SETTLE_S)
+                bare.append(await _bare_job(transport, config.cell_id, poses))
             round_trip = await _round_trip(config)
-            bare = await _bare_jobs(config, request, n_jobs)
     finally:
         await cell.stop()
     columns = {key: [row[key] for row in rows] for key in rows[0]}
