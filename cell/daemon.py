@@ -70,6 +70,7 @@ _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 _RECENT_RESULTS = 100       # results kept in memory to answer at once
 _QUIET_S = 0.2              # an ended job's recording waits at most this long for a job's slow wait
+_VIEW_STEPS = frozenset({JobState.MOVING, JobState.CAPTURING})  # written at the next slow wait
 _REQUEST_IDS = 10_000       # request_ids of this run's jobs kept in memory (older ones: the store finds them)
 
 
@@ -317,8 +318,10 @@ class CellDaemon:
         elif to.finished:
             self._db.post(self._pictures.drop, job.job_id)
         durable = to.finished or to is JobState.RECONSTRUCTING
-        # A step's state waits for the job's next slow wait (or a reader): see cell.executor.
-        write = self._db.post if durable else self._db.defer
+        # A view's step waits for the job's next slow wait, or a reader (cell.executor): a restart
+        # that finds it a step behind takes the views again anyway. A pick's does not wait: a
+        # restart must know that the gripper may hold the object.
+        write = self._db.defer if to in _VIEW_STEPS else self._db.post
         write(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
               error=None if error is None else message, error_kind=None if error is None else error.kind,
               durable=durable, then=published if to.finished else None)

@@ -7,13 +7,15 @@ the events the daemon stored, not from the test's clock.
 
 from __future__ import annotations
 
+import asyncio
 import random
 import time
 
 import pytest
 
 from wire.errors import RemoteError
-from wire.messages import JobEvent, JobState
+from wire.client import AsyncCellClient
+from wire.messages import JobEvent, JobState, PickRequest
 
 from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 
@@ -149,3 +151,31 @@ def test_daemon_stopped_mid_job_commands_the_robot_no_further(cell):
     final = cell.wait(status.job_id)
     assert final.state is JobState.SUCCEEDED, final.error
     assert moves_of_the_job() >= before + 3  # all three views again
+
+
+def test_daemon_killed_during_a_pick_does_not_pick_again(cell):
+    """The gripper may hold the object when the daemon dies during a pick: the restarted daemon
+    fails the job, and moves the arm no further for it. The pick is seen starting from its event
+    only (a status query would make the daemon write down what it holds back)."""
+    request = cell.scan_request(label="killed during its pick", pick=PickRequest())
+
+    async def submit_and_kill_at_the_pick() -> str:
+        async with await AsyncCellClient.connect(cell.router, cell.config.cell_id) as client:
+            client.listen()
+            job_id = (await client.submit(request)).job_id
+            async with asyncio.timeout(60):
+                async for event in client.events(job_id):
+                    if event.state is JobState.PICKING and event.message != "choosing a grasp":
+                        break
+            assert await cell.processes.stop_child("daemon", kill=True) == -9
+            return job_id
+
+    job_id = cell.loop.run(submit_and_kill_at_the_pick())
+    moves_before = cell.log("robot").count(f"for job {job_id}")
+    cell.loop.run(cell.processes.start_child("daemon"))
+    final = cell.wait(job_id)
+    assert final.state is JobState.FAILED and final.error_kind == "PickInterrupted", final
+    assert "the gripper may still hold the object" in final.error
+    time.sleep(2 * MOVE_TIME_S)
+    assert cell.log("robot").count(f"for job {job_id}") <= moves_before + 1  # the move under way may end
+    assert cell.tracebacks() == {}
