@@ -12,7 +12,7 @@ with its own; after a power cut (not a ``kill -9``, which loses nothing written)
 daemon may find the job a step behind, and takes it up from there (a success lost that way
 is reconstructed again from the pictures kept: nothing a restart cannot redo waits for the disk).
 
-The daemon writes a step of a job and a success later still: when the cell next waits for
+The daemon writes a view's step (moving, capturing) and a success later still: when the cell next waits for
 something slow (a snapshot, a reconstruction), when it has been quiet 0.2 s, or before
 anything reads the store through it (``cell.executor``). A ``kill -9`` may therefore find a
 job a step behind too; a program reading this file while the daemon runs may see a job's

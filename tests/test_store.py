@@ -14,7 +14,7 @@ import pytest
 
 from wire.errors import StoreError
 from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
-from cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, queued_event
+from cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, job_id_for, queued_event, queued_status
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -45,6 +45,18 @@ def test_a_new_store_is_a_wal_database_with_a_schema_version(tmp_path):
         assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     finally:
         db.close()
+
+
+def test_a_caller_that_numbers_its_jobs_gets_the_ids_and_statuses_the_store_would_give(store):
+    assert store.last_seq() == 0
+    first, _ = store.add(request(), n_views=3, now=T0)
+    given, created = store.add(request(label="numbered"), n_views=2, now=T0 + 1, seq=store.last_seq() + 1)
+    assert created and given.job_id == job_id_for(2, T0 + 1) == "20261118-000002" and store.last_seq() == 2
+    assert given == store.get(given.job_id) == queued_status(given.job_id, request(label="numbered"), n_views=2,
+                                                             now=T0 + 1)
+    with pytest.raises(StoreError, match="UNIQUE constraint failed: jobs.seq"):
+        store.add(request(), n_views=3, now=T0 + 2, seq=2)
+    assert [job.job_id for job in store.list(limit=10)] == [given.job_id, first.job_id]  # nothing half added
 
 
 def test_add_queues_a_job_with_a_dated_counter_id(store):
