@@ -320,7 +320,7 @@ class CellDaemon:
         durable = to.finished or to is JobState.RECONSTRUCTING
         # A view's step waits for the job's next slow wait, or a reader (cell.executor): a restart
         # that finds it a step behind takes the views again anyway. A pick's does not wait (and
-        # its first is on disk before the pick begins: see _step).
+        # its first step's is on disk before it runs: Step.stored_first).
         write = self._db.defer if to in _VIEW_STEPS else self._db.post
         write(self._jobs.update, job.job_id, to, view=view, now=event.time, event=event,
               error=None if error is None else message, error_kind=None if error is None else error.kind,
@@ -438,9 +438,8 @@ class CellDaemon:
     async def _step(self, job: Job, step: Step) -> None:
         if job.state is JobState.CANCELLING:  # a cancel that came as the last step ended
             raise asyncio.CancelledError
-        picking = step.state is JobState.PICKING and job.state is not JobState.PICKING
         self._transition(job, step.state, step.describe(), view=step.view)
-        if picking:  # on disk before the gripper moves: a restart must know that it may hold the object
+        if step.stored_first:
             await self._db.call(self._jobs.sync)
         await step.run(job, self)
         if job.state is JobState.CANCELLING:

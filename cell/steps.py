@@ -2,8 +2,9 @@
 
 A job runs its steps in order and knows nothing of what each does; a step says
 in which state the job is while it runs (``state``), what to tell the client
-(``describe``), and whether it needs the robot and the camera (``needs_robot``:
-the daemon then runs it in the motion lane, one job at a time). A step that
+(``describe``), whether it needs the robot and the camera (``needs_robot``:
+the daemon then runs it in the motion lane, one job at a time), and whether the
+job's state must be on disk before it runs (``stored_first``). A step that
 fails raises :class:`StepFailed` with the reason; what it gathers it leaves on
 the :class:`~cell.job.Job`. A new step (a grasp, a pick, a second look) is a new
 class here and a line in the function that lists a request's steps.
@@ -77,6 +78,8 @@ class Step(abc.ABC):
     state: ClassVar[JobState]
     #: Whether the step needs the robot (and the camera on it): it then runs in the motion lane.
     needs_robot: ClassVar[bool] = False
+    #: Whether the job's state must be on disk before the step runs: a restart must know it began.
+    stored_first: ClassVar[bool] = False
     #: The view the step is about, if any.
     view: int | None = None
 
@@ -213,6 +216,7 @@ class ChooseGrasp(Step):
     """
 
     state = JobState.PICKING
+    stored_first = True  # the pick begins: restarted, the daemon must not pick again (the gripper may hold it)
 
     def __init__(self, pick: PickRequest) -> None:
         self.pick = pick
