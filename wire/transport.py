@@ -287,8 +287,8 @@ class Transport:
     def _send(self, key: str, payload: bytes | str | None, *, timeout: float, attachment: bytes | str | None,
               encoding: str, parameters: str = "") -> _Sent:
         loop = self._loop
-        sent = _Sent(key, timeout, loop.create_future())
-        replies, done = sent.replies, sent.done
+        done: asyncio.Future[None] = loop.create_future()
+        replies: list[tuple[bool, Reply]] = []
 
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
@@ -316,12 +316,10 @@ class Transport:
         except zenoh.ZError as exc:
             raise TransportError(f"query on {key} failed: {_zenoh_message(exc)}") from exc
         # Watched from the moment it is sent: a link lost before the answer comes ends the wait.
-        sent.lost = asyncio.ensure_future(self._link_lost.wait())
-        return sent
+        return _Sent(key, timeout, done, replies, asyncio.ensure_future(self._link_lost.wait()))
 
     async def _reply(self, sent: _Sent) -> Reply:
         key, timeout, done, lost, replies = sent.key, sent.timeout, sent.done, sent.lost, sent.replies
-        assert lost is not None, "set by _send"
         try:
             # Zenoh finalises every query by its timeout; the margin only guards against a lost signal.
             # Not asyncio.wait_for: on Python 3.11 it swallows a cancel that comes with the answer.
@@ -479,9 +477,9 @@ class _Sent:
 
     key: str
     timeout: float
-    done: asyncio.Future[None]              # Zenoh has finalised the query
-    replies: list[tuple[bool, Reply]] = field(default_factory=list)
-    lost: asyncio.Future[Any] | None = None  # the link went down
+    done: asyncio.Future[None]          # Zenoh has finalised the query
+    replies: list[tuple[bool, Reply]]   # as Zenoh's thread hands them over
+    lost: asyncio.Future[Any]           # the link went down
 
 
 def _settle(done: asyncio.Future[None]) -> None:
