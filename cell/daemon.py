@@ -69,7 +69,7 @@ _RETRY_S = 0.5              # between two tries of a step whose part is away
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 _RECENT_RESULTS = 100       # results kept in memory to answer at once
-_QUIET_S = 0.2              # an ended job's recording waits at most this long for a job's slow wait
+_QUIET_S = 0.2              # what a job records waits at most this long for a slow wait (see _start)
 _VIEW_STEPS = frozenset({JobState.MOVING, JobState.CAPTURING})  # written at the next slow wait
 _REQUEST_IDS = 10_000       # request_ids of this run's jobs kept in memory (older ones: the store finds them)
 
@@ -291,6 +291,11 @@ class CellDaemon:
             journal.hand_over()
         self._ended_journals.clear()
 
+    def _open_recording(self, job_id: str) -> None:
+        journal = self._journals.get(job_id)
+        if journal is not None:  # not ended: an ended job's recording waits for a quiet moment
+            journal.hand_over()
+
     def note(self, job: Job, message: str) -> None:
         log.warning("job %s: %s", job.job_id, message)
         self._keep(job, job.note(message, now=self.clock()))
@@ -392,6 +397,9 @@ class CellDaemon:
         self._db.defer(self._check_recording, job, path, then=functools.partial(checked.set_result, None))
         journal = Journal(self._recorder, job.job_id, path, started=job.started, clock=self.clock)
         self._journals[job.job_id] = journal
+        # The recording opens at the job's first slow wait (cell.journal); a job whose first move is
+        # a real robot's, seconds long, has it opened meanwhile, so that a daemon killed then leaves one.
+        asyncio.get_running_loop().call_later(_QUIET_S, self._open_recording, job.job_id)
         if resumed:  # the recording starts again: the pictures first
             for view, picture in enumerate(job.captures):
                 journal.record("log_view", view, picture.jpeg, self.config.camera.K, picture.T_base_cam,

@@ -4,9 +4,13 @@ Handing a message to the recorder process costs the event loop and the
 interpreter time, and the recorder's work costs a processor; a robot that moves
 at once answers in under a millisecond. So a job's recording messages wait in
 its :class:`Journal`, and go over while a job waits for a snapshot or for a
-reconstruction. A finished job's last messages (its reconstruction drawn, the
-file closed) wait the same way, for the next such wait of any job, or until the
-cell has been quiet a moment (the daemon decides when: :meth:`Journal.hand_over`).
+reconstruction. Opening the recording is the first of them: making a Rerun
+recording and its file costs the recorder a millisecond or two of processor,
+which the bench (bench/bench_cell.py) saw as a slower first move when it was
+done as the job started. A finished job's last messages (its reconstruction
+drawn, the file closed) wait the same way, for the next such wait of any job,
+or until the cell has been quiet a moment (the daemon decides when:
+:meth:`Journal.hand_over`).
 """
 
 from __future__ import annotations
@@ -32,8 +36,7 @@ class Journal:
                  clock: Callable[[], float]) -> None:
         self._recorder, self.job_id, self._started, self._clock = recorder, job_id, started, clock
         self._waiting: list[tuple[float, str, tuple[Any, ...], dict[str, Any]]] = []
-        # At once: a job cut short, by a kill of the daemon say, still leaves a recording.
-        later(recorder.open, job_id, path)
+        self._path: Path | None = path  # until the recording is opened, at the first hand-over
 
     def record(self, method: str, *args: Any, **kwargs: Any) -> None:
         """``JobRecording.<method>(*args, **kwargs)`` at the job time of now, when handed over."""
@@ -50,6 +53,9 @@ class Journal:
     def hand_over(self) -> None:
         """Hand what waits to the recorder, in order, when the event loop next looks round."""
         recorder = self._recorder
+        if self._path is not None:
+            later(recorder.open, self.job_id, self._path)
+            self._path = None
         for at, method, args, kwargs in self._waiting:
             if method == _RECONSTRUCTION:
                 later(recorder.reconstruction, self.job_id, at, *args)

@@ -12,6 +12,13 @@ If the daemon dies, the pipe's other end closes: the recorder closes every
 recording it has open and exits. If the recorder dies, the daemon goes on
 without recordings and says so in its log.
 
+A recorder process makes at most ``recordings_per_process`` recordings; the
+next job's goes to a new one, and the old one ends once its last recording is
+closed. Rerun never ends the two threads it starts for a recording made from
+Python (rerun-io/rerun#2116: the recording is only disconnected, never
+dropped); each wakes five times a second, and a process that had recorded a
+day of jobs would hold tens of thousands of them.
+
 Messages are tuples ``(kind, job_id, job_time_s, body)``:
 
 ==================  ==============================================================
@@ -40,6 +47,10 @@ log = logging.getLogger(__name__)
 _STOP_WAIT_S = 3.0
 _NICENESS = 19  # the lowest: the recording may wait, the robot may not
 _LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
+#: Recordings a recorder process makes before a new one takes over (see the module's text): its
+#: leftover threads then cost about 8 ms of processor a second at most, and starting the next
+#: process (a second or so of processor) a hundredth of that a job.
+RECORDINGS_PER_PROCESS = 100
 
 
 class Recorder:
@@ -51,26 +62,38 @@ class Recorder:
         Points on the sphere the reconstruction starts from (drawn before carving).
     sim : dict or None
         The ``[sim]`` section, to draw the true object beside the fit; None on a real cell.
+    recordings_per_process : int
+        Recordings a recorder process makes before a new one takes over.
     """
 
-    def __init__(self, *, n_points: int, sim: dict | None) -> None:
+    def __init__(self, *, n_points: int, sim: dict | None,
+                 recordings_per_process: int = RECORDINGS_PER_PROCESS) -> None:
         self._arguments = (n_points, sim)
+        self._per_process = recordings_per_process
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._feeder = threading.Thread(target=self._feed, name="recorder-feeder", daemon=True)
-        self._process: multiprocessing.process.BaseProcess | None = None
-        self._writer: Connection | None = None
-        self._broken = False
+        self._current: _Child | None = None
+        self._children: list[_Child] = []   # the current one, and those that end once their recordings are closed
+        self._child_of: dict[str, _Child] = {}  # the job's recording is in this child
+        self._processes: list[multiprocessing.process.BaseProcess] = []  # every one not known to have ended
 
     def start(self) -> None:
         """Start the recorder process (it imports Rerun meanwhile: messages wait in the pipe)."""
-        context = multiprocessing.get_context("spawn")  # never fork a process that runs threads
-        reader, self._writer = context.Pipe(duplex=False)
-        # The child gets only the reading end: when this process dies, it reads end-of-file.
-        self._process = context.Process(target=_main, args=(reader, *self._arguments, logging.getLogger().level),
-                                        name="robocell-recorder", daemon=True)
-        self._process.start()
-        reader.close()
+        self._current = self._start_child()
         self._feeder.start()
+
+    def _start_child(self) -> _Child:
+        context = multiprocessing.get_context("spawn")  # never fork a process that runs threads
+        reader, writer = context.Pipe(duplex=False)
+        # The child gets only the reading end: when this process dies, it reads end-of-file.
+        process = context.Process(target=_main, args=(reader, *self._arguments, logging.getLogger().level),
+                                  name="robocell-recorder", daemon=True)
+        process.start()
+        reader.close()
+        self._processes = [p for p in self._processes if p.is_alive()] + [process]
+        child = _Child(process, writer)
+        self._children.append(child)
+        return child
 
     def open(self, job_id: str, path: Path) -> None:
         self._outbox.put(("open", job_id, 0.0, str(path)))
@@ -87,33 +110,71 @@ class Recorder:
 
     def stop(self) -> None:
         """Let the recorder finish and close every recording; bounded in time."""
-        if self._process is None:
+        if self._current is None:
             return
         self._outbox.put(None)
         self._feeder.join(_STOP_WAIT_S)
-        self._process.join(_STOP_WAIT_S)
-        if self._process.is_alive():
-            log.warning("the recorder did not stop in %g s: terminating it", _STOP_WAIT_S)
-            self._process.terminate()
-            self._process.join(_STOP_WAIT_S)
+        for process in list(self._processes):
+            process.join(_STOP_WAIT_S)
+            if process.is_alive():
+                log.warning("the recorder did not stop in %g s: terminating it", _STOP_WAIT_S)
+                process.terminate()
+                process.join(_STOP_WAIT_S)
 
     def _feed(self) -> None:
-        assert self._writer is not None
         try:
             while (message := self._outbox.get()) is not None:
-                if self._broken:
-                    continue
-                try:
-                    self._writer.send(message)
-                except OSError as exc:  # the recorder is gone
-                    self._broken = True
-                    log.error("the recorder process is gone (%s): jobs are no longer recorded", exc)
-            if not self._broken:
-                self._writer.send(None)
-        except OSError:
-            pass
+                kind, job_id = message[0], message[1]
+                if kind == "open":
+                    self._child_of[job_id] = self._child_for_a_new_recording()
+                child = self._child_of.get(job_id)
+                if child is None:
+                    continue  # its recording was never opened: nothing to add it to
+                child.send(message)
+                if kind == "open":
+                    child.made += 1
+                elif kind == "close":
+                    del self._child_of[job_id]
+                    if child is not self._current and child not in self._child_of.values():
+                        self._end(child)  # its last recording is closed
         finally:
-            self._writer.close()
+            for child in list(self._children):
+                self._end(child)
+
+    def _child_for_a_new_recording(self) -> _Child:
+        current = self._current
+        assert current is not None, "start() starts the first"
+        if current.made < self._per_process or current.broken:  # a dead one is not replaced: see the module's text
+            return current
+        successor = self._current = self._start_child()
+        if current not in self._child_of.values():
+            self._end(current)  # none of its recordings is open
+        return successor
+
+    def _end(self, child: _Child) -> None:
+        """Tell a child to close its recordings and end (:meth:`stop` still waits for it)."""
+        child.send(None)
+        child.writer.close()
+        self._children.remove(child)
+
+
+class _Child:
+    """A recorder process, and the end of the pipe that feeds it."""
+
+    def __init__(self, process: multiprocessing.process.BaseProcess, writer: Connection) -> None:
+        self.process, self.writer = process, writer
+        self.made = 0           # recordings it was asked to make
+        self.broken = False     # it is gone
+
+    def send(self, message: tuple | None) -> None:
+        if self.broken:
+            return
+        try:
+            self.writer.send(message)
+        except OSError as exc:  # the recorder is gone
+            self.broken = True
+            if message is not None:
+                log.error("the recorder process is gone (%s): jobs are no longer recorded", exc)
 
 
 def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -> None:

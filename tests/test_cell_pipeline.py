@@ -17,7 +17,7 @@ from wire.errors import RemoteError
 from wire.client import AsyncCellClient
 from wire.messages import JobEvent, JobState, PickRequest
 
-from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
+from tests.cell_fixtures import cell_config, running_cell, wait_for_footer, wait_until
 
 MOVE_TIME_S = 0.25
 
@@ -117,9 +117,13 @@ def test_daemon_killed_mid_job_restarts_keeping_results(cell, pipelined):
     interrupted = cell.submit(label="interrupted")
     queued = [cell.submit(label=f"queued {k}").job_id for k in range(2)]
     cell.wait_state(interrupted.job_id, {JobState.MOVING, JobState.CAPTURING})
+    # Its recording opens at its first picture, or 0.2 s into its first move: killed after that,
+    recording = cell.config.run_dir / f"{interrupted.job_id}.rrd"
+    wait_until(lambda: recording.exists() and recording.stat().st_size > 0, timeout=10, interval=0.01,
+               what="the interrupted job's recording to be opened")
     assert cell.loop.run(cell.processes.stop_child("daemon", kill=True)) == -9
-    # The daemon's recorder notices, and closes what the daemon was recording.
-    wait_for_footer(cell.config.run_dir / f"{interrupted.job_id}.rrd", timeout=20)
+    # the daemon's recorder notices, and closes what the daemon was recording.
+    wait_for_footer(recording, timeout=20)
     cell.loop.run(cell.processes.start_child("daemon"))
 
     assert cell.client.result(done) == result_before
