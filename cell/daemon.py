@@ -70,6 +70,7 @@ _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
 _RECENT_RESULTS = 100       # results kept in memory to answer at once
 _QUIET_S = 0.2              # what a job records waits at most this long for a slow wait (see _start)
+_HEAD_START_S = 0.002       # a slow wait's bookkeeping starts this long after its query (see hand_over)
 _VIEW_STEPS = frozenset({JobState.MOVING, JobState.CAPTURING})  # written at the next slow wait
 _REQUEST_IDS = 10_000       # request_ids of this run's jobs kept in memory (older ones: the store finds them)
 
@@ -280,7 +281,14 @@ class CellDaemon:
         self._journals[job.job_id].record(method, *args)
 
     def hand_over(self, job: Job) -> None:
-        self._journals[job.job_id].hand_over()
+        # A moment into the wait, not at once: the bookkeeping would compete with the messages that
+        # start the worker's slow part (the camera worker first asks the robot where it stands).
+        asyncio.get_running_loop().call_later(_HEAD_START_S, self._hand_over_now, job.job_id)
+
+    def _hand_over_now(self, job_id: str) -> None:
+        journal = self._journals.get(job_id)
+        if journal is not None:  # ended meanwhile: it is among the ended ones
+            journal.hand_over()
         self._catch_up()
 
     def _catch_up(self) -> None:

@@ -65,7 +65,8 @@ class Cell(Protocol):
         """Add to the job's recording (handed over while the job waits, see ``cell.journal``)."""
 
     def hand_over(self, job: Job) -> None:
-        """Hand the job's recording messages to the recorder now."""
+        """The job is about to wait for something slow: its recording messages go to the recorder,
+        and the store's waiting writes to its thread, a moment into the wait."""
 
     def note(self, job: Job, message: str) -> None:
         """Tell the job's listeners something that changes no state (a retry, say)."""
