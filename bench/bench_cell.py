@@ -220,14 +220,15 @@ def _overlap(this, following) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--jobs", type=int, default=20)
-    parser.add_argument("--pipeline-jobs", type=int, default=10)
+    parser.add_argument("--pipeline-jobs", type=int, default=10, help="0 skips table (b)")
     parser.add_argument("--move-time", type=float, default=1.0)
     parser.add_argument("--run-dir", help="where the cells keep their files (default: a temporary directory)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench-cell-") as tmp:
         root = Path(args.run_dir) if args.run_dir else Path(tmp)
         lane_floor = asyncio.run(overhead(args.jobs, root / "overhead"))
-        asyncio.run(pipelining(args.pipeline_jobs, args.move_time, root / "pipelining", lane_floor))
+        if args.pipeline_jobs > 0:  # 0: table (a) alone
+            asyncio.run(pipelining(args.pipeline_jobs, args.move_time, root / "pipelining", lane_floor))
 
 
 if __name__ == "__main__":

@@ -91,7 +91,7 @@ class Recorder:
         process.start()
         reader.close()
         self._processes = [p for p in self._processes if p.is_alive()] + [process]
-        child = _Child(process, writer)
+        child = _Child(writer)
         self._children.append(child)
         return child
 
@@ -159,10 +159,10 @@ class Recorder:
 
 
 class _Child:
-    """A recorder process, and the end of the pipe that feeds it."""
+    """A recorder process, as the end of the pipe that feeds it."""
 
-    def __init__(self, process: multiprocessing.process.BaseProcess, writer: Connection) -> None:
-        self.process, self.writer = process, writer
+    def __init__(self, writer: Connection) -> None:
+        self.writer = writer
         self.made = 0           # recordings it was asked to make
         self.broken = False     # it is gone
 
