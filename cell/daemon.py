@@ -286,10 +286,15 @@ class CellDaemon:
         asyncio.get_running_loop().call_later(_HEAD_START_S, self._hand_over_now, job.job_id)
 
     def _hand_over_now(self, job_id: str) -> None:
-        journal = self._journals.get(job_id)
-        if journal is not None:  # ended meanwhile: it is among the ended ones
-            journal.hand_over()
+        self._hand_over_journal(job_id)
         self._catch_up()
+
+    def _hand_over_journal(self, job_id: str) -> None:
+        """The job's recording messages, its recording's opening first, to the recorder; not those
+        of an ended job, which wait for a quiet moment (``_catch_up``)."""
+        journal = self._journals.get(job_id)
+        if journal is not None:
+            journal.hand_over()
 
     def _catch_up(self) -> None:
         """The store's deferred writes, and the recordings of ended jobs (see ``cell.journal``), to
@@ -298,11 +303,6 @@ class CellDaemon:
         for journal in self._ended_journals:
             journal.hand_over()
         self._ended_journals.clear()
-
-    def _open_recording(self, job_id: str) -> None:
-        journal = self._journals.get(job_id)
-        if journal is not None:  # not ended: an ended job's recording waits for a quiet moment
-            journal.hand_over()
 
     def note(self, job: Job, message: str) -> None:
         log.warning("job %s: %s", job.job_id, message)
@@ -407,7 +407,7 @@ class CellDaemon:
         self._journals[job.job_id] = journal
         # The recording opens at the job's first slow wait (cell.journal); a job whose first move is
         # a real robot's, seconds long, has it opened meanwhile, so that a daemon killed then leaves one.
-        asyncio.get_running_loop().call_later(_QUIET_S, self._open_recording, job.job_id)
+        asyncio.get_running_loop().call_later(_QUIET_S, self._hand_over_journal, job.job_id)
         if resumed:  # the recording starts again: the pictures first
             for view, picture in enumerate(job.captures):
                 journal.record("log_view", view, picture.jpeg, self.config.camera.K, picture.T_base_cam,

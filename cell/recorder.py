@@ -72,9 +72,8 @@ class Recorder:
         self._per_process = recordings_per_process
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._feeder = threading.Thread(target=self._feed, name="recorder-feeder", daemon=True)
-        self._current: _Child | None = None
-        self._children: list[_Child] = []   # the current one, and those that end once their recordings are closed
-        self._child_of: dict[str, _Child] = {}  # the job's recording is in this child
+        self._current: _Child | None = None     # where new recordings go
+        self._child_of: dict[str, _Child] = {}  # the open recordings, by job: the child that has each
         self._processes: list[multiprocessing.process.BaseProcess] = []  # every one not known to have ended
 
     def start(self) -> None:
@@ -91,9 +90,7 @@ class Recorder:
         process.start()
         reader.close()
         self._processes = [p for p in self._processes if p.is_alive()] + [process]
-        child = _Child(writer)
-        self._children.append(child)
-        return child
+        return _Child(writer)
 
     def open(self, job_id: str, path: Path) -> None:
         self._outbox.put(("open", job_id, 0.0, str(path)))
@@ -138,7 +135,10 @@ class Recorder:
                     if child is not self._current and child not in self._child_of.values():
                         self._end(child)  # its last recording is closed
         finally:
-            for child in list(self._children):
+            ending = set(self._child_of.values())
+            if self._current is not None:
+                ending.add(self._current)
+            for child in ending:
                 self._end(child)
 
     def _child_for_a_new_recording(self) -> _Child:
@@ -155,7 +155,6 @@ class Recorder:
         """Tell a child to close its recordings and end (:meth:`stop` still waits for it)."""
         child.send(None)
         child.writer.close()
-        self._children.remove(child)
 
 
 class _Child:
