@@ -132,8 +132,7 @@ class Recorder:
                     child.made += 1
                 elif kind == "close":
                     del self._child_of[job_id]
-                    if child is not self._current and child not in self._child_of.values():
-                        self._end(child)  # its last recording is closed
+                    self._end_if_done(child)
         finally:
             ending = set(self._child_of.values())
             if self._current is not None:
@@ -147,9 +146,13 @@ class Recorder:
         if current.made < self._per_process or current.broken:  # a dead one is not replaced: see the module's text
             return current
         successor = self._current = self._start_child()
-        if current not in self._child_of.values():
-            self._end(current)  # none of its recordings is open
+        self._end_if_done(current)
         return successor
+
+    def _end_if_done(self, child: _Child) -> None:
+        """A child that takes no new recordings ends once none of its recordings is open."""
+        if child is not self._current and child not in self._child_of.values():
+            self._end(child)
 
     def _end(self, child: _Child) -> None:
         """Tell a child to close its recordings and end (:meth:`stop` still waits for it)."""
