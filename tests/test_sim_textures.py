@@ -279,3 +279,26 @@ def test_backgrounds_are_written_and_named(tmp_path: Path):
     far = cv2.erode((~truth).astype(np.uint8), np.ones((61, 61))) > 0
     assert np.abs(grey(view) - grey(background))[far].mean() < 3  # the same table, other noise
     assert np.abs(grey(view) - grey(background))[truth].mean() > 20  # no object in the background
+
+
+def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace(monkeypatch):
+    from wire.config import SimConfig
+    from workers.sim import scene
+    from workers.sim.camera import SceneCamera
+
+    monkeypatch.setattr(scene, "PRINTED_CELL_SCENE", True)
+    objects = scene.scene_from_config(SimConfig())
+    assert isinstance(objects[0], PrintedObject) and objects[0].look.name == "sugar-box"
+    table, light = scene.surroundings(objects, 0)
+    assert table.kind == "oak" and light is not None
+    camera = SceneCamera(objects, K=K, image_size=SIZE)
+    T = look_at([0.35, -0.2, 0.35], scene.target_from_config(SimConfig()))
+    decode = lambda data: cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR).astype(float)  # noqa: E731
+    with_object, empty = decode(camera.jpeg(T)), decode(camera.jpeg(T, empty=True))
+    _, truth = render(objects, T, K, image_size=SIZE, table=table, light=light)
+    layers = render_layers(objects, T, K, image_size=SIZE, table=table, light=light)
+    near = cv2.dilate(((layers.coverage > 0) | (layers.shadow > 0)).astype(np.uint8), np.ones((9, 9))) > 0
+    changed = np.abs(with_object - empty).mean(axis=2) > 25
+    assert changed[truth > 0].mean() > 0.5 and changed[~near].mean() < 0.001
+    camera.object_present = False
+    assert np.abs(decode(camera.jpeg(T)) - empty).mean(axis=2)[truth > 0].mean() < 5
