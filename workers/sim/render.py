@@ -45,6 +45,7 @@ _NEAR = 1e-3  # metres; triangles closer to the camera are dropped
 _CHUNK = 2_000_000  # candidate samples per rasterisation pass
 _SHADOW_TEXEL = 0.0005  # metres: the shadow map's resolution
 _SHADOW_MAX_TEXELS = 2048  # along each side; a larger scene gets coarser texels
+_SOFT_REACH = 30  # texels a soft shadow lookup reaches: blocker search (12) + widest penumbra (16) + bilinear
 
 
 @dataclass(frozen=True)
@@ -53,13 +54,14 @@ class Light:
     the ``ambient`` light every surface gets, and its angular radius (the soft shadow edge).
 
     A surface turned by angle ``a`` from the lamp, not in shadow, receives
-    ``ambient + strength * cos(a)``; in shadow, ``ambient``.
+    ``ambient + strength * cos(a) * colour``; in shadow, ``ambient``.
     """
 
     direction: tuple[float, float, float] = (0.35, -0.45, 1.0)
     strength: float = 0.7
     ambient: float = 0.3
     angular_radius_deg: float = 1.5
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0)  # BGR tint of the lamp (the ambient light is white)
 
     def __post_init__(self) -> None:
         d = np.asarray(self.direction, dtype=np.float64).reshape(3)
@@ -71,11 +73,11 @@ class Light:
 
     @classmethod
     def from_angles(cls, azimuth_deg: float, elevation_deg: float, strength: float = 0.7,
-                    ambient: float = 0.3) -> Light:
+                    ambient: float = 0.3, colour: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Light:
         """A lamp at ``azimuth_deg`` (from +x towards +y) and ``elevation_deg`` above the table."""
         az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
         return cls((float(np.cos(el) * np.cos(az)), float(np.cos(el) * np.sin(az)), float(np.sin(el))),
-                   strength, ambient)
+                   strength, ambient, colour=colour)
 
     @property
     def L(self) -> NDArray[np.float64]:
@@ -340,7 +342,8 @@ class _ShadowMap:
     """What the light sees: the nearness to the light (``p . L``) of the first surface along each
     light ray, on a grid across the light's direction, drawn with the renderer's own rasteriser."""
 
-    def __init__(self, verts: NDArray[np.float64], faces: NDArray[np.int32], light: Light) -> None:
+    def __init__(self, verts: NDArray[np.float64], faces: NDArray[np.int32], light: Light,
+                 texel: float = _SHADOW_TEXEL) -> None:
         L = light.L
         e1 = np.cross(L, [0.0, 0.0, 1.0] if abs(L[2]) < 0.9 else [1.0, 0.0, 0.0])
         e1 /= np.linalg.norm(e1)
@@ -352,7 +355,7 @@ class _ShadowMap:
             return
         s = verts @ self.basis.T
         extent = float((s.max(0) - s.min(0)).max())
-        self.texel = max(_SHADOW_TEXEL, extent / (_SHADOW_MAX_TEXELS - 16))
+        self.texel = max(texel, extent / (_SHADOW_MAX_TEXELS - 16))
         self.origin = s.min(0) - 8 * self.texel
         cols, rows = (np.ceil((s.max(0) - self.origin) / self.texel) + 8).astype(int)
         near = verts @ L
@@ -366,6 +369,10 @@ class _ShadowMap:
         depth = np.full(rows * cols, -np.inf)
         depth[hit] = (1 - l1[hit] - l2[hit]) * near[f[:, 0]] + l1[hit] * near[f[:, 1]] + l2[hit] * near[f[:, 2]]
         self.depth = depth.reshape(rows, cols)
+        # The nearest blocker anywhere a soft lookup reaches (the blocker search, the widest penumbra):
+        # a point farther from the light than that is lit, and is not looked up tap by tap.
+        finite = np.where(np.isfinite(self.depth), self.depth, -1e9).astype(np.float32)
+        self.reach = cv2.dilate(finite, np.ones((2 * _SOFT_REACH + 1, 2 * _SOFT_REACH + 1), np.uint8))
 
     def _lookup(self, c: NDArray[np.float64], near: NDArray[np.float64], bias: NDArray[np.float64],
                 ) -> NDArray[np.float64]:
@@ -383,11 +390,13 @@ class _ShadowMap:
             blocked += wgt * (d > near + bias)
         return blocked
 
-    def shadow(self, points: NDArray[np.float64], bias: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    def shadow(self, points: NDArray[np.float64], bias: NDArray[np.float64] | float,
+               soft: bool = True) -> NDArray[np.float64]:
         """Share of the lamp hidden from each world point (N, 3), in [0, 1] (0: fully lit).
 
-        ``bias`` (metres of nearness) keeps a surface from shadowing itself. The edge is soft: the
-        lamp's angular radius times the distance to the blocker, sampled on a ring of eight taps.
+        ``bias`` (metres of nearness) keeps a surface from shadowing itself. With ``soft`` the edge
+        is as soft as the lamp's angular radius times the distance to the blocker makes it, sampled on
+        a ring of eight taps; without, one bilinear lookup.
         """
         out = np.zeros(len(points))
         if self.empty or len(points) == 0:
@@ -398,7 +407,13 @@ class _ShadowMap:
         bias = np.broadcast_to(np.asarray(bias, dtype=np.float64), near.shape)
         inside = (c[:, 0] > -24) & (c[:, 0] < cols + 24) & (c[:, 1] > -24) & (c[:, 1] < rows + 24)
         idx = np.flatnonzero(inside)
+        u = np.clip(np.rint(c[idx, 0]).astype(np.int64), 0, cols - 1)
+        v = np.clip(np.rint(c[idx, 1]).astype(np.int64), 0, rows - 1)
+        idx = idx[self.reach[v, u] > near[idx] + bias[idx]]  # the others are surely lit
         c, near, bias = c[idx], near[idx], bias[idx]
+        if not soft:
+            out[idx] = self._lookup(c, near, bias)
+            return out
         ring = [(np.cos(a), np.sin(a)) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
         # The nearest blocker round the point sets how wide the penumbra is.
         blocker = np.full(len(c), -np.inf)
@@ -415,13 +430,33 @@ class _ShadowMap:
         return out
 
 
+def _contact_occlusion(verts: NDArray[np.float64], faces: NDArray[np.int32], points: NDArray[np.float64],
+                       reach: float = 0.006) -> NDArray[np.float32]:
+    """Share of the ambient light reaching table points (N, 3) beside the objects: the objects hide part
+    of the sky from the table right round their feet, a dark rim fading within about ``reach`` metres."""
+    out = np.ones(len(points), dtype=np.float32)
+    if len(faces) == 0 or len(points) == 0:
+        return out
+    above = _ShadowMap(verts, faces, Light((0.0, 0.0, 1.0), angular_radius_deg=0.0), texel=0.001)
+    low = above.depth > -np.inf  # the objects' footprint, seen from above
+    # Distances (texels) from every texel to the nearest one under an object, from outside.
+    distance = cv2.distanceTransform((~low).astype(np.uint8), cv2.DIST_L2, 5)
+    c = np.rint((points @ above.basis.T - above.origin) / above.texel).astype(np.int64)
+    rows, cols = distance.shape
+    inside = (c[:, 0] >= 0) & (c[:, 0] < cols) & (c[:, 1] >= 0) & (c[:, 1] < rows)
+    d = distance[c[inside, 1], c[inside, 0]] * above.texel
+    out[inside] = np.where(d < 6 * reach, 1.0 - 0.6 * np.exp(-d / reach), 1.0)
+    return out
+
+
 @dataclass(frozen=True)
 class Layers:
     """What :func:`render_layers` draws, before the optics and the sensor.
 
     ``image`` (H, W, 3) float32 BGR, 0-255 scale; ``coverage`` (H, W) float32, the share of each
-    pixel the objects cover (area-true to 1/16); ``shadow`` (H, W) float32, the share of the lamp
-    hidden from the table point a pixel sees (0 without a light, and off the table); ``albedo``
+    pixel the objects cover (area-true to 1/16); ``shadow`` (H, W) float32, the share of the light
+    the objects take from the table point a pixel sees: their cast shadow, and the dimmer ambient
+    light round their feet (0 without a light, and off the table); ``albedo``
     (H, W, 3) float32 in [0, 1], the mean albedo of the objects' part of each pixel (0 where none).
     """
 
@@ -457,8 +492,18 @@ def render_layers(
         points = np.column_stack([table_xy.astype(np.float64), np.zeros(len(table_xy))])
         grazing = np.sqrt(max(1 - L[2] ** 2, 0.0)) / L[2]
         hidden = shadow_map.shadow(points, 1.5 * _SHADOW_TEXEL * (1 + grazing))
-        table_shadow[on_table] = hidden
-        background = background * (light.ambient + light.strength * L[2] * (1 - table_shadow))[:, None]
+        tint = np.asarray(light.colour, dtype=np.float32)
+        occlusion = np.ones(h * w, dtype=np.float32)
+        occlusion[on_table] = _contact_occlusion(verts, faces, points)
+        direct = light.strength * L[2] * (1 - hidden)
+        received = light.ambient * occlusion[on_table] + direct * float(tint.mean())
+        # The shadow layer: the share of the light the objects take from the table point.
+        share = 1 - received / (light.ambient + light.strength * L[2] * float(tint.mean()))
+        table_shadow[on_table] = np.where((hidden > 0) | (occlusion[on_table] < 1), share, 0.0)
+        cast = np.zeros(h * w, dtype=np.float32)
+        cast[on_table] = hidden
+        background = background * (light.ambient * occlusion[:, None]
+                                   + (light.strength * L[2] * (1 - cast))[:, None] * tint)
 
     tv = verts[faces]
     face_n = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
@@ -505,14 +550,17 @@ def render_layers(
             lit = cos > 0
             hidden = np.ones(len(p))
             sin = np.sqrt(np.clip(1 - cos[lit] ** 2, 0, 1))
-            hidden[lit] = shadow_map.shadow(p[lit], _SHADOW_TEXEL * (2 + 3 * sin / np.maximum(cos[lit], 0.2)))
+            # Hard-edged on the objects (their own shadows are rare and small): one lookup a sample.
+            hidden[lit] = shadow_map.shadow(p[lit], _SHADOW_TEXEL * (2 + 3 * sin / np.maximum(cos[lit], 0.2)),
+                                            soft=False)
             direct = light.strength * np.clip(cos, 0, 1) * (1 - hidden)
             view = t - p
             view /= np.linalg.norm(view, axis=1, keepdims=True)
             half = view + L
             half /= np.linalg.norm(half, axis=1, keepdims=True)
             specular = gloss * direct * np.clip(np.einsum("ij,ij->i", n, half), 0, 1) ** 40
-            colour = 255.0 * (albedo * (light.ambient + direct)[:, None] + specular[:, None])
+            tint = np.asarray(light.colour)
+            colour = 255.0 * (albedo * (light.ambient + direct[:, None] * tint) + specular[:, None] * tint)
         # Box-filter the samples down to pixels: sums per pixel by bincount.
         obj_sum = np.column_stack([np.bincount(pix, colour[:, k], h * w) for k in range(3)]) / _SS**2
         count = np.bincount(pix, minlength=h * w)
@@ -586,7 +634,11 @@ def render(
     yy, xx = np.mgrid[0:h, 0:w]
     r2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
     image *= (1.0 - 0.15 * r2).astype(np.float32)[..., None]
-    image += noise_sigma * rng.standard_normal(image.shape, dtype=np.float32)
+    noise = noise_sigma * rng.standard_normal(image.shape, dtype=np.float32)
+    if light is not None:
+        # A real sensor's noise grows with the light it counts (shot noise): as given at mid-grey.
+        noise *= np.sqrt(0.3 + 0.7 * np.clip(image, 0, 255) / 128)
+    image += noise
     bgr = np.clip(np.rint(image), 0, 255).astype(np.uint8)
     mask = np.where(layers.coverage >= 0.5, 255, 0).astype(np.uint8)
     return bgr, mask

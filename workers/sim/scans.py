@@ -447,7 +447,7 @@ def printed_set(seed: int = 0) -> list[ScanSpec]:
     an object the colour of its table, a white object on white laminate, a dark one on a
     dark mat, and randomly printed ones) on oak, a rubber mat, white laminate, a cutting
     mat and the classic wood and fabric. The lamp's direction (azimuth any, 35-70 degrees
-    high) and strength, the lens blur, sensor noise, JPEG quality, sizes, yaws and places
+    high), strength and warmth, the lens blur, sensor noise, JPEG quality, sizes, yaws and places
     (within 5 cm of (0.6, 0)) follow ``seed``. The bundles name no segmentation (the
     default finds the object) and carry their true masks as ``truth_mask{i}.png``; names
     are ``{table}-{look}-{shape}``, and ``table_kind``, ``object_kind`` say which.
@@ -468,7 +468,9 @@ def printed_set(seed: int = 0) -> list[ScanSpec]:
         elevation = float(rng.uniform(35, 70))
         # The lit table at 85-100 % of its albedo, as a camera's exposure would put it.
         strength = (float(rng.uniform(0.85, 1.0)) - ambient) / np.sin(np.radians(elevation))
-        light = Light.from_angles(float(rng.uniform(0, 360)), elevation, strength, ambient)
+        warmth = float(rng.uniform(0.0, 0.12))  # from a daylight-white lamp to a warm one
+        light = Light.from_angles(float(rng.uniform(0, 360)), elevation, strength, ambient,
+                                  colour=(1.0 - warmth, 1.0 - warmth / 3, 1.0))
         spec = make_spec(f"{kind}-{look_name}-{shape}", PrintedObject(obj, look), scene_seed, n_views,
                          elevation_deg=(30.0, 60.0), jpeg_quality=int(rng.integers(80, 96)),
                          noise_sigma=float(rng.uniform(1.5, 3.0)))

@@ -110,21 +110,31 @@ def table_pattern(kind: str, base_bgr: ArrayLike, xy: F32, footprint: F32, grain
     fade = 1.0 / (1.0 + (footprint / np.float32(0.0015)) ** 2)
     ones = np.ones((len(xy), 1), dtype=np.float32)
     if kind == "oak":
-        # Boards 14 cm wide along the grain, each its own tone; growth rings warped by noise;
-        # fine fibres; a dark seam between boards.
+        # Boards 14 cm wide along the grain, each its own tone, sawn from a log: the growth rings are
+        # cylinders round the log's pith, so a board shows them as lines that widen into arches where
+        # the cut passes near the pith (cut depth wandering along the board). Latewood bands are darker
+        # and redder; pores are short dark streaks along the grain; a dark seam between boards.
         width = np.float32(0.14)
         board = np.floor(across / width)
         in_board = across - board * width
         ib = board.astype(np.int64)
-        tone = 0.9 + 0.18 * _hash(ib, ib * 0 + 7, seed)
-        warp = 0.012 * fbm(along / np.float32(0.25), across / np.float32(0.05) + board * 13, seed, 3)
-        rings = np.sin((in_board + warp + 0.03 * _hash(ib, ib * 0 + 3, seed)) * np.float32(2 * np.pi / 0.007))
-        ring = (0.5 + 0.5 * rings) ** 3
-        fibres = value_noise(along / np.float32(0.03), across / np.float32(0.0007), seed + 5) - 0.5
+        zero = ib * 0
+        pith = width * (1.6 * _hash(ib, zero + 1, seed) - 0.3)  # across the board, may lie outside it
+        depth = (0.008 + 0.03 * _hash(ib, zero + 2, seed) + 0.012 * fbm(along / np.float32(0.5), board * 7.3, seed, 2)
+                 + 0.004 * np.sin(along / np.float32(0.13) + 6.0 * _hash(ib, zero + 4, seed)))
+        radius = np.sqrt((in_board - pith) ** 2 + depth**2)
+        spacing = np.float32(0.0035) + np.float32(0.002) * _hash(ib, zero + 5, seed)
+        phase = radius / spacing + 0.6 * fbm(radius / np.float32(0.012), board * 3.1, seed + 9, 2)
+        f = phase % 1.0
+        late = np.clip((f - 0.55) / 0.2, 0, 1) * np.clip((1.0 - f) / 0.12, 0, 1)
+        pores = np.clip((value_noise(along / np.float32(0.004), across / np.float32(0.0005), seed + 5) - 0.75) * 4,
+                        0, 1)
+        tone = 0.9 + 0.16 * _hash(ib, zero + 7, seed) + 0.05 * fbm(along / np.float32(0.3), across / np.float32(0.1),
+                                                                    seed + 11, 2)
         seam = _line_coverage(across, float(width), 0.0012, footprint)
-        shade = tone * (1.0 - 0.16 * ring - 0.08 * fade * fibres) * (1.0 - 0.55 * seam)
-        warm = np.array([[0.92, 0.97, 1.0]], dtype=np.float32)  # rings a little redder
-        colour = base * (ones - (1 - warm) * ring[:, None])
+        shade = tone * (1.0 - 0.2 * late - 0.18 * fade * pores) * (1.0 - 0.55 * seam)
+        warm = np.array([[0.85, 0.94, 1.0]], dtype=np.float32)  # latewood a little redder
+        colour = base * (ones - (1 - warm) * late[:, None])
         return colour * shade[:, None]
     if kind == "rubber-mat":
         # A dark mat with a fine speckle of 1.5 mm grains and a soft mottle.
