@@ -18,7 +18,8 @@ from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .quality import radial_residual, silhouette_iou
-from .segment import RED_HSV, Segmentation, mask_with_outline, segment_with_outline
+from .auto_segment import auto_silhouettes
+from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric, start_superquadrics
@@ -34,12 +35,15 @@ class View:
 
     ``image`` is a BGR uint8 array or encoded bytes (JPEG, PNG); ``mask`` an
     8-bit array or encoded bytes, nonzero = object. With a mask the image is
-    not needed (and not decoded).
+    not needed (and not decoded). ``background``, a BGR array or encoded
+    bytes of the image's size: the empty workspace from the same pose, which
+    the ``auto`` segmentation uses when it is given.
     """
 
     camera: Camera
     image: np.ndarray | bytes | None = None
     mask: np.ndarray | bytes | None = None
+    background: np.ndarray | bytes | None = None
 
 
 @dataclass(frozen=True)
@@ -162,7 +166,18 @@ def _decoded(index: int, view: View) -> tuple[np.ndarray, bool]:
     return data, is_mask
 
 
-def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=None,
+def _background(index: int, view: View) -> np.ndarray | None:
+    """The view's background picture as an array, or None."""
+    data = view.background
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        try:
+            return decode_image(bytes(data), view=index)
+        except ImageError as exc:
+            raise ImageError(f"the background: {str(exc).removeprefix(f'view {index}: ')}", view=index) from None
+    return data
+
+
+def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                 options: Options = Options()) -> Reconstruction:
     """Reconstruct a superquadric from two or more calibrated views.
 
@@ -170,7 +185,8 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     ----------
     views : sequence of View
     segmentation : Segmentation
-        How to find the object in views that come without a mask.
+        How to find the object in views that come without a mask (default:
+        ``auto``, all such views together).
     support_plane : (4,) array_like, optional
         ``[nx, ny, nz, d]``: the object stands where ``n . x + d >= 0``.
     options : Options
@@ -198,11 +214,26 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         last = now
 
     silhouettes, boxes, edges = [], [], []
+    decoded = [_decoded(index, view) for index, view in enumerate(views)]
+    found: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    if segmentation.method == "auto":
+        # auto sees all the views at once: the plane's parallax and the hull need every view.
+        pictured = [index for index, (_, is_mask) in enumerate(decoded) if not is_mask]
+        backgrounds = [_background(index, views[index]) for index in pictured]
+        lap("decode")
+        if pictured:
+            found = dict(zip(pictured, auto_silhouettes(
+                [decoded[index][0] for index in pictured], [views[index].camera for index in pictured],
+                support_plane=support_plane, backgrounds=backgrounds,
+                aim_cameras=[view.camera for view in views])))
+            lap("segment")
     for index, view in enumerate(views):
-        data, is_mask = _decoded(index, view)
+        data, is_mask = decoded[index]
         lap("decode")
         if is_mask:
             silhouette, outline = mask_with_outline(data, view=index)
+        elif index in found:
+            silhouette, outline = found[index]
         else:
             silhouette, outline = segment_with_outline(data, segmentation, view=index)
         if view.camera.dist is None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import CoreError, ImageError, SilhouetteError
 
-__all__ = ["Segmentation", "RED_HSV", "segment", "segment_with_outline", "clean_silhouette",
+__all__ = ["Segmentation", "AUTO", "RED_HSV", "segment", "segment_with_outline", "clean_silhouette",
            "silhouette_from_mask", "mask_with_outline"]
 
 _OPEN_KERNEL = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))  # keeps square corners
@@ -32,8 +32,13 @@ class Segmentation:
 
     Parameters
     ----------
-    method : {"hsv", "threshold"}
-        ``hsv``: keep pixels whose HSV values lie in [lower, upper]; hue is
+    method : {"auto", "hsv", "threshold"}
+        ``auto`` (the default): whatever stands on the support plane where the
+        views converge, of any colour or print, its shadow left out; it works on
+        all the views together (:func:`core_cy.auto_segment.auto_silhouettes`),
+        and uses a view's ``background`` (a picture of the empty workspace from
+        the same pose) when there is one. ``hsv`` and ``threshold`` work on one
+        image at a time and take no background. ``hsv``: keep pixels whose HSV values lie in [lower, upper]; hue is
         0-179 as in OpenCV, and a hue range with lower > upper wraps around 0
         (red). ``threshold``: keep pixels whose grey value is above ``value``
         (below it with ``invert``, for a dark object on a bright background).
@@ -53,15 +58,15 @@ class Segmentation:
         If the method is unknown or a bound is out of its range.
     """
 
-    method: Literal["hsv", "threshold"] = "hsv"
+    method: Literal["auto", "hsv", "threshold"] = "auto"
     lower: tuple[int, int, int] = (170, 90, 20)
     upper: tuple[int, int, int] = (10, 255, 255)
     value: int = 128
     invert: bool = False
 
     def __post_init__(self) -> None:
-        if self.method not in ("hsv", "threshold"):
-            raise CoreError(f"segmentation method must be 'hsv' or 'threshold', got {self.method!r}")
+        if self.method not in ("auto", "hsv", "threshold"):
+            raise CoreError(f"segmentation method must be 'auto', 'hsv' or 'threshold', got {self.method!r}")
         limits = (179, 255, 255)
         for name in ("lower", "upper"):
             bound = tuple(getattr(self, name))
@@ -75,7 +80,8 @@ class Segmentation:
             raise CoreError(f"segmentation value must be in 0-255, got {self.value}")
 
 
-RED_HSV = Segmentation()
+AUTO = Segmentation()
+RED_HSV = Segmentation("hsv")
 
 
 def _matches(image: np.ndarray, segmentation: Segmentation) -> np.ndarray:
@@ -116,6 +122,9 @@ def segment_with_outline(image: np.ndarray, segmentation: Segmentation = RED_HSV
     """
     if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
         raise ImageError("expected a (H, W, 3) uint8 BGR image", view=view)
+    if segmentation.method == "auto":
+        raise CoreError("the auto segmentation works on all the views together: "
+                        "use core_cy.auto_segment.auto_silhouettes", view=view)
     what = _describe(segmentation)
     coarse = _matches(np.ascontiguousarray(image[_COARSE // 2::_COARSE, _COARSE // 2::_COARSE]), segmentation)
     if cv2.countNonZero(coarse):

@@ -33,6 +33,9 @@ def register(commands: Commands) -> None:
     parser.add_argument("--gripper", metavar="GRIPPER.json",
                         help="the gripper's dimensions for --grasps (default: the built-in gripper)")
     parser.add_argument("--max-grasps", type=_positive, metavar="N", help="at most N grasps per bundle (default 10)")
+    parser.add_argument("--masks-out", metavar="DIR",
+                        help="write the silhouettes each reconstruction used as DIR/<bundle name>/mask<i>.png "
+                             "(255 = object), one per view in scan.json's order")
 
 
 def _positive(text: str) -> int:
@@ -74,6 +77,18 @@ def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
     return {**line, "grasps": grasps_to_json(grasps)}
 
 
+def _write_masks(directory: str, scan: str, silhouettes) -> None:
+    """DESIGN.md §3's ``--masks-out``: the silhouettes the fit used, ``mask<i>.png`` in the bundle's folder."""
+    import cv2
+    from pathlib import Path
+
+    out = Path(directory) / Path(scan).resolve().name
+    out.mkdir(parents=True, exist_ok=True)
+    for index, silhouette in enumerate(silhouettes):
+        if not cv2.imwrite(str(out / f"mask{index}.png"), silhouette):
+            raise OSError(f"cannot write {out / f'mask{index}.png'}")
+
+
 def _reconstruct(args: argparse.Namespace) -> int:
     from core_cy.errors import CoreError
     from core_cy.reconstruct import Options, reconstruct
@@ -99,9 +114,11 @@ def _reconstruct(args: argparse.Namespace) -> int:
             result = reconstruct(bundle.views, segmentation=bundle.segmentation,
                                  support_plane=bundle.support_plane, options=options)
             line = {"scan": scan, **result.to_dict(points=args.points)}
+            if args.masks_out is not None:
+                _write_masks(args.masks_out, scan, result.silhouettes)
             if gripper is not None:
                 line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
-        except (BundleError, CoreError) as exc:
+        except (BundleError, CoreError, OSError) as exc:
             failures += 1
             line = {"scan": scan, "error": str(exc)}
             print(f"robocell reconstruct: {scan}: {exc}", file=sys.stderr)

@@ -22,7 +22,7 @@ def test_a_valid_bundle_loads_with_encoded_images(bundle):
     assert len(loaded.views) == 3
     assert loaded.views[0].image[:2] == b"\xff\xd8"  # still JPEG: decoding is the core's, timed
     assert loaded.support_plane == [0, 0, 1, 0]
-    assert loaded.segmentation == Segmentation()  # default: red, hue wrapping around 0
+    assert loaded.segmentation == Segmentation("auto")  # default: auto, any colour
 
 
 def test_the_mask_wins_over_the_image(tmp_path):

@@ -10,6 +10,7 @@ from workers.sim.scans import BROAD_FAMILIES, default_K, plan_views, write_scan
 from core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
 from core_cy.reconstruct import Options, View, reconstruct
 from core_cy.scoring import volumetric_iou
+from core_cy.segment import RED_HSV
 from core_cy.superquadric import Superquadric
 
 from tests.bundles import SPHERE_CENTRE, SPHERE_RADIUS, write_sphere_bundle
@@ -128,7 +129,7 @@ def test_empty_silhouette_names_the_view(sphere_bundle):
     grey = cv2.imencode(".jpg", np.full((480, 640, 3), 128, np.uint8))[1].tobytes()
     views[2] = View(views[2].camera, image=grey)
     with pytest.raises(SilhouetteError, match="^view 2: the silhouette is empty"):
-        reconstruct(views)
+        reconstruct(views, segmentation=RED_HSV)
 
 
 def test_support_plane_above_the_object(sphere_bundle):

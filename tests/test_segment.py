@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from core_cy.errors import CoreError, ImageError, SilhouetteError
-from core_cy.segment import Segmentation, segment, segment_with_outline, silhouette_from_mask
+from core_cy.segment import RED_HSV, Segmentation, segment, segment_with_outline, silhouette_from_mask
 
 
 def _hsv_image(patches, shape=(120, 160)):
@@ -99,7 +99,7 @@ def test_looking_in_a_box_first_gives_the_same_silhouette():
     image = _hsv_image([((120, 70, 6, 5), (2, 200, 200))])  # 6 x 5 px
     cut = _hsv_image([((0, 30, 40, 30), (2, 200, 200)), ((140, 100, 3, 3), (2, 200, 200))])
     for picture in (image, cut):
-        whole = _cleaned(_opened(_matches(picture, Segmentation())), picture.shape, (0, 0, 160, 120))
+        whole = _cleaned(_opened(_matches(picture, RED_HSV)), picture.shape, (0, 0, 160, 120))
         silhouette, outline = segment_with_outline(picture)
         np.testing.assert_array_equal(silhouette, whole[0])
         np.testing.assert_array_equal(outline, whole[1])

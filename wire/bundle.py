@@ -27,7 +27,7 @@ from core_cy.camera import Camera
 from core_cy.errors import CoreError
 from core_cy.images import MAX_IMAGE_PIXELS, check_calibrated_size, checked_size
 from core_cy.reconstruct import View
-from core_cy.segment import RED_HSV, Segmentation
+from core_cy.segment import AUTO, Segmentation
 
 from .errors import BundleError
 from .messages import field_errors
@@ -55,6 +55,10 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+class AutoSegmentation(_Strict):
+    method: Literal["auto"]
+
+
 class HsvSegmentation(_Strict):
     method: Literal["hsv"]
     lower: HSV
@@ -73,6 +77,8 @@ class ViewSpec(_Strict):
     K: Annotated[list[Row3], Field(min_length=3, max_length=3)]
     dist: list[float] | None = None
     T_world_cam: Annotated[list[Row4], Field(min_length=4, max_length=4)]
+    #: The empty workspace from the same pose (DESIGN.md §3), for the segmentation.
+    background: str | None = None
 
     @model_validator(mode="after")
     def _needs_a_picture(self) -> "ViewSpec":
@@ -81,12 +87,14 @@ class ViewSpec(_Strict):
         return self
 
 
-SegmentationSpec = Annotated[Union[HsvSegmentation, ThresholdSegmentation], Field(discriminator="method")]
+SegmentationSpec = Annotated[Union[AutoSegmentation, HsvSegmentation, ThresholdSegmentation],
+                             Field(discriminator="method")]
 _SEGMENTATION_SPEC = TypeAdapter(SegmentationSpec | None)
 
 
-def core_segmentation(spec: dict | HsvSegmentation | ThresholdSegmentation | None) -> Segmentation:
-    """The core's Segmentation for a scan.json ``segmentation`` (None: red, the default).
+def core_segmentation(spec: dict | AutoSegmentation | HsvSegmentation | ThresholdSegmentation | None
+                      ) -> Segmentation:
+    """The core's Segmentation for a scan.json ``segmentation`` (None: ``auto``, the default).
 
     Raises
     ------
@@ -100,8 +108,8 @@ def core_segmentation(spec: dict | HsvSegmentation | ThresholdSegmentation | Non
             spec = _SEGMENTATION_SPEC.validate_python(spec)
         except ValidationError as exc:
             raise ValueError(f"segmentation: {field_errors(exc, whole='segmentation')}") from None
-    if spec is None:
-        return RED_HSV
+    if spec is None or isinstance(spec, AutoSegmentation):
+        return AUTO
     if isinstance(spec, HsvSegmentation):
         (h0, s0, v0), (h1, s1, v1) = spec.lower, spec.upper
         return Segmentation("hsv", lower=(h0, s0, v0), upper=(h1, s1, v1))
@@ -246,7 +254,16 @@ def load_bundle(directory: str | Path) -> Bundle:
             views.append(View(camera, mask=budget.read_picture(root, view.mask, "mask", camera, index)))
         else:
             assert view.image is not None  # a view names a mask or an image (ViewSpec checks)
-            views.append(View(camera, image=budget.read_picture(root, view.image, "image", camera, index)))
+            image = budget.read_picture(root, view.image, "image", camera, index)
+            background = None
+            if view.background is not None:
+                background = budget.read_picture(root, view.background, "background", camera, index)
+                image_size, background_size = checked_size(image), checked_size(background)
+                if background_size != image_size:
+                    raise _fail(index, f"background file {view.background!r} is {background_size[0]}x"
+                                       f"{background_size[1]} pixels, but its image {view.image!r} is "
+                                       f"{image_size[0]}x{image_size[1]}")
+            views.append(View(camera, image=image, background=background))
     try:
         segmentation = core_segmentation(spec.segmentation)
     except CoreError as exc:

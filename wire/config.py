@@ -150,6 +150,16 @@ class ScanConfig(Section):
     #: The table surface's height in the robot base frame (the support plane z = height).
     table_height: float = 0.0
     plan: ViewPlan = ViewPlan()
+    #: How the reconstruction finds the object, as scan.json's ``segmentation``; None: ``auto``.
+    segmentation: dict | None = None
+
+    @field_validator("segmentation")
+    @classmethod
+    def _known_segmentation(cls, value: dict | None) -> dict | None:
+        from .bundle import core_segmentation
+
+        core_segmentation(value)  # a ValueError naming the field
+        return value
 
 
 class ReconstructConfig(Section):

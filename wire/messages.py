@@ -141,9 +141,16 @@ class ScanRequest(Message):
     plan: ViewPlan | None = None
     pick: PickRequest | None = None
     label: Annotated[str, Field(max_length=200)] = ""
+    #: How the reconstruction finds the object, as scan.json's ``segmentation``; None: the cell's
+    #: ``[scan]`` configuration, whose default is ``auto``.
+    segmentation: dict | None = None
 
     @model_validator(mode="after")
     def _one_kind_of_views(self) -> "ScanRequest":
+        if self.segmentation is not None:
+            from .bundle import core_segmentation
+
+            core_segmentation(self.segmentation)  # a ValueError naming the field
         if (self.flange_poses is None) == (self.target is None):
             raise ValueError("give exactly one of flange_poses and target")
         if self.plan is not None and self.target is None:

@@ -1,0 +1,519 @@
+"""``auto`` segmentation: find what stands on the support plane where the views converge (DESIGN.md §1.10).
+
+Nothing is known of the object's colour; what is known is geometry. The
+views were aimed at the object, so it lies near the point closest to all
+optical axes (the *aim*). The table is a plane, so the plane's homography
+maps one view's table onto another's exactly, shadow included, while what
+stands above the plane does not map (plane parallax): a pixel whose colour
+no other view confirms through the plane is above it. A picture of the empty
+workspace (``background``), where there is one, says the same directly; a
+shadow there is the table, darker, of the same chromaticity.
+
+Per view, at a coarse scale (about 160 pixels a side, where every cue is
+cheap): the cues give an evidence map; the region that stands out nearest
+the aim gives the seeds (sure object, sure table, and the uncertain rest) of
+a graph cut (OpenCV's GrabCut, initialised with that mask on a small region
+around the object), which draws the silhouette along the image's own edges
+with colour models of object and table learned from the seeds. The views
+then check each other: the hull carved from all other views, projected into
+a view, must contain that view's silhouette; what lies outside it (a
+shadow, a stretch of table) is table, and that view is cut again with it
+marked so. Last, the silhouette's edge is placed at full resolution: each
+pixel of a thin band along the coarse edge goes to the side, object or
+table, whose nearby colour it is closer to.
+
+Without a support plane the aim alone seeds the cut (the region around it
+is taken for the object, the image's border for the background), and the
+views' consistency does the rest; this serves a bright object on a dark
+ground, or a photograph whose background is not a plane.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+from .carve import check_support_plane
+from .errors import GeometryError, ImageError, SilhouetteError
+from .segment import mask_with_outline
+
+__all__ = ["auto_silhouettes", "aim_point"]
+
+#: The coarse images' longer side, px: the cues and the graph cut work there.
+COARSE_SIDE = 160
+#: A view in which nothing stands out over this share of the evidence's noise is empty.
+_NOTHING = "nothing stands on the table near the views' aim"
+_GC_ITERATIONS = 3
+#: The evidence's noise is taken to be at least this (a relative colour difference): JPEG and a
+#: pixel's worth of misregistration leave that much on a flat table.
+_NOISE_FLOOR = 0.03
+#: The score of a pixel whose table point no other view sees: above the threshold of standing out,
+#: below that of a sure seed.
+_HIDDEN = 3.0
+_HULL_GRID = 40
+
+
+def aim_point(cameras: Sequence[Camera]) -> np.ndarray:
+    """(3,) the point closest, in least squares, to all the cameras' optical axes.
+
+    Raises
+    ------
+    GeometryError
+        If the axes are (nearly) parallel: they do not converge anywhere.
+
+    Examples
+    --------
+    >>> from core_cy.camera import Camera
+    >>> def looking_at_origin(position):
+    ...     z = -np.asarray(position, float) / np.linalg.norm(position)
+    ...     x = np.cross([0.0, 0.0, 1.0], z); x /= np.linalg.norm(x)
+    ...     T = np.eye(4); T[:3, :3] = np.column_stack([x, np.cross(z, x), z]); T[:3, 3] = position
+    ...     return Camera(K=[[500, 0, 320], [0, 500, 240], [0, 0, 1]], T_world_cam=T)
+    >>> aim_point([looking_at_origin([1, 0, 1]), looking_at_origin([0, 1, 1])]).round(6).tolist()
+    [0.0, 0.0, 0.0]
+    """
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for camera in cameras:
+        axis = camera.T_world_cam[:3, 2]
+        P = np.eye(3) - np.outer(axis, axis)
+        A += P
+        b += P @ camera.center
+    eigenvalues = np.linalg.eigvalsh(A)
+    if eigenvalues[0] < 1e-6 * eigenvalues[-1]:
+        raise GeometryError("the views' optical axes are parallel: they converge nowhere, so the "
+                            "object cannot be found without a segmentation naming its colour or masks")
+    return np.linalg.solve(A, b)
+
+
+class _View:
+    """One view at the coarse scale: its image, camera matrices scaled, and what was found."""
+
+    def __init__(self, index: int, image: np.ndarray, camera: Camera, background: np.ndarray | None) -> None:
+        height, width = image.shape[:2]
+        self.index = index
+        self.image = image
+        self.camera = camera
+        self.scale = max(1.0, max(width, height) / COARSE_SIDE)
+        self.coarse_size = (max(8, round(width / self.scale)), max(8, round(height / self.scale)))
+        cw, ch = self.coarse_size
+        self.sx, self.sy = width / cw, height / ch
+        self.coarse = cv2.resize(image, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        self.background = None if background is None else cv2.resize(
+            background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        self.full_background = background
+
+    def to_coarse(self, uv: np.ndarray) -> np.ndarray:
+        """Full-resolution pixel coordinates (N, 2) to coarse ones (pixel centres on integers)."""
+        return np.column_stack([(uv[:, 0] + 0.5) / self.sx - 0.5, (uv[:, 1] + 0.5) / self.sy - 0.5])
+
+    def coarse_grid(self) -> np.ndarray:
+        """Full-resolution coordinates (N, 2) of every coarse pixel's centre, row by row."""
+        cw, ch = self.coarse_size
+        u, v = np.meshgrid((np.arange(cw) + 0.5) * self.sx - 0.5, (np.arange(ch) + 0.5) * self.sy - 0.5)
+        return np.column_stack([u.ravel(), v.ravel()])
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Full-resolution pixels (N, 2) of world points, through the lens (distortion applied), and depth."""
+        uv, depth = self.camera.project(points)
+        if self.camera.dist is not None:
+            R = self.camera.T_world_cam[:3, :3]
+            local = (points - self.camera.center) @ R
+            lens, _ = cv2.projectPoints(local.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.camera.K,
+                                        self.camera.dist)
+            uv = lens.reshape(-1, 2)
+        return uv, depth
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """World directions (N, 3) of the rays through full-resolution pixels of the lens's image."""
+        if self.camera.dist is not None:
+            ideal = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), self.camera.K, self.camera.dist,
+                                        P=self.camera.K).reshape(-1, 2)
+            uv = ideal
+        return self.camera.pixel_rays(uv)
+
+
+def _relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-pixel colour difference of two float BGR images, relative to their brightness: a change of
+    light over the image (vignetting, a gentle fall-off) changes it little, a change of colour much."""
+    return np.abs(a - b).sum(axis=2) / (0.5 * (a.sum(axis=2) + b.sum(axis=2)) + 30.0)
+
+
+def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
+                       standing: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+    """How little any other view, mapped through the support plane, agrees with each coarse pixel of
+    ``view``: the smallest difference over the others (NaN where no other view sees that table point).
+
+    ``standing``, per other view, what stands out in it (0/255, or None): where the plane point lies
+    behind the object in another view, that view sees the object, not the table, and says nothing."""
+    cw, ch = view.coarse_size
+    grid = view.coarse_grid()
+    rays = view.rays(grid)
+    normal, offset = plane[:3], plane[3]
+    height = float(normal @ view.camera.center + offset)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -height / (rays @ normal)
+    valid = np.isfinite(t) & (t > 0)
+    points = view.camera.center + np.where(valid, t, 0.0)[:, None] * rays
+    evidence = np.full(cw * ch, np.inf, np.float32)
+    seen = np.zeros(cw * ch, bool)
+    for number, other in enumerate(others):
+        uv, depth = other.project(points)
+        coarse_uv = other.to_coarse(uv).astype(np.float32)
+        ow, oh = other.coarse_size
+        inside = valid & (depth > 0) & (coarse_uv[:, 0] >= 0) & (coarse_uv[:, 1] >= 0) & \
+            (coarse_uv[:, 0] <= ow - 1) & (coarse_uv[:, 1] <= oh - 1)
+        maps = coarse_uv.reshape(ch, cw, 2)
+        warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        hidden = None if standing is None else standing[number]
+        if hidden is not None:
+            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0)
+            inside &= behind.ravel() == 0
+        difference = _relative_difference(view.coarse, warped).ravel()
+        evidence = np.where(inside, np.minimum(evidence, difference), evidence)
+        seen |= inside
+    evidence[~seen] = np.nan
+    return evidence.reshape(ch, cw)
+
+
+def _background_evidence(view: _View) -> np.ndarray:
+    """How much each coarse pixel differs from the empty workspace, a shadow (darker, same chromaticity)
+    counting as no difference."""
+    assert view.background is not None
+    return _shadowless_difference(view.coarse, view.background)
+
+
+def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndarray:
+    difference = _relative_difference(image, background)
+    # A shadow multiplies every channel by about the same factor below 1: compare chromaticities.
+    brightness = image.sum(axis=2) + 3.0
+    ground = background.sum(axis=2) + 3.0
+    chroma = np.abs(image / brightness[..., None] - background / ground[..., None]).sum(axis=2) * 3.0
+    darker = (brightness < ground) & (brightness > 0.15 * ground)
+    return np.where(darker, np.minimum(difference, chroma), difference)
+
+
+def _noise_level(evidence: np.ndarray) -> float:
+    """A robust scale of the evidence on the table (most of the image): its median plus spread."""
+    values = evidence[np.isfinite(evidence)]
+    if not len(values):
+        return 0.05
+    median = float(np.median(values))
+    spread = float(np.median(np.abs(values - median)))
+    return median + 3.0 * 1.4826 * spread
+
+
+def _component_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.ndarray | None:
+    """The connected region of ``binary`` that holds ``point`` or, failing that, the largest region
+    within ``reach`` px of it; None if there is none."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
+    if count <= 1:
+        return None
+    h, w = binary.shape
+    x, y = int(round(min(max(point[0], 0), w - 1))), int(round(min(max(point[1], 0), h - 1)))
+    label = labels[y, x]
+    if label == 0:
+        ys, xs = np.nonzero(labels)
+        near = np.hypot(xs - point[0], ys - point[1]) <= reach
+        if not near.any():
+            return None
+        candidates = np.unique(labels[ys[near], xs[near]])
+        label = int(candidates[np.argmax(stats[candidates, cv2.CC_STAT_AREA])])
+    return (labels == label).astype(np.uint8) * 255
+
+
+def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *, support_plane=None,
+                     backgrounds: Sequence[np.ndarray | None] | None = None,
+                     aim_cameras: Sequence[Camera] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """One filled silhouette per view, (H, W) uint8 0/255, of what stands where the views converge,
+    and its outline ((M, 2) int32, as :func:`core_cy.segment.segment_with_outline` gives).
+
+    Parameters
+    ----------
+    images : sequence of (H, W, 3) ndarray of uint8
+        The views' BGR photographs, as the lens saw them.
+    cameras : sequence of Camera
+        The views' cameras, in the same order.
+    support_plane : (4,) array_like, optional
+        ``[nx, ny, nz, d]``, the object on the side where ``n . x + d >= 0``.
+    backgrounds : sequence of (H, W, 3) ndarray of uint8 or None, optional
+        Per view, a picture of the empty workspace from the same pose, or None.
+    aim_cameras : sequence of Camera, optional
+        The cameras whose optical axes give the aim (default: ``cameras``); a
+        scan whose other views came with masks names all its cameras here.
+
+    An object cut off by an image's edge gives a silhouette cut off there
+    too: what the view shows of it. The reconstruction takes the edge on the
+    image's border for no edge (:func:`core_cy.edges.edge_samples`) and carves
+    nothing that projects out of an image, so the model is of what the views
+    saw together.
+
+    Raises
+    ------
+    ImageError
+        If an image or background is not a (H, W, 3) uint8 array, or a background's size is not its
+        image's.
+    SilhouetteError
+        If nothing stands out near the views' aim in a view (naming it).
+    GeometryError
+        If the views' optical axes do not converge.
+    """
+    if len(images) != len(cameras):
+        raise ValueError(f"got {len(images)} images for {len(cameras)} cameras")
+    backgrounds = list(backgrounds) if backgrounds is not None else [None] * len(images)
+    if len(backgrounds) != len(images):
+        raise ValueError(f"got {len(backgrounds)} backgrounds for {len(images)} images")
+    views = []
+    for index, (image, camera, background) in enumerate(zip(images, cameras, backgrounds)):
+        if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+            raise ImageError("expected a (H, W, 3) uint8 BGR image", view=index)
+        if background is not None:
+            if (not isinstance(background, np.ndarray) or background.dtype != np.uint8 or background.ndim != 3
+                    or background.shape[2] != 3):
+                raise ImageError("expected the background as a (H, W, 3) uint8 BGR image", view=index)
+            if background.shape != image.shape:
+                raise ImageError(f"the background is {background.shape[1]}x{background.shape[0]} pixels, but its "
+                                 f"image is {image.shape[1]}x{image.shape[0]}", view=index)
+        views.append(_View(index, image, camera, background))
+    aim = aim_point(cameras if aim_cameras is None else aim_cameras)
+    plane = None if support_plane is None else check_support_plane(support_plane, aim)
+    standing: list[np.ndarray | None] = [None] * len(views)
+    if plane is not None and not all(view.background is not None for view in views):
+        # What stands out in each view, on the first look: where another view's plane point lies behind
+        # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
+        for view in views:
+            if view.background is None:
+                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], plane))
+                first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
+                standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
+    cuts = [_first_cut(view, views, plane, aim, standing) for view in views]
+    masks = [mask for mask, _ in cuts]
+    hulls = _hull_projections(views, masks, plane, aim)
+    for index, (view, (mask, score), hull) in enumerate(zip(views, cuts, hulls)):
+        outside = cv2.bitwise_not(hull)
+        excess = cv2.countNonZero(cv2.bitwise_and(mask, outside))
+        if excess > _DISAGREEMENT * cv2.countNonZero(mask):
+            # The other views say that part is no object (a shadow, a stretch of table): cut again.
+            if score is None:
+                masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), outside)
+            else:
+                kept = cv2.bitwise_and(mask, hull)
+                if cv2.countNonZero(kept) < 12:
+                    raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
+                masks[index] = _graph_cut(view, kept, score, outside)
+    return [_refined(view, mask) for view, mask in zip(views, masks)]
+
+
+#: A view whose silhouette reaches this share of its area out of the other views' hull is cut again.
+_DISAGREEMENT = 3.0
+
+
+def _hull_projections(views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray | None,
+                      aim: np.ndarray) -> list[np.ndarray]:
+    """For each view, the hull carved from all the other views' coarse silhouettes, projected into it
+    (0/255, the coarse size; the whole image where the others do not constrain it)."""
+    radius = 0.0
+    for view, mask in zip(views, masks):
+        ys, xs = np.nonzero(mask)
+        centre = _coarse_aim(view, aim)
+        reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]))) * max(view.sx, view.sy)
+        depth = float(view.camera.project(aim[None, :])[1][0])
+        radius = max(radius, 1.2 * reach_px * depth / view.camera.focal_length)
+    steps = np.linspace(-radius, radius, _HULL_GRID)
+    grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    if plane is not None:
+        grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
+    voxel = 2 * radius / (_HULL_GRID - 1)
+    inside, pixels = [], []
+    for view, mask in zip(views, masks):
+        uv, depth = view.project(grid)
+        coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+        cw, ch = view.coarse_size
+        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
+        hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
+        hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+        inside.append(hit)
+        pixels.append((coarse, seen, depth))
+    hulls = []
+    for i, view in enumerate(views):
+        keep = np.logical_and.reduce([hit for j, hit in enumerate(inside) if j != i])
+        coarse, seen, depth = pixels[i]
+        keep &= seen
+        hull = np.zeros(masks[i].shape, np.uint8)
+        hull[coarse[keep, 1], coarse[keep, 0]] = 255
+        if keep.any():
+            footprint = voxel * view.camera.focal_length / float(np.min(depth[keep])) / min(view.sx, view.sy)
+            size = 2 * int(np.ceil(footprint)) + 3
+            hull = cv2.dilate(hull, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        hulls.append(hull)
+    return hulls
+
+
+def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The full-resolution silhouette and its outline: each pixel of a band along the coarse edge goes
+    to the side (object or table) whose nearby colour it is closer to."""
+    height, width = view.image.shape[:2]
+    band = int(np.ceil(max(view.sx, view.sy))) + 1
+    x, y, w, h = cv2.boundingRect(coarse_mask)
+    reach = 4 * band
+    x0, y0 = max(0, int(x * view.sx) - reach), max(0, int(y * view.sy) - reach)
+    x1, y1 = min(width, int((x + w) * view.sx) + reach), min(height, int((y + h) * view.sy) + reach)
+    # The coarse mask, resampled smoothly and cut at its half-way line, within the box.
+    up = cv2.resize(coarse_mask, (width, height), interpolation=cv2.INTER_LINEAR)[y0:y1, x0:x1]
+    mask = (up >= 128).astype(np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+    sure = cv2.erode(mask, kernel)
+    table = 1 - cv2.dilate(mask, kernel)
+    image = view.image[y0:y1, x0:x1].astype(np.float32)
+    window = (4 * band + 1, 4 * band + 1)
+
+    def local_mean(weights: np.ndarray) -> np.ndarray:
+        w = cv2.boxFilter(weights.astype(np.float32), -1, window, normalize=False)
+        total = cv2.boxFilter(image * weights[..., None].astype(np.float32), -1, window, normalize=False)
+        return total / np.maximum(w, 1e-3)[..., None]
+
+    object_colour = local_mean(sure)
+    object_distance = _relative_difference(image, object_colour)
+    if view.full_background is not None:
+        table_distance = _shadowless_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
+    else:
+        table_distance = _relative_difference(image, local_mean(table))
+    uncertain = (sure == 0) & (table == 0)
+    chosen = np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255
+    chosen = cv2.medianBlur(chosen, 3)
+    silhouette = np.zeros((height, width), np.uint8)
+    silhouette[y0:y1, x0:x1] = chosen
+    return mask_with_outline(silhouette, view=view.index)
+
+
+def _coarse_aim(view: _View, aim: np.ndarray) -> np.ndarray:
+    uv, depth = view.project(aim[None, :])
+    if depth[0] <= 0:
+        raise SilhouetteError("the views' aim lies behind this camera: its pose does not look at the object",
+                              view=view.index)
+    return view.to_coarse(uv)[0]
+
+
+def _brightness(image: np.ndarray) -> np.ndarray:
+    return image.sum(axis=2)
+
+
+def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, aim: np.ndarray,
+               standing: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray | None]:
+    """The view's coarse silhouette from its own cues (0/255, the coarse size), and the evidence
+    it came from, in units of its noise (None without a plane or a background)."""
+    cw, ch = view.coarse_size
+    centre = _coarse_aim(view, aim)
+    if view.background is not None:
+        evidence = _background_evidence(view)
+    elif plane is not None:
+        evidence = _parallax_evidence(view, [v for v in views if v is not view], plane,
+                                      [standing[v.index] for v in views if v is not view])
+    else:
+        return _cut_around_aim(view, centre), None
+    noise = max(_noise_level(evidence), _NOISE_FLOOR)
+    # Where no other view sees the table point behind a pixel (the object hides it from all of them),
+    # the pixel is next to the object's foot, or on it: it counts as standing out.
+    score = np.nan_to_num(evidence / noise, nan=_HIDDEN)
+    standing = np.where(score > 2.5, 255, 0).astype(np.uint8)
+    standing = cv2.morphologyEx(standing, cv2.MORPH_OPEN, _SMALL)
+    region = _component_near(standing, centre, reach=0.25 * np.hypot(cw, ch))
+    if region is None or cv2.countNonZero(region) < 12:
+        raise SilhouetteError(_NOTHING, view=view.index)
+    return _graph_cut(view, region, score), score
+
+
+_SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+
+
+def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None) -> np.ndarray:
+    """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
+    evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
+    cw, ch = view.coarse_size
+    x, y, w, h = cv2.boundingRect(region)
+    margin = max(8, int(0.5 * max(w, h)))
+    x0, y0, x1, y1 = max(0, x - margin), max(0, y - margin), min(cw, x + w + margin), min(ch, y + h + margin)
+    mask = np.full((y1 - y0, x1 - x0), cv2.GC_PR_BGD, np.uint8)
+    crop = (slice(y0, y1), slice(x0, x1))
+    inside = region[crop] > 0
+    mask[inside] = cv2.GC_PR_FGD
+    sure = cv2.erode(region, _SMALL)[crop] > 0
+    mask[sure & (score[crop] > 5.0)] = cv2.GC_FGD
+    low = score[crop] < 1.0
+    if view.background is not None:
+        mask[low & ~sure] = cv2.GC_BGD
+    else:
+        # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
+        # object's model: a dark pixel that the other views confirm is table for sure.
+        mask[low & _shadow_like(view.coarse[crop], low) & ~sure] = cv2.GC_BGD
+    # The box's rim is outside the object (it was grown around it), unless it is the image's own edge.
+    rim = np.zeros(mask.shape, bool)
+    rim[[0, -1], :] = True
+    rim[:, [0, -1]] = True
+    if x0 == 0:
+        rim[:, 0] = False
+    if y0 == 0:
+        rim[0, :] = False
+    if x1 == cw:
+        rim[:, -1] = False
+    if y1 == ch:
+        rim[-1, :] = False
+    mask[rim & (mask != cv2.GC_FGD)] = cv2.GC_BGD
+    if outside is not None:
+        mask[outside[crop] > 0] = cv2.GC_BGD
+    return _run_grabcut(view, mask, (x0, y0, x1, y1))
+
+
+def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Pixels of the same chromaticity as the ``table`` pixels' median and darker than it: a shadow."""
+    brightness = image.sum(axis=2) + 3.0
+    chroma = image / brightness[..., None]
+    if not table.any():
+        return np.zeros(brightness.shape, bool)
+    table_chroma = np.median(chroma[table], axis=0)
+    table_brightness = float(np.median(brightness[table]))
+    return (np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
+
+
+def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+    cw, ch = view.coarse_size
+    x0, y0, x1, y1 = box
+    result = np.zeros((ch, cw), np.uint8)
+    has_object = np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)).any()
+    has_table = np.isin(mask, (cv2.GC_BGD, cv2.GC_PR_BGD)).any()
+    if not has_object:
+        raise SilhouetteError(_NOTHING, view=view.index)
+    if has_table:
+        image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
+        background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
+        cv2.grabCut(image, mask, None, background_model, object_model, _GC_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+    result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
+    return _filled_region(result, view)
+
+
+def _filled_region(binary: np.ndarray, view: _View) -> np.ndarray:
+    """The largest region of a coarse binary image, holes filled."""
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        raise SilhouetteError(_NOTHING, view=view.index)
+    filled = np.zeros_like(binary)
+    cv2.drawContours(filled, [max(contours, key=cv2.contourArea)], -1, 255, thickness=cv2.FILLED)
+    return filled
+
+
+def _cut_around_aim(view: _View, centre: np.ndarray, outside: np.ndarray | None = None) -> np.ndarray:
+    """Without a plane or a background: the region around the aim is taken for the object, the
+    image's border for the background, and the graph cut draws the line between them."""
+    cw, ch = view.coarse_size
+    mask = np.full((ch, cw), cv2.GC_PR_BGD, np.uint8)
+    axes = (max(2, int(0.3 * cw)), max(2, int(0.35 * ch)))
+    cx, cy = int(round(centre[0])), int(round(centre[1]))
+    cv2.ellipse(mask, (cx, cy), axes, 0, 0, 360, cv2.GC_PR_FGD, thickness=-1)
+    if outside is not None:
+        mask[outside > 0] = cv2.GC_BGD
+    cv2.circle(mask, (cx, cy), max(2, cw // 40), cv2.GC_FGD, thickness=-1)
+    return _run_grabcut(view, mask, (0, 0, cw, ch))
