@@ -310,3 +310,19 @@ def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace(mo
     assert changed[truth > 0].mean() > 0.5 and changed[~near].mean() < 0.001
     camera.object_present = False
     assert np.abs(decode(camera.jpeg(T)) - empty).mean(axis=2)[truth > 0].mean() < 5
+
+
+def test_cli_writes_backgrounds_and_knows_the_printed_set(tmp_path: Path, capsys):
+    import argparse
+
+    from robocell import sim as cli
+
+    parser = argparse.ArgumentParser(prog="robocell sim scans")
+    cli.add_arguments(parser)
+    assert parser.parse_args(["--set", "printed"]).set_name == "printed"
+    args = parser.parse_args(["--out", str(tmp_path), "--shape", "cylinder", "--views", "1", "--backgrounds"])
+    assert cli.run(args) == 0
+    bundle = Path(capsys.readouterr().out.split()[0])
+    scan = json.loads((bundle / "scan.json").read_text())
+    assert scan["views"][0]["background"] == "background0.jpg"
+    assert cv2.imread(str(bundle / "background0.jpg")).shape == (480, 640, 3)

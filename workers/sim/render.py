@@ -430,23 +430,49 @@ class _ShadowMap:
         return out
 
 
-def _contact_occlusion(verts: NDArray[np.float64], faces: NDArray[np.int32], points: NDArray[np.float64],
-                       reach: float = 0.006) -> NDArray[np.float32]:
-    """Share of the ambient light reaching table points (N, 3) beside the objects: the objects hide part
-    of the sky from the table right round their feet, a dark rim fading within about ``reach`` metres."""
-    out = np.ones(len(points), dtype=np.float32)
-    if len(faces) == 0 or len(points) == 0:
+class _Footprint:
+    """How far each table point is from the objects' footprint (seen from straight above), for the
+    dimmer ambient light round their feet: the objects hide part of the sky from the table there."""
+
+    def __init__(self, verts: NDArray[np.float64], faces: NDArray[np.int32]) -> None:
+        self.above = _ShadowMap(verts, faces, Light((0.0, 0.0, 1.0), angular_radius_deg=0.0), texel=0.001)
+        if not self.above.empty:
+            low = self.above.depth > -np.inf
+            # Distances (texels) from every texel to the nearest one under an object.
+            self.distance = cv2.distanceTransform((~low).astype(np.uint8), cv2.DIST_L2, 5)
+
+    def occlusion(self, points: NDArray[np.float64], reach: float = 0.006) -> NDArray[np.float32]:
+        """Share of the ambient light reaching table points (N, 3): a dark rim fading within ``reach`` metres."""
+        out = np.ones(len(points), dtype=np.float32)
+        if self.above.empty or len(points) == 0:
+            return out
+        above = self.above
+        c = np.rint((points @ above.basis.T - above.origin) / above.texel).astype(np.int64)
+        rows, cols = self.distance.shape
+        inside = (c[:, 0] >= 0) & (c[:, 0] < cols) & (c[:, 1] >= 0) & (c[:, 1] < rows)
+        d = self.distance[c[inside, 1], c[inside, 0]] * above.texel
+        out[inside] = np.where(d < 6 * reach, 1.0 - 0.6 * np.exp(-d / reach), 1.0)
         return out
-    above = _ShadowMap(verts, faces, Light((0.0, 0.0, 1.0), angular_radius_deg=0.0), texel=0.001)
-    low = above.depth > -np.inf  # the objects' footprint, seen from above
-    # Distances (texels) from every texel to the nearest one under an object, from outside.
-    distance = cv2.distanceTransform((~low).astype(np.uint8), cv2.DIST_L2, 5)
-    c = np.rint((points @ above.basis.T - above.origin) / above.texel).astype(np.int64)
-    rows, cols = distance.shape
-    inside = (c[:, 0] >= 0) & (c[:, 0] < cols) & (c[:, 1] >= 0) & (c[:, 1] < rows)
-    d = distance[c[inside, 1], c[inside, 0]] * above.texel
-    out[inside] = np.where(d < 6 * reach, 1.0 - 0.6 * np.exp(-d / reach), 1.0)
-    return out
+
+
+@lru_cache(maxsize=4)
+def _light_maps_cached(key: tuple, light: Light) -> tuple[_ShadowMap, _Footprint]:
+    verts, faces = _MESHES.pop(key)
+    return _ShadowMap(verts, faces, light), _Footprint(verts, faces)
+
+
+_MESHES: dict[tuple, tuple[NDArray[np.float64], NDArray[np.int32]]] = {}
+
+
+def _light_maps(verts: NDArray[np.float64], faces: NDArray[np.int32], light: Light) -> tuple[_ShadowMap, _Footprint]:
+    """The shadow map and the footprint of a scene under a light. They depend on neither the camera nor
+    the pixels, so the views of one scene share them: kept for the last few scenes, by their meshes' bytes."""
+    key = (verts.tobytes(), faces.tobytes())
+    _MESHES[key] = (verts, faces)
+    try:
+        return _light_maps_cached(key, light)
+    finally:
+        _MESHES.pop(key, None)
 
 
 @dataclass(frozen=True)
@@ -485,25 +511,32 @@ def render_layers(
     background, on_table, table_xy = table.trace(T_world_cam, K, dist, image_size)
 
     verts, faces, normals, owner = _merge_meshes(objs)
-    shadow_map = None if light is None else _ShadowMap(verts, faces, light)
+    shadow_map, footprint = (None, None) if light is None else _light_maps(verts, faces, light)
     table_shadow = np.zeros(h * w, dtype=np.float32)
-    if light is not None and shadow_map is not None:
+    if light is not None and shadow_map is not None and footprint is not None:
         L = light.L
-        points = np.column_stack([table_xy.astype(np.float64), np.zeros(len(table_xy))])
-        grazing = np.sqrt(max(1 - L[2] ** 2, 0.0)) / L[2]
-        hidden = shadow_map.shadow(points, 1.5 * _SHADOW_TEXEL * (1 + grazing))
         tint = np.asarray(light.colour, dtype=np.float32)
-        occlusion = np.ones(h * w, dtype=np.float32)
-        occlusion[on_table] = _contact_occlusion(verts, faces, points)
-        direct = light.strength * L[2] * (1 - hidden)
-        received = light.ambient * occlusion[on_table] + direct * float(tint.mean())
+        # Only table points near the objects or their shadows can be darkened: the box of the
+        # objects' feet and of their outline cast along the light onto the table, with a margin
+        # for the soft edge and the dark rim.
+        hidden, occlusion = np.zeros(h * w, dtype=np.float32), np.ones(h * w, dtype=np.float32)
+        table_index = np.flatnonzero(on_table)
+        if len(verts) and len(table_xy):
+            cast_xy = verts[:, :2] - verts[:, 2:3] * (L[:2] / L[2])
+            reach = np.vstack([verts[:, :2], cast_xy])
+            lo, hi = reach.min(axis=0) - 0.04, reach.max(axis=0) + 0.04
+            near = np.flatnonzero((table_xy[:, 0] >= lo[0]) & (table_xy[:, 0] <= hi[0])
+                                  & (table_xy[:, 1] >= lo[1]) & (table_xy[:, 1] <= hi[1]))
+            points = np.column_stack([table_xy[near].astype(np.float64), np.zeros(len(near))])
+            grazing = np.sqrt(max(1 - L[2] ** 2, 0.0)) / L[2]
+            hidden[table_index[near]] = shadow_map.shadow(points, 1.5 * _SHADOW_TEXEL * (1 + grazing))
+            occlusion[table_index[near]] = footprint.occlusion(points)
+        full = light.ambient + light.strength * L[2] * float(tint.mean())
+        received = light.ambient * occlusion + light.strength * L[2] * (1 - hidden) * float(tint.mean())
         # The shadow layer: the share of the light the objects take from the table point.
-        share = 1 - received / (light.ambient + light.strength * L[2] * float(tint.mean()))
-        table_shadow[on_table] = np.where((hidden > 0) | (occlusion[on_table] < 1), share, 0.0)
-        cast = np.zeros(h * w, dtype=np.float32)
-        cast[on_table] = hidden
+        table_shadow = np.where((hidden > 0) | (occlusion < 1), 1 - received / full, 0.0).astype(np.float32)
         background = background * (light.ambient * occlusion[:, None]
-                                   + (light.strength * L[2] * (1 - cast))[:, None] * tint)
+                                   + (light.strength * L[2] * (1 - hidden))[:, None] * tint)
 
     tv = verts[faces]
     face_n = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
