@@ -292,65 +292,132 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                 standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
     cuts = [_first_cut(view, views, plane, aim, standing) for view in views]
     masks = [mask for mask, _ in cuts]
-    hulls = _hull_projections(views, masks, plane, aim)
-    for index, (view, (mask, score), hull) in enumerate(zip(views, cuts, hulls)):
-        outside = cv2.bitwise_not(hull)
-        excess = cv2.countNonZero(cv2.bitwise_and(mask, outside))
-        if excess > _DISAGREEMENT * cv2.countNonZero(mask):
-            # The other views say that part is no object (a shadow, a stretch of table): cut again.
-            if score is None:
-                masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), outside)
-            else:
-                kept = cv2.bitwise_and(mask, hull)
-                if cv2.countNonZero(kept) < 12:
-                    raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
-                masks[index] = _graph_cut(view, kept, score, outside)
+    masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
 
 
+def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
+    """The share of a silhouette outside a hull, in units of :data:`_DISAGREEMENT` (above 1: too much)."""
+    area = max(cv2.countNonZero(mask), 1)
+    return cv2.countNonZero(cv2.bitwise_and(mask, cv2.bitwise_not(hull))) / area / _DISAGREEMENT
+
+
+def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+            plane: np.ndarray | None, aim: np.ndarray) -> list[np.ndarray]:
+    """The views checked against each other, one correction at a time, each view corrected once.
+
+    A silhouette that reaches out of the other views' hull takes in too much (a shadow, a stretch of
+    table); one that holds too little (the aim alone seeded it, and it found part of the object)
+    carves every other view's hull, so that they reach out of it. Which is which: a view without
+    which none of the others reaches out holds too little, and is cut again within their hull;
+    failing that, the view that reaches out most is cut again with what lies outside marked table;
+    when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
+    others' hull is cut again within it.
+    """
+    done: set[int] = set()
+    everyone = set(range(len(views)))
+    for _ in range(len(views)):
+        hulls = _Hulls(views, masks, plane, aim)
+        excess = {i: _excess(masks[i], hulls.of(everyone - {i})) for i in everyone}
+        culprit, relief = -1, 0.0
+        for k in everyone - done:
+            others = everyone - {k}
+            if scores[k] is None and len(views) > 2 and max(excess[j] for j in others) > 1.0:
+                without = [_excess(masks[j], hulls.into(others - {j}, j)) for j in others]
+                gain = sum(excess[j] for j in others) - sum(without)
+                if max(without) <= 1.0 and gain > relief:
+                    culprit, relief = k, gain
+        if culprit >= 0:
+            done.add(culprit)
+            view = views[culprit]
+            masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {culprit}))
+            continue
+        candidates = [i for i in everyone - done if excess[i] > 1.0]
+        if not candidates:
+            # All agree, but a view seeded by the aim alone may still hold only part of the object.
+            small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
+                     for i in everyone - done if scores[i] is None}
+            if not small or min(small.values()) >= _TOO_SMALL:
+                break
+            index = min(small, key=small.__getitem__)
+            done.add(index)
+            view = views[index]
+            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {index}))
+            continue
+        index = max(candidates, key=excess.__getitem__)
+        done.add(index)
+        view, score = views[index], scores[index]
+        hull = hulls.of(everyone - {index})
+        if score is None:
+            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hull)
+        else:
+            kept = cv2.bitwise_and(masks[index], hull)
+            if cv2.countNonZero(kept) < 12:
+                raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
+            masks[index] = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+    return masks
+
+
 #: A view whose silhouette reaches this share of its area out of the other views' hull is cut again.
-_DISAGREEMENT = 3.0
+_DISAGREEMENT = 0.03
+#: Seeded by the aim alone, a silhouette under this share of the other views' hull is cut again
+#: within that hull (two views' hull is larger than the object, but seldom three times as large).
+_TOO_SMALL = 0.35
 
 
-def _hull_projections(views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray | None,
-                      aim: np.ndarray) -> list[np.ndarray]:
-    """For each view, the hull carved from all the other views' coarse silhouettes, projected into it
-    (0/255, the coarse size; the whole image where the others do not constrain it)."""
-    radius = 0.0
-    for view, mask in zip(views, masks):
-        ys, xs = np.nonzero(mask)
-        centre = _coarse_aim(view, aim)
-        reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]))) * max(view.sx, view.sy)
-        depth = float(view.camera.project(aim[None, :])[1][0])
-        radius = max(radius, 1.2 * reach_px * depth / view.camera.focal_length)
-    steps = np.linspace(-radius, radius, _HULL_GRID)
-    grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    if plane is not None:
-        grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
-    voxel = 2 * radius / (_HULL_GRID - 1)
-    inside, pixels = [], []
-    for view, mask in zip(views, masks):
-        uv, depth = view.project(grid)
-        coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-        cw, ch = view.coarse_size
-        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
-        hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
-        hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
-        inside.append(hit)
-        pixels.append((coarse, seen, depth))
-    hulls = []
-    for i, view in enumerate(views):
-        keep = np.logical_and.reduce([hit for j, hit in enumerate(inside) if j != i])
-        coarse, seen, depth = pixels[i]
+class _Hulls:
+    """The coarse hulls of sets of views' silhouettes, projected into another view."""
+
+    def __init__(self, views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray | None,
+                 aim: np.ndarray) -> None:
+        radius = 0.0
+        for view, mask in zip(views, masks):
+            ys, xs = np.nonzero(mask)
+            centre = _coarse_aim(view, aim)
+            reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]), initial=1.0)) * max(view.sx, view.sy)
+            depth = float(view.camera.project(aim[None, :])[1][0])
+            radius = max(radius, 1.2 * reach_px * depth / view.camera.focal_length)
+        steps = np.linspace(-radius, radius, _HULL_GRID)
+        grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+        if plane is not None:
+            grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
+        self.voxel = 2 * radius / (_HULL_GRID - 1)
+        self.views = views
+        self.inside, self.pixels = [], []
+        for view, mask in zip(views, masks):
+            uv, depth = view.project(grid)
+            coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+            cw, ch = view.coarse_size
+            seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
+            hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
+            hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+            self.inside.append(hit)
+            self.pixels.append((coarse, seen, depth))
+        self.shape = [mask.shape for mask in masks]
+
+    def of(self, carving: set[int]) -> np.ndarray:
+        """The hull of the views ``carving`` projected into the one view not among them (0/255)."""
+        (i,) = set(range(len(self.views))) - carving
+        return self.into(carving, i)
+
+    def into(self, carving: set[int], i: int) -> np.ndarray:
+        """The hull of the views ``carving`` projected into view ``i`` (0/255)."""
+        seen_by = np.sum([self.pixels[j][1] for j in carving], axis=0)
+        misses = np.sum([~self.inside[j] for j in carving], axis=0)
+        # With three carving views or more, one of them may miss a voxel (a view that found only part
+        # of the object carves the others' hulls less); a voxel that fewer than two carving views
+        # (or all of them, if fewer) see within their images is not known to be anything.
+        keep = (misses <= (1 if len(carving) >= 3 else 0)) & (seen_by >= min(2, len(carving)))
+        coarse, seen, depth = self.pixels[i]
         keep &= seen
-        hull = np.zeros(masks[i].shape, np.uint8)
+        view = self.views[i]
+        hull = np.zeros(self.shape[i], np.uint8)
         hull[coarse[keep, 1], coarse[keep, 0]] = 255
         if keep.any():
-            footprint = voxel * view.camera.focal_length / float(np.min(depth[keep])) / min(view.sx, view.sy)
+            footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
             size = 2 * int(np.ceil(footprint)) + 3
             hull = cv2.dilate(hull, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
-        hulls.append(hull)
-    return hulls
+        return hull
 
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -490,6 +557,7 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) 
     if has_table:
         image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
         background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
+        cv2.setRNGSeed(0)  # GrabCut's k-means starts from OpenCV's global generator
         cv2.grabCut(image, mask, None, background_model, object_model, _GC_ITERATIONS, cv2.GC_INIT_WITH_MASK)
     result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
     return _filled_region(result, view)
@@ -505,15 +573,19 @@ def _filled_region(binary: np.ndarray, view: _View) -> np.ndarray:
     return filled
 
 
-def _cut_around_aim(view: _View, centre: np.ndarray, outside: np.ndarray | None = None) -> np.ndarray:
-    """Without a plane or a background: the region around the aim is taken for the object, the
-    image's border for the background, and the graph cut draws the line between them."""
+def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = None) -> np.ndarray:
+    """Without a plane or a background: the region around the aim is taken for the object, the rest
+    of the image for the background, and the graph cut draws the line between them by colour. With
+    the other views' ``hull`` (0/255), the object is looked for within it, and outside it is sure
+    background."""
     cw, ch = view.coarse_size
     mask = np.full((ch, cw), cv2.GC_PR_BGD, np.uint8)
-    axes = (max(2, int(0.3 * cw)), max(2, int(0.35 * ch)))
     cx, cy = int(round(centre[0])), int(round(centre[1]))
-    cv2.ellipse(mask, (cx, cy), axes, 0, 0, 360, cv2.GC_PR_FGD, thickness=-1)
-    if outside is not None:
-        mask[outside > 0] = cv2.GC_BGD
+    if hull is None:
+        axes = (max(2, int(0.12 * cw)), max(2, int(0.15 * ch)))
+        cv2.ellipse(mask, (cx, cy), axes, 0, 0, 360, cv2.GC_PR_FGD, thickness=-1)
+    else:
+        mask[hull > 0] = cv2.GC_PR_FGD
+        mask[cv2.dilate(hull, _SMALL, iterations=2) == 0] = cv2.GC_BGD
     cv2.circle(mask, (cx, cy), max(2, cw // 40), cv2.GC_FGD, thickness=-1)
     return _run_grabcut(view, mask, (0, 0, cw, ch))
