@@ -227,10 +227,10 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
     X, Y, Z = np.meshgrid(across, t, np.linspace(g.palm, g.tip, _ALONG_SAMPLES), indexing="ij")
     if (inside(shrunk, X, Y, Z) & (np.abs(Y) >= half_open)).any():
         return "the open fingers would cut the model"
-    X, Y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
-                       np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
-                                   _ACROSS_SAMPLES + 2), indexing="ij")
-    if inside(shrunk, X, Y, g.palm).any():
+    palm_x, palm_y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
+                                 np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
+                                             _ACROSS_SAMPLES + 2), indexing="ij")
+    if inside(shrunk, palm_x, palm_y, g.palm).any():
         return "the palm would cut the model"
     return None
 

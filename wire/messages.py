@@ -25,7 +25,7 @@ __all__ = [
     "Blob",
     "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
     "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING", "parse_request", "RequestTooLarge",
-    "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES",
+    "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES", "DiskUsage",
 ]
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -499,6 +499,21 @@ class FailedJob(BaseModel):
     updated: float
 
 
+class DiskUsage(BaseModel):
+    """What the cell keeps in its run directory, bytes, and what its retention would free now
+    (``cell/retention.py``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    recordings: int
+    pictures: int
+    store: int                  # the job store with its WAL
+    other: int
+    free_on_disk: int | None = None       # what the run directory's file system has free
+    recordings_to_free: int = 0
+    pictures_to_free: int = 0
+    jobs_to_prune: int = 0
+
+
 class CellStatus(Message):
     """The answer on ``robocell/<cell>/status``: the cell at a glance."""
 
@@ -512,3 +527,4 @@ class CellStatus(Message):
     waiting_for_reconstructor: int          # jobs whose pictures are taken, waiting for a free worker
     jobs: dict[str, int]                    # every job in the store, by state
     recent_failures: list[FailedJob]        # newest first
+    disk: DiskUsage | None = None           # the run directory, and what retention will free
