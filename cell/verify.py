@@ -53,10 +53,14 @@ from core_cy.gripper import Gripper
 from core_cy.segment import Segmentation, segment
 from core_cy.superquadric import Superquadric as CoreSuperquadric
 from core_cy.superquadric import inside_outside, surface_points
-from wire.messages import Grasp, Reconstruction, Superquadric
+from wire.bundle import core_segmentation
+from wire.config import CellConfig
+from wire.messages import Grasp, Reconstruction, ReconstructRequest, Superquadric
 
-__all__ = ["Verdict", "MIN_VIEW_IOU", "REDUCTION", "verify_reconstruction", "check_model", "check_grasp",
-           "reduced_silhouettes", "reduced_camera", "model_iou"]
+from .job import Picture
+
+__all__ = ["Verdict", "MIN_VIEW_IOU", "REDUCTION", "verify_answer", "verify_reconstruction", "check_model",
+           "check_grasp", "reduced_silhouettes", "reduced_camera", "model_iou"]
 
 #: The least intersection over union of the model's projection and the daemon's own silhouette,
 #: in every view, at a quarter scale.
@@ -110,6 +114,28 @@ def reduced_camera(K, T_world_cam, dist=None, *, view: int | None = None) -> Cam
     return Camera(K=scale @ np.asarray(K, dtype=np.float64), T_world_cam=T_world_cam, dist=dist, view=view)
 
 
+def _decoded_reduced(jpeg: bytes, view: int) -> np.ndarray:
+    image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_REDUCED_COLOR_4)
+    if image is None:
+        raise CoreError(f"view {view}: the picture cannot be decoded")
+    return image
+
+
+def _segmented(jpeg: bytes, segmentation: Segmentation, view: int) -> np.ndarray:
+    """The silhouette at 1/:data:`REDUCTION` scale; for an object too small to survive the small
+    picture's clean-up, segmented at full size and reduced."""
+    small = _decoded_reduced(jpeg, view)
+    try:
+        return segment(small, segmentation, view=view)
+    except CoreError:
+        full = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+        if full is None:
+            raise
+        silhouette = segment(full, segmentation, view=view)
+        reduced = cv2.resize(silhouette, (small.shape[1], small.shape[0]), interpolation=cv2.INTER_AREA)
+        return np.where(reduced >= 128, 255, 0).astype(np.uint8)
+
+
 def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
                         cameras: Sequence[Camera]) -> list[np.ndarray]:
     """Each picture decoded at 1/:data:`REDUCTION` of its size, segmented, and undistorted to the
@@ -122,10 +148,7 @@ def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
     """
     silhouettes = []
     for view, (jpeg, camera) in enumerate(zip(jpegs, cameras)):
-        image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_REDUCED_COLOR_4)
-        if image is None:
-            raise CoreError(f"view {view}: the picture cannot be decoded")
-        silhouette = segment(image, segmentation, view=view)
+        silhouette = _segmented(jpeg, segmentation, view)
         silhouettes.append(silhouette if camera.dist is None else undistort_mask(silhouette, camera))
     return silhouettes
 
@@ -288,3 +311,20 @@ def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], camera
     told = f"; {len(dropped)} of its {len(result.grasps)} grasps dropped ({dropped[0]})" if dropped else ""
     return Verdict(True, f"{verdict.reason}; {len(kept)} grasps follow from it{told}", verdict.ious, tuple(kept),
                    tuple(dropped))
+
+
+def verify_answer(answer: Reconstruction, request: ReconstructRequest, pictures: Sequence[Picture],
+                  config: CellConfig) -> Verdict:
+    """:func:`verify_reconstruction` of a worker's answer to ``request``, with the job's ``pictures``
+    (the daemon's own, ``job.captures``) and the cell's camera, support plane and gripper: the
+    daemon's one call, before it stores a result. Grasps are checked when the request asked for
+    them (``request.gripper``)."""
+    try:
+        segmentation = core_segmentation(request.segmentation)
+        cameras = [reduced_camera(config.camera.K, picture.T_base_cam, config.camera.dist, view=view)
+                   for view, picture in enumerate(pictures)]
+        gripper = None if request.gripper is None else Gripper.from_dict(request.gripper)
+    except (CoreError, ValueError) as exc:
+        return Verdict(False, f"the answer cannot be checked: {exc}")
+    return verify_reconstruction(answer, [picture.jpeg for picture in pictures], cameras, segmentation,
+                                 request.support_plane, gripper)

@@ -35,6 +35,7 @@ class Scan:
         scan = json.loads((directory / "scan.json").read_text())
         self.truth = json.loads((directory / "truth.json").read_text())
         self.jpegs = [(directory / view["image"]).read_bytes() for view in scan["views"]]
+        self.K = np.asarray(scan["views"][0]["K"])
         full = [Camera(K=v["K"], T_world_cam=v["T_world_cam"], view=i) for i, v in enumerate(scan["views"])]
         self.cameras = [reduced_camera(v["K"], v["T_world_cam"], view=i) for i, v in enumerate(scan["views"])]
         fit = reconstruct([View(c, image=j) for c, j in zip(full, self.jpegs)], support_plane=PLANE)
@@ -128,3 +129,25 @@ def test_pictures_that_cannot_be_decoded_fail_the_check_naming_the_view(scans):
     verdict = verify_reconstruction(scan.answer, [scan.jpegs[0], b"not a jpeg", scan.jpegs[2]], scan.cameras,
                                     RED_HSV, PLANE, GRIPPER)
     assert not verdict.ok and verdict.reason == "the answer cannot be checked: view 1: the picture cannot be decoded"
+
+
+def test_the_daemons_one_call_checks_an_answer_against_its_own_pictures(scans, tmp_path):
+    """``verify_answer`` as the daemon calls it: the job's pictures, the request it sent, its configuration."""
+    from cell.job import Picture
+    from cell.verify import verify_answer
+    from wire.config import CellConfig
+    from wire.messages import CameraModel, ReconstructRequest, ReconstructView
+
+    scan = scans["cylinder-04"]
+    K = scan.K
+    poses = [c.T_world_cam for c in scan.cameras]
+    config = CellConfig.model_validate({"camera": {"backend": "sim", "K": K.tolist()}, "run_dir": str(tmp_path)})
+    pictures = [Picture(jpeg, np.eye(4), pose) for jpeg, pose in zip(scan.jpegs, poses)]
+    request = ReconstructRequest(job_id="j", views=[ReconstructView(camera=CameraModel(K=K.tolist()),
+                                                                    T_world_cam=pose.tolist(), length=len(jpeg))
+                                                    for jpeg, pose in zip(scan.jpegs, poses)],
+                                 support_plane=config.support_plane, gripper=config.gripper.dimensions())
+    verdict = verify_answer(scan.answer, request, pictures, config)
+    assert verdict.ok and verdict.grasps, verdict.reason
+    big = scan.answer.superquadric.model_copy(update={"size": [a * 8 for a in scan.answer.superquadric.size]})
+    assert not verify_answer(scan.answer.model_copy(update={"superquadric": big}), request, pictures, config).ok
