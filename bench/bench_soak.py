@@ -46,7 +46,7 @@ from robocell.up import CellProcesses  # noqa: E402
 from wire.client import AsyncCellClient, JobFailed  # noqa: E402
 from wire.config import CellConfig, RetentionConfig  # noqa: E402
 from wire.errors import CellError  # noqa: E402
-from wire.messages import JobState, ScanRequest, ScanResult  # noqa: E402
+from wire.messages import DiskUsage, JobState, ScanRequest, ScanResult  # noqa: E402
 from workers.sim.scene import target_from_config  # noqa: E402
 
 _MB = 1024 * 1024
@@ -66,8 +66,9 @@ def _processes(cell: CellProcesses) -> dict[str, psutil.Process]:
         try:
             top = psutil.Process(child.process.pid)
             found[child.name] = top
-            for index, below in enumerate(sorted(top.children(recursive=True), key=lambda p: p.pid)):
-                found[f"{child.name}/{_what(below)}-{index}"] = below
+            below = [p for p in top.children(recursive=True) if p.status() != psutil.STATUS_ZOMBIE]
+            for index, process in enumerate(sorted(below, key=lambda p: p.pid)):
+                found[f"{child.name}/{_what(process)}-{index}"] = process
         except psutil.NoSuchProcess:
             continue
     return found
@@ -99,13 +100,12 @@ def _sample(cell: CellProcesses) -> dict[str, tuple[float, int, int]]:
     return sample
 
 
-def _disk(run_dir: Path, policy: RetentionConfig) -> float:
-    usage = disk_usage(run_dir, policy, now=time.time())
-    return (usage.recordings + usage.pictures + usage.store + usage.other) / _MB
+def _disk(run_dir: Path, policy: RetentionConfig) -> DiskUsage:
+    return disk_usage(run_dir, policy, now=time.time())
 
 
 async def _jobs(client: AsyncCellClient, request: ScanRequest, count: int, in_flight: int,
-                outcome: dict[str, int], told: dict[str, JobState]) -> None:
+                outcome: dict[str, int], told: dict[str, JobState], results: list[ScanResult] | None = None) -> None:
     """``count`` jobs, ``in_flight`` at a time; tally how each ended as the client was told."""
     queue = asyncio.Queue[int]()
     for k in range(count):
@@ -118,6 +118,8 @@ async def _jobs(client: AsyncCellClient, request: ScanRequest, count: int, in_fl
                 result: ScanResult = await client.scan(request, timeout=120.0)
                 outcome["succeeded"] += 1
                 told[result.job_id] = JobState.SUCCEEDED
+                if results is not None:
+                    results.append(result)
                 if result.recording is None and result.recording_error is None:
                     outcome["recording unnamed"] += 1
                 elif result.recording_error is not None:
@@ -133,7 +135,7 @@ async def _jobs(client: AsyncCellClient, request: ScanRequest, count: int, in_fl
     await asyncio.gather(*(runner() for _ in range(in_flight)))
 
 
-def _table(samples: list[tuple[str, dict[str, tuple[float, int, int]], float]]) -> None:
+def _table(samples: list[tuple[str, dict[str, tuple[float, int, int]], DiskUsage]]) -> None:
     names = sorted({name for _, sample, _ in samples for name in sample})
     labels = [label for label, _, _ in samples]
     print(f"\n{'process':34s} " + " ".join(f"{label:>24s}" for label in labels))
@@ -144,7 +146,10 @@ def _table(samples: list[tuple[str, dict[str, tuple[float, int, int]], float]]) 
             value = sample.get(name)
             cells.append(f"{value[0]:9.1f} / {value[1]:4d} / {value[2]:4d}" if value else f"{'-':>24s}")
         print(f"{name:34s} " + " ".join(f"{c:>24s}" for c in cells))
-    print(f"{'run directory, MB':34s} " + " ".join(f"{disk:>24.1f}" for _, _, disk in samples))
+    for what in ("recordings", "pictures", "store", "other"):
+        print(f"{'run directory: ' + what + ', MB':34s} "
+              + " ".join(f"{getattr(disk, what) / _MB:>24.2f}" for _, _, disk in samples))
+    print("(other: the logs of the cell's processes)")
 
 
 async def soak(n_jobs: int, in_flight: int, run_dir: Path, retention: RetentionConfig | None, every: int) -> None:
@@ -219,12 +224,17 @@ async def disk_full(n_jobs: int, size_mb: int, directory: Path) -> None:
                                    "recording unnamed": 0, "recording error named": 0}
         after: dict[str, int] = dict.fromkeys(outcome, 0)
         told: dict[str, JobState] = {}
+        results: list[ScanResult] = []
         try:
             await cell.start()
             request = ScanRequest(target=target_from_config(config.sim))
             async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id, timeout=30.0) as client:
-                await _jobs(client, request, n_jobs, 1, outcome, told)
+                await _jobs(client, request, n_jobs, 1, outcome, told, results)
                 full = shutil.disk_usage(directory)
+                await asyncio.sleep(2.0)    # the last recordings are completed
+                # A recording named in a result, with no recording_error, that is missing or empty.
+                lost = sum(1 for r in results if r.recording_error is None and r.recording is not None
+                           and (not Path(r.recording).exists() or Path(r.recording).stat().st_size == 0))
                 # Space returns: the recordings go, as retention would delete them.
                 for recording in run_dir.glob("*.rrd"):
                     recording.unlink()
@@ -243,7 +253,7 @@ async def disk_full(n_jobs: int, size_mb: int, directory: Path) -> None:
               f"({full.free / _MB:.1f} MB free at the end)")
         print("outcomes: " + ", ".join(f"{k} {v}" for k, v in outcome.items()))
         print(f"told succeeded but not stored as succeeded: {lies}; unfinished in the store after the run "
-              f"(phantoms): {phantoms}")
+              f"(phantoms): {phantoms}; recordings named with no error but missing or empty: {lost}")
         print("after freeing the recordings, 5 more jobs: " + ", ".join(f"{k} {v}" for k, v in after.items()))
     finally:
         subprocess.run(["umount", str(directory)], capture_output=True, timeout=30)
