@@ -45,7 +45,7 @@ __all__ = ["RetentionReport", "FileEntry", "apply_retention", "disk_usage", "pla
            "GRACE_S"]
 
 #: A file written this recently is kept whatever the policy: it may belong to a job just ended.
-GRACE_S = 60.0
+GRACE_S = 10.0
 _DAY_S = 86400.0
 _MB = 1024 * 1024
 _STORE = "jobs.sqlite"

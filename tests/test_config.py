@@ -43,6 +43,9 @@ move_s = 12.5
 
 [gripper]
 max_opening = 0.11
+
+[retention]
+recordings_max_mb = 500
 """
 
 
