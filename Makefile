@@ -12,7 +12,7 @@ VENV ?= $(if $(filter $(call version_of,$(DEFAULT_PYTHON)),$(PYTHON_VERSION)),.v
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.robocell-installed
 
-.PHONY: install python demo test bench bench-cell bench-scale bench-grasp contract clean
+.PHONY: install python demo test bench bench-cell bench-scale bench-grasp bench-soak contract clean
 
 # A bare `make`: the venv with robocell installed, nothing run.
 install: $(STAMP)
@@ -57,6 +57,9 @@ bench-cell: $(STAMP)
 
 bench-scale: $(STAMP)
 	$(BIN)/python bench/bench_scale.py
+
+bench-soak: $(STAMP)   # not in the test suite; --jobs 2000 for issue 23's target
+	$(BIN)/python bench/bench_soak.py --retention
 
 # Grasps planned on real reconstructions of simulated scenes, judged against the true objects.
 bench-grasp: $(STAMP)

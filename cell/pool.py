@@ -22,6 +22,22 @@ the pool adds what it sent since that heartbeat, and takes off what was
 answered since. A worker is sent at most ``capacity`` requests at a time by
 this reckoning; when every worker is full, callers wait in a queue, and each
 free slot goes to the caller that has waited longest.
+
+No worker is trusted on its word (issue 23: a token and a heartbeat are all a
+fake worker needs to take jobs):
+
+- A heartbeat counts only for the worker whose key it came on: a
+  ``WorkerLoad`` naming worker ``a`` published under ``heartbeat/b`` is
+  ignored, and so is an info answer from another key. Under the router's
+  access control each worker may publish only under its own id
+  (``wire/access.py``), so nobody can make a worker look busy or idle.
+- A worker is sent work only once it has said what it is (a heartbeat or an
+  info answer): a bare liveliness token takes no job.
+- A worker is *proven* once the daemon has checked one of its answers and
+  found it right (:meth:`ReconstructorPool.confirm`). A free proven worker is
+  always chosen before a new one; a new one gets work only when no proven
+  worker has a free slot. A worker whose answer was refused
+  (:meth:`ReconstructorPool.refuse`) is proven no more.
 """
 
 from __future__ import annotations
@@ -31,7 +47,7 @@ import collections
 import contextlib
 import logging
 import time
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -80,6 +96,8 @@ class _Worker:
     last_sent: float = float("-inf")
     sent: int = 0
     failed: int = 0
+    proven: bool = False                        # one of its answers was checked and found right
+    refused: int = 0                            # answers the daemon checked and refused
 
     @property
     def load(self) -> int:
@@ -123,7 +141,8 @@ class ReconstructorPool:
         self._spawn(self._follow(self._transport.watch_liveliness(keys.RECONSTRUCTORS_ALIVE),
                                  lambda change: self._on_token(*change)))
         self._spawn(self._follow(self._transport.subscribe(keys.RECONSTRUCTORS_HEARTBEAT),
-                                 lambda sample: self._on_heartbeat(sample.payload)))
+                                 lambda sample: self._on_heartbeat(sample.payload, sample.key,
+                                                                   keys.reconstructor_heartbeat)))
         self._spawn(self._check_heartbeats())
 
     async def close(self) -> None:
@@ -201,13 +220,19 @@ class ReconstructorPool:
         except TransportError as exc:
             log.debug("no info from reconstructor %s: %s", worker, exc)
             return
-        self._on_heartbeat(reply.payload)
+        self._on_heartbeat(reply.payload, reply.key, keys.reconstructor_info)
 
-    def _on_heartbeat(self, payload: bytes) -> None:
+    def _on_heartbeat(self, payload: bytes, key: str, key_of: Callable[[str], str]) -> None:
+        """A worker's load, from its heartbeat or its info answer, which came on ``key``: counted
+        only if ``key`` is that worker's own (``key_of(worker)``)."""
         try:
             load = parse(WorkerLoad, payload)
         except ValueError as exc:
             log.warning("ignoring a bad heartbeat: %s", exc)
+            return
+        if key != key_of(load.worker):
+            # Debug only: whoever forges them can send thousands a second, and would fill the log.
+            log.debug("ignoring a heartbeat for %s that came on %s, not on its own key", load.worker, key)
             return
         record = self._workers.get(load.worker)
         if record is None:
@@ -347,12 +372,33 @@ class ReconstructorPool:
                 self._waiters.remove(waiter)
 
     def _choose(self, healthy: list[_Worker], avoid: Collection[str]) -> _Worker | None:
-        """The least loaded worker with a free slot, not one to avoid if another will do; None: wait."""
-        preferred = [r for r in healthy if r.worker not in avoid] or healthy
+        """The least loaded worker with a free slot, not one to avoid if another will do, a proven
+        one before a new one; None: wait. A worker not heard from yet gets nothing."""
+        heard = [r for r in healthy if r.heard is not None]
+        preferred = [r for r in heard if r.worker not in avoid] or heard
         free = [r for r in preferred if r.load < r.capacity]
         if not free:
             return None
-        return min(free, key=lambda r: (r.load / r.capacity, r.last_sent))
+        return min(free, key=lambda r: (not r.proven, r.load / r.capacity, r.last_sent))
+
+    # --- what the daemon found of their answers --------------------------------------------
+
+    def confirm(self, worker: str) -> None:
+        """``worker``'s answer was checked (``cell.verify``) and found right: it is proven."""
+        record = self._workers.get(worker)
+        if record is not None and not record.proven:
+            record.proven = True
+            log.info("reconstructor %s is proven: its answer agreed with the pictures", worker)
+
+    def refuse(self, worker: str, reason: str) -> None:
+        """``worker``'s answer was checked and refused: it is proven no more, and the attempt counts
+        as failed."""
+        record = self._workers.get(worker)
+        if record is not None:
+            record.proven = False
+            record.refused += 1
+            record.failed += 1
+            log.warning("reconstructor %s answered what the pictures refute: %s", worker, reason)
 
     def _none_message(self, wait_s: float) -> str:
         if not self._workers:
@@ -368,7 +414,7 @@ class ReconstructorPool:
         return [ReconstructorStatus(worker=r.worker, capacity=r.capacity, in_flight=r.load,
                                     in_flight_here=len(r.mine), tickets_here=sorted(r.mine), healthy=not r.hung,
                                     heartbeat_age_s=None if r.heard is None else round(now - r.heard, 3),
-                                    sent=r.sent, failed=r.failed)
+                                    sent=r.sent, failed=r.failed, proven=r.proven, refused=r.refused)
                 for r in sorted(self._workers.values(), key=lambda r: r.worker)]
 
 

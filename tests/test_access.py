@@ -1,13 +1,16 @@
 """Access by role, as deploy/cell-host.toml sets it up: on loopback, with TLS and users.
 
 The router runs as ``robocell router`` with the deployment example's own
-``[zenoh.roles]``, the daemon as ``robocell cell``. The robot, camera and
-reconstruction workers are the real worker code in this process, each in a
-Zenoh session of its user, so that the test can count what reaches them. Each
-test plays one user: a client scans, follows and cancels its jobs; an observer
-reads; and nobody may do what their role does not allow: move the robot, take
-pictures, publish job events, join the reconstruction pool, pose as a worker,
-or submit.
+``[zenoh.roles]``, the daemon as ``robocell cell``, except that the robot and
+camera workers have users of their own (``robot1``, ``camera1``): so each part
+runs on its own role's rules alone, and a rule missing from any role fails the
+whole scan and pick. The robot, camera and reconstruction workers are the real
+worker code in this process, each in a Zenoh session of its user, so that the
+test can count what reaches them. Each test plays one user: a client scans,
+picks, follows and cancels its jobs; an observer reads; and nobody may do what
+their role does not allow: move the robot, take pictures, publish job events,
+join the reconstruction pool, serve or beat under another worker's id, pose as
+a worker, or submit.
 """
 
 from __future__ import annotations
@@ -33,19 +36,20 @@ from wire.access import ROLES, access_control, permissions
 from wire.client import CellClient
 from wire.config import CellConfig, load_config
 from wire.errors import CellError, NoResponder
-from wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, ScanRequest
+from wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
 from wire.transport import Transport
 from workers.camera.backend import Camera
 from workers.camera.worker import make_camera, serve_camera
 from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
 from workers.robot.worker import serve_robot
-from workers.sim.robot import SimRobot
+from workers.sim.robot import SceneGripper, SimRobot
 from workers.sim.scene import target_from_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 #: The users of the router's dictionary: those deploy/cell-host.toml gives roles, and one it does not.
-USERS = ("cell1", "recon", "alice", "bob", "dashboard", "intruder")
-RECONSTRUCTOR = "recon-1"
+USERS = ("cell1", "robot1", "camera1", "recon1", "recon2", "alice", "bob", "dashboard", "intruder")
+#: The reconstruction worker: its user name is its worker id (deploy/README.md).
+RECONSTRUCTOR = "recon1"
 START_TIMEOUT_S = 60.0
 JOB_TIMEOUT_S = 60.0
 
@@ -75,11 +79,16 @@ def test_only_the_daemon_and_reconstruct_workers_touch_the_pool():
         assert bool(pool) == (role in {"daemon", "reconstruct"}) and (pool == granted) == (role == "reconstruct")
 
 
-def test_a_reconstruct_user_of_several_cells_is_one_subject():
-    block = access_control({"bay1": {"reconstruct": ["r1"], "client": ["a"]}, "bay2": {"reconstruct": ["r2"]}})
+def test_each_reconstruct_user_is_a_subject_of_its_own_in_every_cell():
+    block = access_control({"bay1": {"reconstruct": ["r1"], "client": ["a"]},
+                            "bay2": {"reconstruct": ["r2", "r1"]}})
     assert [(s["id"], s["usernames"]) for s in block["subjects"]] == [("client@bay1", ["a"]),
-                                                                      ("reconstruct", ["r1", "r2"])]
+                                                                      ("reconstruct:r1", ["r1"]),
+                                                                      ("reconstruct:r2", ["r2"])]
     assert len({rule["id"] for rule in block["rules"]}) == len(block["rules"])
+    served = {key for rule in block["rules"] if rule["id"].startswith("reconstruct:r2 ")
+              and "declare_queryable" in rule["messages"] for key in rule["key_exprs"]}
+    assert served == {keys.reconstructor("r2"), keys.reconstructor_info("r2")}
 
 
 # --- the deployed cell ---------------------------------------------------------------------------
@@ -87,8 +96,8 @@ def test_a_reconstruct_user_of_several_cells_is_one_subject():
 class CountingRobot(SimRobot):
     """The simulated robot, counting its moves; while held, a move waits (at most 30 s) to begin."""
 
-    def __init__(self, config) -> None:
-        super().__init__(config)
+    def __init__(self, config: CellConfig) -> None:
+        super().__init__(config.robot, gripper=SceneGripper.from_config(config))
         self.moves = 0
         self.free = asyncio.Event()
         self.free.set()
@@ -134,7 +143,7 @@ class Cell:
         self.children: list[subprocess.Popen] = []
         self.clients: dict[str, CellClient] = {}
         self.sessions: list[Transport] = []
-        self.robot = CountingRobot(self.config.robot)
+        self.robot = CountingRobot(self.config)
         self.camera: CountingCamera | None = None
         self.robot_session: Transport | None = None
         self.reconstructor: ReconstructWorker | None = None
@@ -146,6 +155,7 @@ class Cell:
         data["run_dir"] = str(directory / "run")
         data["zenoh"].update(router=f"tls/127.0.0.1:{free_port()}", settings=tls_settings(self.pki),
                              router_settings=router_tls_settings(self.pki))
+        data["zenoh"]["roles"].update(robot=["robot1"], camera=["camera1"])
         data["robot"] = {"backend": "sim", "speed": 0.0, "rotation_speed_deg": 0.0}
         data["camera"] = {"backend": "sim"}
         data["timeouts"] = {"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0}
@@ -178,7 +188,7 @@ class Cell:
 
     async def _start_workers(self) -> None:
         await self.start_robot()
-        camera_session = await self.open("cell1")
+        camera_session = await self.open("camera1")
         self.camera = CountingCamera(make_camera(self.config, camera_session))
         await self.camera.open()
         serve_camera(camera_session, self.config, self.camera)
@@ -187,11 +197,11 @@ class Cell:
         async def reconstruct(request_json: str, payload: bytes) -> tuple[str, bytes]:
             return await asyncio.to_thread(reconstruct_request, request_json, payload, RECONSTRUCTOR)
 
-        self.reconstructor = ReconstructWorker(await self.open("recon"), RECONSTRUCTOR, 2, reconstruct)
+        self.reconstructor = ReconstructWorker(await self.open(RECONSTRUCTOR), RECONSTRUCTOR, 2, reconstruct)
         await self.reconstructor.start()
 
     async def start_robot(self) -> None:
-        self.robot_session = await Transport.open(self.endpoint, settings=self.settings("cell1"), connect_timeout_s=20)
+        self.robot_session = await Transport.open(self.endpoint, settings=self.settings("robot1"), connect_timeout_s=20)
         serve_robot(self.robot_session, self.config, self.robot)
         self.robot_session.declare_token(keys.alive(self.config.cell_id, "robot"))
 
@@ -397,40 +407,79 @@ def test_a_client_cannot_publish_job_events(cell):
 
 def test_a_client_cannot_join_the_reconstruction_pool(cell):
     """The attack of issue 12: a fake worker that got the pictures of jobs and answered them."""
-    received: dict[str, list[str]] = {"recon": [], "alice": []}
+    received: dict[str, list[str]] = {}
 
-    async def start_fake(user: str) -> ReconstructWorker:
+    async def start_fake(user: str, worker_id: str) -> ReconstructWorker:
+        received[worker_id] = []
+
         async def made_up(request_json: str, payload: bytes) -> tuple[str, bytes]:
-            received[user].append(request_json)
-            return await asyncio.to_thread(reconstruct_request, request_json, payload, f"fake-{user}")
+            received[worker_id].append(request_json)
+            return await asyncio.to_thread(reconstruct_request, request_json, payload, worker_id)
 
-        worker = ReconstructWorker(await cell.open(user), f"fake-{user}", 8, made_up)
+        worker = ReconstructWorker(await cell.open(user), worker_id, 8, made_up)
         await worker.start()
         return worker
 
     def listed(worker: str) -> bool:
         return any(r.worker == worker for r in cell.client("alice").cell_status().reconstructors)
 
-    # With a reconstruct worker's user the same worker joins the pool; so it is the role that keeps it out.
+    # A reconstruct user joins the pool under its own id (its user name); so it is the role that keeps others out.
     began = time.monotonic()
-    genuine = cell.loop.run(start_fake("recon"))
-    wait_until(lambda: listed("fake-recon"), timeout=START_TIMEOUT_S, what="the daemon seeing a reconstruct user's worker")
+    genuine = cell.loop.run(start_fake("recon2", "recon2"))
+    wait_until(lambda: listed("recon2"), timeout=START_TIMEOUT_S, what="the daemon seeing a reconstruct user's worker")
     joined_s = time.monotonic() - began
     cell.loop.run(genuine.close())
-    wait_until(lambda: not listed("fake-recon"), timeout=START_TIMEOUT_S, what="the worker leaving the pool")
+    wait_until(lambda: not listed("recon2"), timeout=START_TIMEOUT_S, what="the worker leaving the pool")
 
-    fake = cell.loop.run(start_fake("alice"))
+    # A client's worker, and a reconstruct user's worker under another id than its own, are kept out.
+    fakes = [cell.loop.run(start_fake("alice", "fake-alice")), cell.loop.run(start_fake("recon2", "fake-recon2"))]
     try:
         time.sleep(2 * joined_s + keys.HEARTBEAT_PERIOD_S)  # twice what the genuine one took to join, and a beat
-        assert not listed("fake-alice")
-        # Idle with 8 slots, the fake would get both jobs were it in the pool (ties go to the least used).
+        assert not listed("fake-alice") and not listed("fake-recon2")
+        # Idle with 8 slots, the fakes would get both jobs were they in the pool (ties go to the least used).
         jobs = [cell.client("alice").submit(cell.request(label=f"pool {i}")).job_id for i in range(2)]
         for job_id in jobs:
             assert cell.client("alice").wait(job_id, timeout=JOB_TIMEOUT_S).state is JobState.SUCCEEDED
             assert cell.client("alice").result(job_id).worker == RECONSTRUCTOR
-        assert received["alice"] == [] and not listed("fake-alice")
+        assert received["fake-alice"] == received["fake-recon2"] == []
     finally:
-        cell.loop.run(fake.close())
+        for fake in fakes:
+            cell.loop.run(fake.close())
+
+
+def test_a_reconstruct_user_cannot_make_another_worker_look_busy(cell):
+    """Issue 23: busy heartbeats under the real worker's id took 4 of 5 jobs elsewhere."""
+    busy = WorkerLoad(worker=RECONSTRUCTOR, capacity=1, in_flight=99, period_s=0.1, time=time.time(),
+                      started=time.time())
+
+    async def forge() -> None:
+        session = await cell.open("recon2")
+        for _ in range(20):
+            # Under recon1's key the router drops it; under its own, every daemon ignores it.
+            session.put(keys.reconstructor_heartbeat(RECONSTRUCTOR), busy.model_dump_json())
+            session.put(keys.reconstructor_heartbeat("recon2"), busy.model_dump_json())
+            await asyncio.sleep(0.05)
+
+    cell.loop.run(forge())
+    seen = {r.worker: r for r in cell.client("alice").cell_status().reconstructors}[RECONSTRUCTOR]
+    assert (seen.capacity, seen.in_flight) == (2, 0)
+
+
+def test_a_client_scans_and_picks_with_every_part_on_its_own_roles_rules(cell):
+    """Issue 23: under deploy/'s access control ``scan --pick`` always failed (no rule for the
+    gripper). Here the daemon, robot, camera and reconstruction worker each have a user and role
+    of their own; alice scans and picks, and the dashboard follows and reads it."""
+    alice, dashboard = cell.client("alice"), cell.client("dashboard")
+    moves = cell.robot.moves
+    heard: list[JobEvent] = []
+    result = alice.scan(cell.request(label="pick", pick=PickRequest(place=[0.55, 0.25])), timeout=JOB_TIMEOUT_S,
+                        on_event=heard.append)
+    assert result.pick is not None and result.pick.held is True, result.pick
+    assert result.pick.placed and result.worker == RECONSTRUCTOR
+    assert cell.robot.moves - moves == len(result.T_base_cam) + 6    # the views, and the pick's six moves
+    assert JobState.PICKING in {event.state for event in heard}
+    assert dashboard.status(result.job_id).state is JobState.SUCCEEDED
+    assert dashboard.result(result.job_id).pick == result.pick
 
 
 def test_a_client_cannot_pose_as_the_robot(cell):
@@ -451,7 +500,8 @@ def test_a_client_cannot_pose_as_the_robot(cell):
         cell.wait_for_parts(robot=True)
 
 
-@pytest.mark.parametrize("user", ["recon", "intruder"], ids=["a reconstruct worker", "a user without a role"])
+@pytest.mark.parametrize("user", ["recon1", "robot1", "camera1", "dashboard", "intruder"],
+                         ids=["a reconstruct worker", "the robot", "the camera", "an observer", "a user without a role"])
 def test_only_clients_submit(cell, user):
     jobs = cell.job_count()
     with pytest.raises(NoResponder):

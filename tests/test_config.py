@@ -43,6 +43,9 @@ move_s = 12.5
 
 [gripper]
 max_opening = 0.11
+
+[retention]
+recordings_max_mb = 500
 """
 
 
@@ -144,11 +147,11 @@ def _subjects(roles: str, tmp_path) -> dict[str, list[str]]:
 
 def test_roles_are_in_the_files_cell_unless_a_table_names_its_cells(tmp_path):
     assert _subjects('[zenoh.roles]\nclient = ["alice"]\nreconstruct = ["r"]\n', tmp_path) == {
-        "client@bay1": ["alice"], "reconstruct": ["r"]}
+        "client@bay1": ["alice"], "reconstruct:r": ["r"]}
     assert _subjects('[[zenoh.roles]]\nclient = ["alice"]\ndaemon = ["bay1"]\n'
                      '[[zenoh.roles]]\ncells = ["bay2", "bay3"]\nclient = ["alice", "bob"]\nreconstruct = ["r"]\n',
                      tmp_path) == {"client@bay1": ["alice"], "daemon@bay1": ["bay1"], "client@bay2": ["alice", "bob"],
-                                   "client@bay3": ["alice", "bob"], "reconstruct": ["r"]}
+                                   "client@bay3": ["alice", "bob"], "reconstruct:r": ["r"]}
 
 
 def test_without_roles_the_router_has_no_access_control():

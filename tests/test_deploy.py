@@ -40,18 +40,37 @@ def test_the_cell_host_router_gives_each_role_its_part():
     assert block["enabled"] and block["default_permission"] == "deny"
     assert {s["id"]: s["usernames"] for s in block["subjects"]} == {
         "client@cell1": ["alice", "bob"], "observer@cell1": ["dashboard"], "daemon@cell1": ["cell1"],
-        "robot@cell1": ["cell1"], "camera@cell1": ["cell1"], "reconstruct": ["recon"]}
+        "robot@cell1": ["cell1"], "camera@cell1": ["cell1"], "reconstruct:recon1": ["recon1"],
+        "reconstruct:recon2": ["recon2"]}
     cell = config.cell_id
     client_asks = _allowed(block, "client@cell1", "ingress", "query")
     assert {keys.submit(cell), keys.cancel(cell, "*"), keys.result(cell, "*")} <= client_asks
     assert not client_asks & {keys.robot_move(cell), keys.camera_capture(cell), keys.reconstructor("*")}
     assert keys.cancel(cell, "*") not in _allowed(block, "observer@cell1", "ingress", "query")
-    assert keys.submit(cell) not in _allowed(block, "reconstruct", "ingress", "query")
-    for subject in ("client@cell1", "observer@cell1", "reconstruct"):
+    assert keys.submit(cell) not in _allowed(block, "reconstruct:recon1", "ingress", "query")
+    for subject in ("client@cell1", "observer@cell1", "reconstruct:recon1"):
         assert not _allowed(block, subject, "ingress", "put") & {keys.events(cell, "*")}
+    # The gripper is the robot's to serve and the daemon's to ask (issue 23: a pick failed without it).
+    assert keys.robot_grip(cell) in _allowed(block, "robot@cell1", "ingress", "declare_queryable")
+    assert keys.robot_grip(cell) in _allowed(block, "daemon@cell1", "ingress", "query")
+    # Each reconstruction worker serves, announces and beats under its own id, and no other.
+    for worker in ("recon1", "recon2"):
+        subject = f"reconstruct:{worker}"
+        assert _allowed(block, subject, "ingress", "declare_queryable") == {keys.reconstructor(worker),
+                                                                            keys.reconstructor_info(worker)}
+        assert _allowed(block, subject, "ingress", "put") == {keys.reconstructor_heartbeat(worker)}
+        assert _allowed(block, subject, "ingress", "liveliness_token") == {keys.reconstructor_alive(worker)}
     serving = {s["id"] for s in block["subjects"]
-               if keys.reconstructor("*") in _allowed(block, s["id"], "ingress", "declare_queryable")}
-    assert serving == {"reconstruct"}
+               if _allowed(block, s["id"], "ingress", "declare_queryable") & {keys.reconstructor("recon1"),
+                                                                              keys.reconstructor("*")}}
+    assert serving == {"reconstruct:recon1"}
+
+
+def test_a_reconstruct_user_must_be_a_worker_id():
+    from wire.access import access_control
+
+    with pytest.raises(ValueError, match="reconstruct user 'recon 1' is no worker id"):
+        access_control({"cell1": {"reconstruct": ["recon 1"]}})
 
 
 def test_the_readme_gives_every_user_of_the_roles_a_password_line():

@@ -5,7 +5,9 @@ it can neither submit a job nor read an image.
 """
 
 import asyncio
+import time
 
+import numpy as np
 import pytest
 
 from robocell.demo import free_port
@@ -86,3 +88,180 @@ def test_plain_tcp_to_a_tls_router_is_refused(pki):
             await client.close()
 
     _run(_with_router(pki, check))
+
+
+# --- no reconstruction worker trusted on its word (issue 23) -----------------------------------------
+
+from cell.pool import ReconstructorPool  # noqa: E402
+from tests.test_scale_pool import network, run, send, sees, until  # noqa: E402
+from wire import keys  # noqa: E402
+from wire.messages import WorkerLoad  # noqa: E402
+
+
+def test_three_fake_tokens_that_never_answer_fail_no_job_while_a_real_worker_exists():
+    """Issue 23: three bare pool tokens failed a job in 3.3 s; a worker not heard from takes no job."""
+    async def check():
+        async with network() as net:
+            pool = await net.pool()
+            fakes = []
+            for index in range(3):
+                fake = await Transport.open(net.endpoint, connect_timeout_s=10.0)
+                fakes.append(fake)
+                fake.declare_token(keys.reconstructor_alive(f"aaa-fake-{index}"))   # first by name, too
+            real = await net.worker("zzz-real")
+            await sees(pool, real)
+            await until(lambda: len(pool.snapshot()) == 4, "the pool to see the three fake tokens")
+            tried: set[str] = set()
+            try:
+                for attempt in range(3):   # what the daemon does: each failed attempt elsewhere
+                    worker, _ = await send(pool, f"job/{attempt}", avoid=tried)
+                    tried.add(worker)
+                    assert worker == "zzz-real"
+            finally:
+                for fake in fakes:
+                    await fake.close()
+
+    run(check())
+
+
+def test_busy_heartbeats_forged_under_a_real_workers_id_are_ignored():
+    """A heartbeat counts only on its worker's own key, which access control gives that worker alone."""
+    async def check():
+        async with network() as net:
+            pool = await net.pool()
+            real, other = await net.worker("real", 2), await net.worker("other", 2)
+            await sees(pool, real, other)
+            forger = await Transport.open(net.endpoint, connect_timeout_s=10.0)
+            try:
+                busy = WorkerLoad(worker="real", capacity=1, in_flight=50, period_s=0.5, time=time.time(),
+                                  started=time.time())
+                for _ in range(5):
+                    forger.put(keys.reconstructor_heartbeat("forger"), busy.model_dump_json())
+                    await asyncio.sleep(0.05)
+                seen = {r.worker: r for r in pool.snapshot()}
+                assert (seen["real"].capacity, seen["real"].in_flight) == (2, 0)
+                pool.confirm("real")      # its answer was checked and found right
+                workers = [(await send(pool, f"t{k}"))[0] for k in range(3)]
+                assert workers == ["real"] * 3   # proven, and free: it is chosen over the new one
+                pool.refuse("real", "its model did not match the pictures")
+                assert not {r.worker: r for r in pool.snapshot()}["real"].proven
+            finally:
+                await forger.close()
+
+    run(check())
+
+
+# --- strict types, bounded requests -------------------------------------------------------------------
+
+from wire.messages import (REQUEST_LIMITS, CaptureRequest, GripRequest, RequestTooLarge, ScanRequest,  # noqa: E402
+                           parse, parse_request)
+
+
+@pytest.mark.parametrize("payload, field", [
+    (b'{"close": "yes"}', "close"), (b'{"close": 1}', "close"), (b'{"close": "true"}', "close"),
+])
+def test_close_yes_does_not_close_the_gripper(payload, field):
+    with pytest.raises(ValueError, match=rf"^invalid GripRequest: {field}: Input should be a valid boolean"):
+        parse(GripRequest, payload)
+    assert parse(GripRequest, b'{"close": true}').close is True
+
+
+@pytest.mark.parametrize("payload, named", [
+    (b'{"target": ["0.6", 0, 0.05]}', "target.0: Input should be a valid number"),
+    (b'{"target": [true, 0, 0.05]}', "target.0: Input should be a valid number"),
+    (b'{"target": [0.6, 0, 0.05], "label": 7}', "label: Input should be a valid string"),
+    (b'{"target": [0.6, 0, 0.05], "request_id": 12}', "request_id: Input should be a valid string"),
+    (b'{"target": [0.6, 0, 0.05], "pick": {"lift_m": "0.1"}}', "pick.lift_m: Input should be a valid number"),
+])
+def test_a_scan_request_takes_json_numbers_and_strings_only(payload, named):
+    with pytest.raises(ValueError, match=named):
+        parse(ScanRequest, payload)
+    assert parse(ScanRequest, b'{"target": [1, 0, 0.05]}').target == [1.0, 0.0, 0.05]
+
+
+def test_a_capture_view_is_an_integer_not_true():
+    with pytest.raises(ValueError, match="view: Input should be a valid integer"):
+        parse(CaptureRequest, b'{"view": true}')
+
+
+def test_a_50_mb_submit_is_refused_before_it_is_parsed():
+    huge = b'{"target": [0.6, 0, 0.05], "label": "' + b"x" * (50 * 1024 * 1024) + b'"}'
+    with pytest.raises(RequestTooLarge, match=rf"^the ScanRequest is {len(huge)} bytes: at most "
+                                              rf"{REQUEST_LIMITS['submit']} are taken$"):
+        parse_request(ScanRequest, huge, REQUEST_LIMITS["submit"])
+    sixteen_views = ScanRequest(flange_poses=[np.eye(4).tolist()] * 16, label="x" * 200,
+                                request_id="r" * 128).model_dump_json()
+    assert parse_request(ScanRequest, sixteen_views, REQUEST_LIMITS["submit"]).label == "x" * 200
+
+
+# --- a forged event does not end scan() -----------------------------------------------------------------
+
+from wire.client import AsyncCellClient  # noqa: E402
+from wire.messages import JobEvent, JobState, JobStatus, ScanResult  # noqa: E402
+
+_BOX = {"size": [0.02, 0.02, 0.02], "shape": [0.1, 0.1], "T_world_object": np.eye(4).tolist()}
+
+
+class FakeDaemon:
+    """Answers submit, status and result like a daemon, for one job that ends when told to."""
+
+    def __init__(self, transport: Transport, cell: str) -> None:
+        self.transport, self.cell = transport, cell
+        self.state = JobState.MOVING
+        self.request: ScanRequest | None = None
+        transport.serve(keys.submit(cell), self._submit)
+        transport.serve(keys.job(cell, "j1"), self._status)
+        transport.serve(keys.result(cell, "j1"), self._result)
+
+    def status(self) -> JobStatus:
+        return JobStatus(job_id="j1", state=self.state, n_views=3, created=0.0, updated=time.time(),
+                         request=self.request)
+
+    async def _submit(self, request):
+        self.request = parse(ScanRequest, request.payload)
+        return Response(self.status().model_dump_json())
+
+    async def _status(self, request):
+        return Response(self.status().model_dump_json())
+
+    async def _result(self, request):
+        assert self.state is JobState.SUCCEEDED
+        return Response(ScanResult(job_id="j1", superquadric=_BOX, silhouette_iou=[0.9, 0.9, 0.9], residual=0.001,
+                                   timings_ms={}, T_base_cam=[np.eye(4).tolist()] * 3, worker="the real one")
+                        .model_dump_json())
+
+    def succeed(self) -> None:
+        self.state = JobState.SUCCEEDED
+        self.transport.put(keys.events(self.cell, "j1"), JobEvent(job_id="j1", state=JobState.SUCCEEDED,
+                                                                   message="done", time=time.time()).model_dump_json())
+
+
+def test_a_forged_success_event_does_not_end_scan():
+    """Issue 23: on an open router, anyone's ``succeeded`` event made ``scan()`` return a result that never was."""
+    async def check():
+        async with network() as net:
+            daemon = FakeDaemon(await Transport.open(net.endpoint, connect_timeout_s=10.0), "c1")
+            forger = await Transport.open(net.endpoint, connect_timeout_s=10.0)
+            client = await AsyncCellClient.connect(net.endpoint, "c1")
+            try:
+                heard: list[JobEvent] = []
+                scanning = asyncio.ensure_future(client.scan(ScanRequest(target=[0.6, 0.0, 0.05]), timeout=20,
+                                                             on_event=heard.append, poll_s=5.0))
+                await until(lambda: daemon.request is not None, "the submit")
+                fake = ScanResult(job_id="j1", superquadric={**_BOX, "size": [0.5, 0.5, 0.5]},
+                                  silhouette_iou=[1.0] * 3, residual=0.0, timings_ms={},
+                                  T_base_cam=[np.eye(4).tolist()] * 3, worker="forger")
+                for state in (JobState.SUCCEEDED, JobState.FAILED):
+                    forger.put(keys.events("c1", "j1"), JobEvent(job_id="j1", state=state, message="forged",
+                                                                 time=time.time(), result=fake).model_dump_json())
+                await asyncio.sleep(1.0)
+                assert not scanning.done() and heard == []
+                daemon.succeed()
+                result = await scanning
+                assert result.worker == "the real one" and [e.message for e in heard] == ["done"]
+            finally:
+                await client.close()
+                await forger.close()
+                await daemon.transport.close()
+
+    run(check())

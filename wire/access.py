@@ -12,13 +12,20 @@ that every cell shares):
 client         submit, list, status, result and cancel a cell's jobs; hear their events;
                read the cell's status, the robot's state and which parts are alive
 observer       what a client reads, nothing more: no submit, no cancel
-daemon         the cell daemon: serve the job keys, publish events, ask the robot and
-               the camera, send reconstructions to the pool and follow its workers
-robot          the robot worker: serve move and state, publish the state
+daemon         the cell daemon: serve the job keys, publish events, ask the robot (move
+               and gripper) and the camera, send reconstructions to the pool and follow
+               its workers
+robot          the robot worker: serve move, gripper and state, publish the state
 camera         the camera worker: serve capture, read the robot's state (the simulated
                camera renders from it)
-reconstruct    a reconstruction worker: serve the pool's keys, announce itself, beat
+reconstruct    a reconstruction worker: serve the pool's keys, announce itself and beat,
+               each only under its own worker id, which is its Zenoh user name
 =============  =====================================================================
+
+A reconstruction worker is trusted with no cell's robot, but a worker id stands for a
+track record in the daemon's pool (``cell/pool.py``): so each ``reconstruct`` user is a
+subject of its own, ``reconstruct:<user>``, whose rules name ``<user>`` as the worker id in
+every pool key. No reconstruct user can then serve, announce or beat under another's id.
 
 The router denies everything else: a query no rule allows is dropped, and so is
 a queryable, a subscriber, a publication, a liveliness token or a reply. A user
@@ -41,7 +48,7 @@ from collections.abc import Iterable, Mapping
 
 from . import keys
 
-__all__ = ["ROLES", "POOL_ROLES", "USER_NAME", "permissions", "access_control"]
+__all__ = ["ROLES", "POOL_ROLES", "USER_NAME", "permissions", "access_control", "pool_subject"]
 
 #: What a user name must match: the router's dictionary holds ``user:password`` lines.
 USER_NAME = re.compile(r"[^:\s](?:[^:]*[^:\s])?")
@@ -75,22 +82,25 @@ def _reads(cell: str) -> list[tuple[str, str]]:
     ]
 
 
-def permissions(role: str, cell: str) -> list[tuple[str, str]]:
+def permissions(role: str, cell: str, worker: str = "*") -> list[tuple[str, str]]:
     """What ``role`` may do in ``cell``, as (verb, key expression) pairs.
 
     The verbs: ``query`` (ask, and hear the answer), ``serve`` (answer queries),
     ``publish``, ``subscribe``, ``announce`` (declare a liveliness token) and ``watch``
-    (follow liveliness tokens). A ``reconstruct`` worker's keys do not depend on ``cell``.
+    (follow liveliness tokens). A ``reconstruct`` worker's keys do not depend on ``cell``;
+    they are those of worker id ``worker`` (the router gives each its own).
 
     Raises
     ------
     ValueError
-        If ``role`` is not one of :data:`ROLES`.
+        If ``role`` is not one of :data:`ROLES`, or ``worker`` is neither a worker id nor "*".
 
     >>> ("query", "robocell/cell1/jobs/*/cancel") in permissions("client", "cell1")
     True
     >>> [key for verb, key in permissions("observer", "cell1") if key.endswith("cancel")]
     []
+    >>> ("publish", "robocell/_pool/heartbeat/recon1") in permissions("reconstruct", "cell1", "recon1")
+    True
     """
     if role == "client":
         return [("query", keys.submit(cell)), ("query", keys.cancel(cell, "*")), *_reads(cell)]
@@ -102,19 +112,22 @@ def permissions(role: str, cell: str) -> list[tuple[str, str]]:
             ("serve", keys.job(cell, "**")),   # a job's status, result and cancel
             ("publish", keys.events(cell, "*")),
             ("announce", keys.alive(cell, "daemon")), ("watch", keys.alive(cell)),
-            ("query", keys.robot_move(cell)), ("query", keys.camera_capture(cell)),
+            ("query", keys.robot_move(cell)), ("query", keys.robot_grip(cell)), ("query", keys.camera_capture(cell)),
             ("query", keys.reconstructor("*")), ("query", keys.reconstructor_info("*")),
             ("watch", keys.RECONSTRUCTORS_ALIVE), ("subscribe", keys.RECONSTRUCTORS_HEARTBEAT),
         ]
     if role == "robot":
-        return [("serve", keys.robot_move(cell)), ("serve", keys.robot_state(cell)),
+        return [("serve", keys.robot_move(cell)), ("serve", keys.robot_grip(cell)), ("serve", keys.robot_state(cell)),
                 ("publish", keys.robot_state(cell)), ("announce", keys.alive(cell, "robot"))]
     if role == "camera":
         return [("serve", keys.camera_capture(cell)), ("query", keys.robot_state(cell)),
                 ("announce", keys.alive(cell, "camera"))]
     if role == "reconstruct":
-        return [("serve", keys.reconstructor("*")), ("serve", keys.reconstructor_info("*")),
-                ("publish", keys.reconstructor_heartbeat("*")), ("announce", keys.reconstructor_alive("*"))]
+        if worker != "*" and not keys.WORKER_ID.fullmatch(worker):
+            raise ValueError(f"reconstruct user {worker!r} is no worker id: its user name must be letters, digits, "
+                             f"'.', '_' and '-', starting with a letter or digit")
+        return [("serve", keys.reconstructor(worker)), ("serve", keys.reconstructor_info(worker)),
+                ("publish", keys.reconstructor_heartbeat(worker)), ("announce", keys.reconstructor_alive(worker))]
     raise ValueError(f"unknown role {role!r}: expected one of {', '.join(ROLES)}")
 
 
@@ -133,6 +146,11 @@ def _rules(subject: str, grants: Iterable[tuple[str, str]]) -> list[dict[str, ob
             for (flow, key_exprs), messages in sorted(messages_of.items())]
 
 
+def pool_subject(user: str) -> str:
+    """The subject of the access control that holds one reconstruct user (``:`` is in no user name)."""
+    return f"reconstruct:{user}"
+
+
 def access_control(users: Mapping[str, Mapping[str, Iterable[str]]]) -> dict[str, object]:
     """The router's ``access_control`` block (JSON, as Zenoh's configuration takes it).
 
@@ -140,17 +158,18 @@ def access_control(users: Mapping[str, Mapping[str, Iterable[str]]]) -> dict[str
     ----------
     users : cell id -> role -> Zenoh user names
         Who plays which role in which cell. A ``reconstruct`` user serves the pool of
-        every cell, whichever cell lists it.
+        every cell, whichever cell lists it, under the worker id that is its user name.
 
     Raises
     ------
     ValueError
         If a role is unknown, a cell id is not one (see ``wire.config``), a user name is empty or
-        holds ":", or no user has a role at all (the router would refuse everyone).
+        holds ":", a reconstruct user's name is no worker id, or no user has a role at all (the
+        router would refuse everyone).
 
-    >>> block = access_control({"cell1": {"client": ["alice"], "daemon": ["cell1"]}})
+    >>> block = access_control({"cell1": {"client": ["alice"], "daemon": ["cell1"], "reconstruct": ["r1"]}})
     >>> block["default_permission"], [s["id"] for s in block["subjects"]]
-    ('deny', ['client@cell1', 'daemon@cell1'])
+    ('deny', ['client@cell1', 'daemon@cell1', 'reconstruct:r1'])
     """
     subjects: dict[str, set[str]] = {}
     grants: dict[str, list[tuple[str, str]]] = {}
@@ -158,16 +177,20 @@ def access_control(users: Mapping[str, Mapping[str, Iterable[str]]]) -> dict[str
         if not keys.CELL_ID.fullmatch(cell):
             raise ValueError(f"cell id {cell!r} must be letters, digits, '_' and '-', starting with a letter or digit")
         for role, names in roles.items():
-            subject = role if role in POOL_ROLES else f"{role}@{cell}"
-            granted = permissions(role, cell)
             names = set(names)
             for name in names:
                 if not USER_NAME.fullmatch(name):
                     raise ValueError(f"user name {name!r} ({role} in {cell}) must be non-empty, without ':' "
                                      f"or spaces at its ends")
+            if role in POOL_ROLES:   # one subject per worker: its rules name its own id
+                for name in names:
+                    subjects.setdefault(pool_subject(name), set()).add(name)
+                    grants[pool_subject(name)] = permissions(role, cell, name)
+                continue
+            granted = permissions(role, cell)
             if names:
-                subjects.setdefault(subject, set()).update(names)
-                grants[subject] = granted
+                subjects.setdefault(f"{role}@{cell}", set()).update(names)
+                grants[f"{role}@{cell}"] = granted
     if not subjects:
         raise ValueError("no user has a role: the router would refuse every session")
     ordered = sorted(subjects)

@@ -19,7 +19,7 @@ from collections.abc import AsyncIterator, Callable
 
 from . import keys
 from .errors import CellError, LinkDown, RemoteError, TransportError
-from .messages import CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
+from .messages import CancelRequest, CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
 from .transport import Subscription, Transport
 
 __all__ = ["AsyncCellClient", "CellClient", "JobFailed"]
@@ -119,8 +119,11 @@ class AsyncCellClient:
     async def result(self, job_id: str) -> ScanResult:
         return parse(ScanResult, await self._ask(keys.result(self.cell, job_id)))
 
-    async def cancel(self, job_id: str) -> JobStatus:
-        return parse(JobStatus, await self._ask(keys.cancel(self.cell, job_id)))
+    async def cancel(self, job_id: str, token: str | None = None) -> JobStatus:
+        """Cancel the job; ``token`` is its submit's ``JobStatus.token`` (a daemon that issues
+        tokens cancels only for it)."""
+        payload = None if token is None else CancelRequest(token=token).model_dump_json()
+        return parse(JobStatus, await self._ask(keys.cancel(self.cell, job_id), payload))
 
     async def list(self, states: set[JobState] | None = None, limit: int = 50) -> list[JobStatus]:
         parameters = f"limit={limit}"
@@ -233,6 +236,15 @@ class AsyncCellClient:
                     except LinkDown:
                         pass  # the router is away: the job goes on, and so does the wait
                     continue
+                if event.state.finished:
+                    # An event is anyone's to publish on an open router: an end is believed only
+                    # once the daemon confirms it (a forged one is dropped, and the wait goes on).
+                    confirmed = (await self.status(job_id)).state
+                    if confirmed is not event.state:
+                        log.warning("ignoring a %s event for job %s, which the daemon says is %s",
+                                    event.state.value, job_id, confirmed.value)
+                        state = confirmed
+                        continue
                 if on_event is not None:
                     on_event(event)
                 state = event.state
@@ -255,12 +267,11 @@ class AsyncCellClient:
         """
         self.listen()  # before submitting: every event of the job is heard
         status = await self.submit(request)
-        state, final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event,
+        state, _ = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event,
                                                  poll_s=poll_s, heard_from_start=True)
         if state is JobState.SUCCEEDED:
-            if final is not None and final.result is not None:
-                return final.result
-            return await self.result(status.job_id)  # the end was learnt by polling
+            # Asked of the daemon, not taken from the event: anyone may publish an event.
+            return await self.result(status.job_id)
         ended = await self.status(status.job_id)
         raise JobFailed(f"job {ended.job_id} {ended.state.value}: {ended.error or 'no reason given'}", status=ended)
 
@@ -311,8 +322,8 @@ class CellClient:
     def result(self, job_id: str) -> ScanResult:
         return self._call(self._client.result(job_id))
 
-    def cancel(self, job_id: str) -> JobStatus:
-        return self._call(self._client.cancel(job_id))
+    def cancel(self, job_id: str, token: str | None = None) -> JobStatus:
+        return self._call(self._client.cancel(job_id, token))
 
     def list(self, states: set[JobState] | None = None, limit: int = 50) -> list[JobStatus]:
         return self._call(self._client.list(states, limit))

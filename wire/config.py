@@ -21,7 +21,7 @@ from .backends import AxisCameraConfig, CameraConfig, RobotConfig, Section, SimR
 from .errors import ConfigError
 from .messages import Point, Pose, ViewPlan, field_errors
 
-__all__ = ["CellConfig", "Roles", "load_config", "DEFAULT_HAND_EYE"]
+__all__ = ["CellConfig", "Roles", "RetentionConfig", "load_config", "DEFAULT_HAND_EYE"]
 
 # A camera 10 cm out along the flange's z axis, looking along it, rotated so that
 # image "up" is the flange's x axis: a typical wrist mount.
@@ -200,6 +200,25 @@ class Timeouts(Section):
     heartbeat_s: Annotated[float, Field(gt=0)] = 5.0
 
 
+class RetentionConfig(Section):
+    """How much of the run directory the cell keeps (``cell/retention.py``), applied while it runs:
+    recordings, pictures left by jobs that ended, and ended jobs in the store, by age and by size.
+    A job that has not ended keeps everything."""
+
+    #: Recordings (``<run dir>/<job id>.rrd``) older than this are deleted.
+    recordings_max_age_days: Annotated[float, Field(gt=0)] = 30.0
+    #: The recordings together take at most this much; the oldest go first.
+    recordings_max_mb: Annotated[float, Field(gt=0)] = 2048.0
+    #: Pictures kept for a restart (``<run dir>/pictures/<job id>/``) of jobs that ended, older than this.
+    pictures_max_age_days: Annotated[float, Field(gt=0)] = 1.0
+    #: Ended jobs (their status, events and result) older than this leave the store.
+    jobs_max_age_days: Annotated[float, Field(gt=0)] = 90.0
+    #: At most this many ended jobs stay in the store; the oldest leave first.
+    jobs_max_count: Annotated[int, Field(ge=1)] = 100_000
+    #: How often the daemon applies it, seconds.
+    interval_s: Annotated[float, Field(gt=0)] = 600.0
+
+
 def _run_dir(path: Path) -> Path:
     if path.exists() and not path.is_dir():
         raise ValueError(f"{str(path)!r} is a file, not a directory")
@@ -219,6 +238,7 @@ class CellConfig(Section):
     sim: SimConfig = SimConfig()
     timeouts: Timeouts = Timeouts()
     gripper: GripperConfig = GripperConfig()
+    retention: RetentionConfig = RetentionConfig()
     #: Jobs that may wait in the queue; a submit beyond this is refused.
     max_queued: Annotated[int, Field(ge=1)] = 100
 

@@ -14,7 +14,8 @@ import math
 from typing import Annotated, Any, Literal, TypeVar
 
 from core_cy.rigid import rigid_error
-from pydantic import AfterValidator, BeforeValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (AfterValidator, BeforeValidator, BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt,
+                      StrictStr, ValidationError, model_validator)
 
 __all__ = [
     "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
@@ -23,7 +24,8 @@ __all__ = [
     "RobotState", "GripRequest", "GripReply", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
     "Blob",
     "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
-    "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING",
+    "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING", "parse_request", "RequestTooLarge",
+    "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES", "DiskUsage",
 ]
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -42,11 +44,13 @@ def _finite(values: list[float]) -> list[float]:
     return values
 
 
-Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
+# Numbers a client sends are JSON numbers: "1.5" is not 1.5, and true is not 1 (strict types
+# wherever a request is parsed; a JSON integer is still a good float).
+Row4 = Annotated[list[StrictFloat], Field(min_length=4, max_length=4)]
 #: A 4x4 rigid transform, metres; which frames it maps between is in the field's name.
 Pose = Annotated[list[Row4], Field(min_length=4, max_length=4), AfterValidator(_rigid)]
 #: A point, metres.
-Point = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_finite)]
+Point = Annotated[list[StrictFloat], Field(min_length=3, max_length=3), AfterValidator(_finite)]
 
 
 def _integer(value: Any) -> Any:
@@ -93,17 +97,57 @@ def parse(model: type[M], payload: bytes | str | None) -> M:
         raise ValueError(f"invalid {model.__name__}: {field_errors(exc)}") from None
 
 
+class RequestTooLarge(ValueError):
+    """A request longer than its limit: refused before it is parsed."""
+
+
+#: The most bytes a request's payload may take, checked before it is parsed (:func:`parse_request`).
+#: A submit with 16 flange poses at full precision takes about 8 kB; every other request to the
+#: daemon (a cancel with its token, a pick decision, a status or list query) well under 1 kB.
+REQUEST_LIMITS: dict[str, int] = {
+    "submit": 64 * 1024,            # ScanRequest
+    "cancel": 4 * 1024,             # CancelRequest
+    "pick": 4 * 1024,               # PickDecision
+    "query": 4 * 1024,              # jobs, jobs/<id>, jobs/<id>/result, status: parameters only
+    "worker": 1024 * 1024,          # a worker's JSON answer (ReconstructReply: grasps, timings)
+}
+
+
+def parse_request(model: type[M], payload: bytes | str | None, limit: int) -> M:
+    """:func:`parse`, after checking the payload's size against ``limit`` (bytes; see
+    :data:`REQUEST_LIMITS`): a payload of 50 MB is refused unread, with a one-line error.
+
+    Raises
+    ------
+    RequestTooLarge
+        If the payload is longer than ``limit``.
+    ValueError
+        As :func:`parse`.
+
+    >>> parse_request(GripRequest, b'{"close": true}', 4096).close
+    True
+    >>> parse_request(GripRequest, b" " * 5000, 4096)
+    Traceback (most recent call last):
+    ...
+    wire.messages.RequestTooLarge: the GripRequest is 5000 bytes: at most 4096 are taken
+    """
+    size = 0 if payload is None else len(payload.encode() if isinstance(payload, str) else payload)
+    if size > limit:
+        raise RequestTooLarge(f"the {model.__name__} is {size} bytes: at most {limit} are taken")
+    return parse(model, payload)
+
+
 # --- jobs --------------------------------------------------------------------------------------
 
 class ViewPlan(BaseModel):
     """Where to look at a target from: one view per (elevation, azimuth), at ``standoff`` metres."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-    standoff: Annotated[float, Field(gt=0.05, le=3.0)] = 0.5
+    standoff: Annotated[StrictFloat, Field(gt=0.05, le=3.0)] = 0.5
     # Below 90: looking straight down, the camera's image "up" is undefined.
-    elevations_deg: Annotated[list[Annotated[float, Field(ge=5, lt=90)]], Field(min_length=2, max_length=MAX_VIEWS)] \
-        = [55.0, 40.0, 35.0]
-    azimuths_deg: Annotated[list[float], Field(min_length=2, max_length=MAX_VIEWS)] = [0.0, 120.0, 240.0]
+    elevations_deg: Annotated[list[Annotated[StrictFloat, Field(ge=5, lt=90)]],
+                              Field(min_length=2, max_length=MAX_VIEWS)] = [55.0, 40.0, 35.0]
+    azimuths_deg: Annotated[list[StrictFloat], Field(min_length=2, max_length=MAX_VIEWS)] = [0.0, 120.0, 240.0]
 
     @model_validator(mode="after")
     def _same_length(self) -> "ViewPlan":
@@ -122,9 +166,9 @@ class PickRequest(BaseModel):
     """
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-    approach_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
-    lift_m: Annotated[float, Field(gt=0, le=0.5)] = 0.1
-    place: Annotated[list[float], Field(min_length=2, max_length=2)] | None = None
+    approach_m: Annotated[StrictFloat, Field(gt=0, le=0.5)] = 0.1
+    lift_m: Annotated[StrictFloat, Field(gt=0, le=0.5)] = 0.1
+    place: Annotated[list[StrictFloat], Field(min_length=2, max_length=2)] | None = None
 
 
 class ScanRequest(Message):
@@ -135,12 +179,12 @@ class ScanRequest(Message):
     chosen by the client, makes submitting idempotent.
     """
 
-    request_id: Annotated[str, Field(min_length=1, max_length=128)] | None = None
+    request_id: Annotated[StrictStr, Field(min_length=1, max_length=128)] | None = None
     flange_poses: Annotated[list[Pose], Field(min_length=2, max_length=MAX_VIEWS)] | None = None
     target: Point | None = None
     plan: ViewPlan | None = None
     pick: PickRequest | None = None
-    label: Annotated[str, Field(max_length=200)] = ""
+    label: Annotated[StrictStr, Field(max_length=200)] = ""
     #: How the reconstruction finds the object, as scan.json's ``segmentation``; None: the cell's
     #: ``[scan]`` configuration, whose default is ``auto``.
     segmentation: dict | None = None
@@ -189,6 +233,9 @@ class JobStatus(Message):
     updated: float
     recording: str | None = None     # path of the job's Rerun .rrd
     request: ScanRequest
+    #: The job's token, a secret: in the answer to its submit only (never in a list, a status
+    #: query or an event). Cancel and pick decisions must show it (:class:`CancelRequest`).
+    token: str | None = None
 
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -262,6 +309,27 @@ class JobEvent(Message):
     result: ScanResult | None = None
 
 
+#: Random bytes in a job token (``secrets.token_urlsafe``): 32 bytes, 43 characters.
+JOB_TOKEN_BYTES = 32
+JobToken = Annotated[StrictStr, Field(min_length=16, max_length=256)]
+
+
+class CancelRequest(Message):
+    """The payload of a cancel (``robocell/<cell>/jobs/<id>/cancel``): the job's token, which only
+    the client that submitted it holds (``JobStatus.token`` in the submit's answer)."""
+
+    token: JobToken
+
+
+class PickDecision(Message):
+    """A client's decision on a pick that waits for one: go with grasp ``grasp`` of the result
+    (or the daemon's choice, None), or not (``go`` false). Shows the job's token."""
+
+    token: JobToken
+    go: StrictBool
+    grasp: Annotated[StrictInt, Field(ge=0)] | None = None
+
+
 class ErrorReply(Message):
     """An error answer: its message, its ``kind`` (the class of the error, see ``wire/errors.py``:
     the receiver raises the same class) and the ``details`` that class carries (a refused move's
@@ -276,7 +344,7 @@ class ErrorReply(Message):
 
 class MoveRequest(Message):
     T_base_flange: Pose
-    job_id: str | None = None
+    job_id: StrictStr | None = None
 
 
 class MoveReply(Message):
@@ -287,8 +355,8 @@ class MoveReply(Message):
 class GripRequest(Message):
     """Close (``close``) or open the parallel-jaw gripper."""
 
-    close: bool
-    job_id: str | None = None
+    close: StrictBool                # JSON true or false: "yes" or 1 closes nothing
+    job_id: StrictStr | None = None
 
 
 class GripReply(Message):
@@ -306,8 +374,8 @@ class RobotState(Message):
 
 
 class CaptureRequest(Message):
-    job_id: str | None = None
-    view: int | None = None
+    job_id: StrictStr | None = None
+    view: Annotated[StrictInt, Field(ge=0)] | None = None
 
 
 class CaptureInfo(Message):
@@ -427,6 +495,8 @@ class ReconstructorStatus(BaseModel):
     heartbeat_age_s: float | None   # since its last heartbeat; None: none heard yet
     sent: int = 0               # attempts this daemon sent it
     failed: int = 0             # of which failed: it died, hung, ran out of time or answered an error
+    proven: bool = False        # one of its answers was checked against the pictures and found right
+    refused: int = 0            # its answers that the check refused
 
 
 class FailedJob(BaseModel):
@@ -434,6 +504,21 @@ class FailedJob(BaseModel):
     job_id: str
     error: str | None
     updated: float
+
+
+class DiskUsage(BaseModel):
+    """What the cell keeps in its run directory, bytes, and what its retention would free now
+    (``cell/retention.py``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    recordings: int
+    pictures: int
+    store: int                  # the job store with its WAL
+    other: int
+    free_on_disk: int | None = None       # what the run directory's file system has free
+    recordings_to_free: int = 0
+    pictures_to_free: int = 0
+    jobs_to_prune: int = 0
 
 
 class CellStatus(Message):
@@ -449,3 +534,4 @@ class CellStatus(Message):
     waiting_for_reconstructor: int          # jobs whose pictures are taken, waiting for a free worker
     jobs: dict[str, int]                    # every job in the store, by state
     recent_failures: list[FailedJob]        # newest first
+    disk: DiskUsage | None = None           # the run directory, and what retention will free

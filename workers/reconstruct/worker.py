@@ -262,8 +262,12 @@ def _ready() -> int:
 
 
 def main(config: CellConfig, worker_id: str | None = None, *, job: Job = reconstruct_request) -> int:
-    """Run a reconstruction worker until SIGTERM/SIGINT; ``job`` is what its pool runs per request."""
-    worker_id = worker_id or default_worker_id()
+    """Run a reconstruction worker until SIGTERM/SIGINT; ``job`` is what its pool runs per request.
+
+    Without ``worker_id``, a worker with a Zenoh user takes its user name as its id: under the
+    router's access control that is the only id it may serve under (``wire/access.py``)."""
+    user = config.zenoh.user
+    worker_id = worker_id or (user if user and keys.WORKER_ID.fullmatch(user) else default_worker_id())
     processes = config.reconstruct.processes
 
     async def run(stop: asyncio.Event) -> None:
