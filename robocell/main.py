@@ -21,12 +21,12 @@ import sys
 from core_cy.errors import CoreError
 from wire.errors import CellError
 
-from . import calibrate, camera, config, demo, jobs, reconstruct, replay, services, sim
+from . import calibrate, camera, config, demo, export, jobs, reconstruct, replay, services, sim
 from .command import Commands
 
 __all__ = ["build_parser", "main", "MODULES"]
 
-MODULES = (reconstruct, sim, services, jobs, replay, config, calibrate, camera, demo)
+MODULES = (reconstruct, sim, services, jobs, export, replay, config, calibrate, camera, demo)
 #: The exit status of a program whose reader went away (128 + SIGPIPE), as a shell reports it.
 _BROKEN_PIPE_STATUS = 141
 #: After Ctrl-C, as a shell reports a program it stopped with SIGINT.
