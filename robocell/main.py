@@ -16,6 +16,7 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse
 import logging
+import signal
 import sys
 
 from core_cy.errors import CoreError
@@ -68,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         status = args.run(args)
+        if status == _INTERRUPTED_STATUS:
+            # The command heard Ctrl-C and handled it: one more while it exits has nothing left to stop.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         sys.stdout.flush()  # here, where a closed pipe can still be handled
         return status
     except BrokenPipeError:

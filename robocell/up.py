@@ -20,6 +20,7 @@ import logging
 import os
 import signal
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -106,6 +107,7 @@ class CellProcesses:
             children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon"), f"daemon of cell {cell}"))
         self.children = children
         self._environment: dict[str, str] = {}
+        self._stopping: asyncio.Future | None = None
 
     async def start(self, *, ready_timeout: float = 60.0) -> None:
         """Start every child and wait until the daemon and all workers announce themselves.
@@ -116,6 +118,8 @@ class CellProcesses:
             If a child exits during start-up, or the cell is not ready in time (the
             message names what is missing and where its log is).
         """
+        if any(child.name == "router" for child in self.children):
+            self._check_router_port()
         self.log_dir.mkdir(parents=True, exist_ok=True)
         # The JSON masks the camera password; the children get it from the environment instead.
         self.config_path.write_text(self.config.model_dump_json(indent=1))
@@ -126,6 +130,19 @@ class CellProcesses:
         for child in self.children:
             await self._spawn(child)
         await self.wait_ready(ready_timeout)
+
+    def _check_router_port(self) -> None:
+        """A port already taken is named, with who holds it, before the router fails on it."""
+        endpoint = self.config.zenoh.router
+        address = endpoint.split("/", 1)[-1]
+        host, _, port = address.rpartition(":")
+        if not port.isdigit() or not endpoint.startswith(("tcp/", "tls/")):
+            return
+        host = host.strip("[]")
+        holder = port_holder(host, int(port))
+        if holder is not None:
+            raise CellError(f"the router's port {port} on {host} is in use by {holder}: stop that, or give "
+                            f"[zenoh] router another port")
 
     async def _spawn(self, child: _Child) -> None:
         child.stopped = False
@@ -257,9 +274,39 @@ class CellProcesses:
         return next(c for c in self.children if c.name == name)
 
     async def stop(self) -> None:
-        """Stop every child, in reverse start order."""
+        """Stop every child, in reverse start order.
+
+        Once begun, the stop goes on to its end even if the caller is cancelled meanwhile (a
+        second Ctrl-C, say): every wait in it is time-limited, and a stop cut short would leave
+        the remaining children running. The cancellation is raised once all are stopped.
+        """
+        if self._stopping is None or self._stopping.done():
+            self._stopping = asyncio.ensure_future(self._stop_all())
+        cancelled = False
+        while not self._stopping.done():
+            try:
+                await asyncio.shield(self._stopping)
+            except asyncio.CancelledError:
+                cancelled = True
+        self._stopping.result()
+        if cancelled:
+            raise asyncio.CancelledError
+
+    async def _stop_all(self) -> None:
         for child in reversed(self.children):
             await self._stop(child, signal.SIGTERM)
+
+    def kill_remaining(self) -> list[str]:
+        """Kill, at once, every child (and its process group) still running: the last resort of a
+        caller whose event loop is going away. Returns their names."""
+        killed = []
+        for child in self.children:
+            process = child.process
+            if process is None or process.returncode is not None:
+                continue
+            killed.append(child.name)
+            _kill_group(process.pid)
+        return killed
 
     async def _stop(self, child: _Child, signum: int) -> None:
         """Stop a running child. After a SIGTERM, whatever is left of its process group is
@@ -281,6 +328,71 @@ class CellProcesses:
             _kill_group(process.pid)
 
 
+def on_interrupt(task: asyncio.Future, *, again: str) -> Callable[[], int]:
+    """Ctrl-C (SIGINT) and SIGTERM, heard by the running loop: the first cancels ``task``, each
+    later one prints ``again`` (what is still going on) and changes nothing, so that a stop under
+    way is never cut short. Returns a function that says how many signals came."""
+    loop = asyncio.get_running_loop()
+    count = 0
+
+    def heard() -> None:
+        nonlocal count
+        count += 1
+        if count == 1:
+            task.cancel()
+        else:
+            print(again, file=sys.stderr, flush=True)
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(signum, heard)
+    return lambda: count
+
+
+def port_holder(host: str, port: int) -> str | None:
+    """Who listens on TCP ``port`` of ``host`` already, or None if nobody does: ``"process 1234
+    (python -m robocell router)"``, or ``"another process"`` where it cannot be told (Linux's
+    /proc tells; another user's processes stay hidden)."""
+    import errno
+    import socket
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a listener binds: TIME_WAIT is no holder
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                return None  # not ours to bind (another machine's address): the router will say
+        else:
+            return None
+    return _listener(port) or "another process"
+
+
+def _listener(port: int) -> str | None:
+    inodes = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 9 and fields[3] == "0A" and int(fields[1].rsplit(":", 1)[1], 16) == port:  # LISTEN
+                inodes.add(f"socket:[{fields[9]}]")
+    if not inodes:
+        return None
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if any(os.readlink(fd) in inodes for fd in (entry / "fd").iterdir()):
+                command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+                return f"process {entry.name} ({command or '?'})"
+        except OSError:  # gone meanwhile, or not ours to look into
+            continue
+    return None
+
+
 def _kill_group(pgid: int) -> None:
     """Kill what is left of a child's process group (the child itself has exited)."""
     try:
@@ -296,10 +408,21 @@ def up(config: CellConfig) -> int:
         cell = CellProcesses(config, reconstructors=1)
         for part in cell.describe():
             print(f"starting {part}", flush=True)
+        cells.append(cell)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
+        heard = 0
+
+        def on_signal() -> None:
+            nonlocal heard
+            heard += 1
+            if heard > 1:
+                print(f"still stopping the cell (each part gets {_STOP_WAIT_S:g} s, then is killed)",
+                      file=sys.stderr, flush=True)
+            stop.set()
+
         for signum in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(signum, stop.set)
+            loop.add_signal_handler(signum, on_signal)
         try:
             # Ctrl-C is heard while the parts start too (that can take a minute, if one hangs).
             starting = asyncio.ensure_future(cell.start())
@@ -328,4 +451,9 @@ def up(config: CellConfig) -> int:
         finally:
             await cell.stop()
 
-    return asyncio.run(run())
+    cells: list[CellProcesses] = []
+    try:
+        return asyncio.run(run())
+    finally:
+        for cell in cells:  # only if the stop above could not finish: its loop went away first
+            cell.kill_remaining()
