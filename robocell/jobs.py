@@ -74,6 +74,7 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
         from wire.errors import CellError, NoResponder
 
         config = load_config(args.config)
+        args.cell_config = config
         if prepare is not None:
             args.prepared = prepare(args)
         try:
@@ -153,7 +154,11 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     if not args.no_wait:
         client.listen()  # before the submit: the job's first events can come before its answer
     # A Ctrl-C during the submit is heard once its answer says which job to cancel.
-    status = await client.submit(args.prepared)
+    try:
+        status = await client.submit(args.prepared)
+    except CellError as exc:
+        print(f"robocell {args.command}: {exc}{_plan_hint(args, exc)}", file=sys.stderr)
+        return 1
     job_id = status.job_id
     print(f"job {job_id} {status.state.value}", file=progress, flush=True)
     if args.no_wait:
@@ -215,6 +220,16 @@ async def _watch(client: AsyncCellClient, args: argparse.Namespace, job_id: str,
     else:
         print(format_result(result, seconds=loop.time() - began))
     return 0
+
+
+def _plan_hint(args: argparse.Namespace, error: Exception) -> str:
+    """For views planned around ``--target`` that the workspace refuses: the setting that moves them."""
+    if args.target is None or "outside the workspace" not in str(error):
+        return ""
+    plan = args.cell_config.scan.plan
+    return (f" (the views are planned {plan.standoff:g} m from the target, at elevations "
+            f"{', '.join(f'{e:g}' for e in plan.elevations_deg)} deg: [scan] plan standoff, or elevations_deg, "
+            f"of the configuration moves them)")
 
 
 async def _first(waiting: asyncio.Future, interrupts: asyncio.Queue) -> bool:
