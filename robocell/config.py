@@ -16,7 +16,7 @@ from typing import Any
 
 from .command import Commands
 
-__all__ = ["register", "update_toml", "write_config", "message_schemas", "SCHEMA_DIR"]
+__all__ = ["register", "update_toml", "write_config", "message_schemas", "message_table", "SCHEMA_DIR", "README_TABLE"]
 
 #: Significant digits written: far below any calibration's error.
 _DIGITS = 12
@@ -52,6 +52,35 @@ def message_schemas() -> dict[str, str]:
             for name, model in sorted(found.items())}
 
 
+#: The README's table of messages lies between these lines; ``schema --write`` rewrites it.
+README_TABLE = ("<!-- messages: made by `robocell schema --write` -->", "<!-- messages end -->")
+
+
+def message_table() -> str:
+    """A Markdown table of the messages: each one's fields, ``?`` after an optional one (it has a
+    default), from the same JSON Schemas."""
+    import json
+
+    rows = ["| message | fields (`?`: optional) |", "|---|---|"]
+    for name, text in message_schemas().items():
+        schema = json.loads(text)
+        required = set(schema.get("required", []))
+        fields = ", ".join(f"`{field}`" + ("" if field in required else "?") for field in schema["properties"])
+        rows.append(f"| [`{name.removesuffix('.json')}`](schemas/{name}) | {fields} |")
+    return "\n".join(rows)
+
+
+def _write_readme_table(readme: Path) -> bool:
+    begin, end = README_TABLE
+    text = readme.read_text(encoding="utf-8")
+    if begin not in text or end not in text:
+        return False
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    readme.write_text(f"{head}{begin}\n{message_table()}\n{end}{tail}", encoding="utf-8")
+    return True
+
+
 def _schema(args: argparse.Namespace) -> int:
     import json
 
@@ -66,6 +95,9 @@ def _schema(args: argparse.Namespace) -> int:
     for name, text in schemas.items():
         (directory / name).write_text(text, encoding="utf-8")
     print(f"wrote {len(schemas)} schemas to {directory}")
+    readme = directory.parent / "README.md"
+    if readme.is_file() and _write_readme_table(readme):
+        print(f"and the table of messages in {readme}")
     return 0
 
 
