@@ -30,6 +30,8 @@ __all__ = ["build_parser", "main", "MODULES"]
 MODULES = (reconstruct, sim, services, jobs, export, replay, config, calibrate, camera, demo)
 #: The exit status of a program whose reader went away (128 + SIGPIPE), as a shell reports it.
 _BROKEN_PIPE_STATUS = 141
+#: Libraries whose INFO messages are left out unless -v.
+_QUIET_LIBRARIES = ("httpx", "httpcore", "PIL", "trimesh", "rosbags")
 #: After Ctrl-C, as a shell reports a program it stopped with SIGINT.
 _INTERRUPTED_STATUS = 130
 
@@ -67,6 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if not args.verbose:
+        # Libraries' own progress (httpx logs every request at INFO) is noise to a user; -v shows it.
+        for library in _QUIET_LIBRARIES:
+            logging.getLogger(library).setLevel(logging.WARNING)
     try:
         status = args.run(args)
         if status == _INTERRUPTED_STATUS:
