@@ -362,12 +362,13 @@ def _write_scene(model: Model, fmt: str, out: Path) -> list[Path]:
 # --- ROS 2 bag ---------------------------------------------------------------------------------
 
 def _write_bag(model: Model, out: Path) -> list[Path]:
+    from rosbags.interfaces import Connection
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
     with Writer(out, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP) as writer:
-        connections: dict[str, object] = {}
+        connections: dict[str, Connection] = {}
         for topic, stamp, message in sorted(_bag_messages(model, store), key=lambda item: item[1]):
             if topic not in connections:
                 connections[topic] = writer.add_connection(topic, message.__msgtype__, typestore=store)
