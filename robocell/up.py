@@ -30,7 +30,7 @@ from wire.config import CellConfig
 from wire.errors import CellError
 from wire.transport import Transport
 
-__all__ = ["CellProcesses", "up", "serves_sim_camera"]
+__all__ = ["CellProcesses", "up", "serves_sim_camera", "on_interrupt", "port_holder", "check_port_free"]
 
 log = logging.getLogger(__name__)
 _STOP_WAIT_S = 5.0
@@ -132,17 +132,7 @@ class CellProcesses:
         await self.wait_ready(ready_timeout)
 
     def _check_router_port(self) -> None:
-        """A port already taken is named, with who holds it, before the router fails on it."""
-        endpoint = self.config.zenoh.router
-        address = endpoint.split("/", 1)[-1]
-        host, _, port = address.rpartition(":")
-        if not port.isdigit() or not endpoint.startswith(("tcp/", "tls/")):
-            return
-        host = host.strip("[]")
-        holder = port_holder(host, int(port))
-        if holder is not None:
-            raise CellError(f"the router's port {port} on {host} is in use by {holder}: stop that, or give "
-                            f"[zenoh] router another port")
+        check_port_free(self.config.zenoh.router, what="the router's port", setting="[zenoh] router")
 
     async def _spawn(self, child: _Child) -> None:
         child.stopped = False
@@ -346,6 +336,27 @@ def on_interrupt(task: asyncio.Future, *, again: str) -> Callable[[], int]:
     for signum in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(signum, heard)
     return lambda: count
+
+
+def check_port_free(endpoint: str, *, what: str, setting: str) -> None:
+    """Raise, naming the port and who holds it, if a Zenoh TCP or TLS ``endpoint`` on this machine
+    is taken: before a router fails on it with no more than "Address already in use" in its log.
+
+    Raises
+    ------
+    CellError
+        ``"the router's port 7447 on 127.0.0.1 is in use by process 1234 (...): stop that, or give
+        [zenoh] router another port"``.
+    """
+    if not endpoint.startswith(("tcp/", "tls/")):
+        return
+    host, _, port = endpoint.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+    if not port.isdigit():
+        return
+    host = host.strip("[]")
+    holder = port_holder(host, int(port))
+    if holder is not None:
+        raise CellError(f"{what} {port} on {host} is in use by {holder}: stop that, or give {setting} another port")
 
 
 def port_holder(host: str, port: int) -> str | None:

@@ -361,3 +361,12 @@ def test_camera_probe_logs_no_library_chatter(tmp_path):
     assert "snapshot     ok" in quiet.stdout
     assert quiet.stderr == ""
     assert "httpx" in verbose.stderr  # what was left out is there to be asked for
+
+
+def test_a_router_on_a_held_port_names_its_holder(tmp_path, capsys):
+    with _held_port() as listener:
+        port = listener.getsockname()[1]
+        assert main(["router", "--listen", f"tcp/127.0.0.1:{port}"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"robocell router: the router's port {port} on 127.0.0.1 is in use by process {os.getpid()} (")
+    assert err.rstrip().endswith("give --listen or [zenoh] router another port")
