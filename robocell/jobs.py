@@ -157,7 +157,10 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     try:
         status = await client.submit(args.prepared)
     except CellError as exc:
-        print(f"robocell {args.command}: {exc}{_plan_hint(args, exc)}", file=sys.stderr)
+        hint = _plan_hint(args, exc)
+        if not hint:
+            raise
+        print(f"robocell {args.command}: {exc}{hint}", file=sys.stderr)
         return 1
     job_id = status.job_id
     print(f"job {job_id} {status.state.value}", file=progress, flush=True)

@@ -195,3 +195,19 @@ def test_a_bag_of_a_job_has_its_pictures_and_the_flange_under_the_camera(cell, s
     points = np.frombuffer(bytes(cloud.data), dtype="<f4").reshape(-1, 3)
     fit = Superquadric.from_dict(scanned.superquadric.model_dump())
     assert np.median(np.linalg.norm(points - fit.T_world_object[:3, 3], axis=1)) < 0.1  # the object's, in metres
+
+
+def test_scan_ends_with_a_summary_a_person_reads(cell, capsys):
+    target = target_from_config(cell.config.sim)
+    assert main(["--config", _config(cell), "scan", "--target", *map(str, target)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    job_id = out[0].split()[1]
+    summary = out[-5:]
+    truth = _truth(cell)
+    assert summary[0].startswith(f"job {job_id} succeeded in ") and " cm (shape " in summary[0]
+    centre = ", ".join(f"{v:.3f}" for v in truth.T_world_object[:3, 3])
+    assert f"centred at [{centre}] m" in summary[0]  # the true centre, to the millimetre
+    assert summary[1].startswith("  silhouette IoU ")
+    assert "grasps; the best: " in summary[2]
+    assert summary[3] == f"  recording {cell.config.run_dir / (job_id + '.rrd')}; replay it: robocell replay {job_id}"
+    assert summary[4] == f"  its model for a simulator or MoveIt: robocell export {job_id} --format urdf"
