@@ -1,4 +1,5 @@
-"""``robocell config`` and ``robocell schema``, and editing a user's configuration file in place (``calibrate --write-config``).
+"""``robocell config`` and ``robocell schema``, and editing a user's configuration file in place
+(``calibrate --write-config``).
 
 The file is edited with tomlkit, which keeps its comments, its order and its
 layout; the edited text must load as a valid configuration before it

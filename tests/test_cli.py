@@ -368,5 +368,6 @@ def test_a_router_on_a_held_port_names_its_holder(tmp_path, capsys):
         port = listener.getsockname()[1]
         assert main(["router", "--listen", f"tcp/127.0.0.1:{port}"]) == 1
     err = capsys.readouterr().err
-    assert err.startswith(f"robocell router: the router's port {port} on 127.0.0.1 is in use by process {os.getpid()} (")
+    holder = f"process {os.getpid()} ("
+    assert err.startswith(f"robocell router: the router's port {port} on 127.0.0.1 is in use by {holder}")
     assert err.rstrip().endswith("give --listen or [zenoh] router another port")

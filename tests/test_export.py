@@ -174,7 +174,8 @@ def test_export_of_a_bundle_from_the_command_line(bundle, tmp_path, capsys):
     assert main(["export", str(bundle), "--format", "urdf", "--out", str(out)]) == 0
     line = json.loads(capsys.readouterr().out)
     assert line["parts"] >= 1 and line["grasps"] >= 1
-    assert [Path(f).name for f in line["files"]] == ["model.urdf", *(f"model_part{i}.stl" for i in range(line["parts"]))]
+    meshes = [f"model_part{i}.stl" for i in range(line["parts"])]
+    assert [Path(f).name for f in line["files"]] == ["model.urdf", *meshes]
 
 
 def test_a_directory_that_is_no_bundle_is_one_line(tmp_path, capsys):
