@@ -209,10 +209,11 @@ class CellProcesses:
             If a child exits meanwhile, or something is still missing after ``timeout`` seconds.
         """
         expected, sim_camera = self._expected()
-        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
-                                         connect_timeout_s=min(timeout, 20.0))
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
+        await self._wait_router_listening(deadline)
+        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
+                                         connect_timeout_s=min(max(deadline - loop.time(), 1.0), 20.0))
         missing: list[str] = []
         try:
             while loop.time() < deadline:
@@ -232,19 +233,25 @@ class CellProcesses:
         raise CellError(f"the cell was not ready after {timeout:g} s: waiting for "
                         f"{', '.join(missing)}; logs in {self.log_dir}")
 
+    async def _wait_router_listening(self, deadline: float) -> None:
+        """Wait until the router this cell started takes TCP connections. Zenoh's open waits in a
+        thread that a Ctrl-C cannot stop (and the loop's end waits for it): it is begun only once
+        the router is there, so that it returns at once."""
+        router = next((c for c in self.children if c.name == "router"), None)
+        endpoint = self.config.zenoh.router
+        if router is None or router.process is None or not endpoint.startswith(("tcp/", "tls/")):
+            return
+        host, _, port = endpoint.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+        loop = asyncio.get_running_loop()
+        while loop.time() < deadline:
+            self._check_running()
+            if port.isdigit() and await _listening(host.strip("[]"), int(port)):
+                return
+            await asyncio.sleep(0.05)
+
     async def _sim_camera_listening(self) -> bool:
         address = urlsplit(self.config.camera.url)
-        try:
-            _, writer = await asyncio.wait_for(
-                asyncio.open_connection(address.hostname or "127.0.0.1", address.port or 80), 1.0)
-        except (OSError, asyncio.TimeoutError):
-            return False
-        writer.close()
-        try:
-            await writer.wait_closed()
-        except OSError:
-            pass
-        return True
+        return await _listening(address.hostname or "127.0.0.1", address.port or 80)
 
     def _check_running(self) -> None:
         for child in self.children:
@@ -402,6 +409,20 @@ def _listener(port: int) -> str | None:
         except OSError:  # gone meanwhile, or not ours to look into
             continue
     return None
+
+
+async def _listening(host: str, port: int) -> bool:
+    """Whether something takes TCP connections at ``host:port`` now."""
+    try:
+        _, writer = await asyncio.wait_for(asyncio.open_connection(host, port), 1.0)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    writer.close()
+    try:
+        await writer.wait_closed()
+    except OSError:
+        pass
+    return True
 
 
 def _kill_group(pgid: int) -> None:

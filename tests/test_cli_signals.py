@@ -110,7 +110,8 @@ def _no_traceback_and_nothing_left(command: Foreground) -> None:
     wait_until(lambda: not command.left_behind(), timeout=15, what="the command's processes to end")
 
 
-def _cell_toml(tmp_path: Path, **lines: str) -> Path:
+def _cell_toml(tmp_path: Path) -> Path:
+    """A cell on free loopback ports, its robot moving at 0.2 m/s."""
     path = tmp_path / "cell.toml"
     text = [f'run_dir = "{tmp_path / "runs"}"', "[zenoh]", f'router = "tcp/127.0.0.1:{free_port()}"',
             "[camera]", f'url = "http://127.0.0.1:{free_port()}"', "[robot]", "speed = 0.2"]
