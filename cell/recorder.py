@@ -35,6 +35,7 @@ import logging
 import multiprocessing
 import os
 import queue
+import signal
 import threading
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -181,6 +182,7 @@ class _Child:
 
 def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -> None:
     """The recorder process: apply messages until told to stop, or until the daemon is gone."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C is for the daemon, which stops this process
     logging.basicConfig(level=level or logging.INFO, format=_LOG_FORMAT)
     # Recording is background work: on a busy machine the processes that run the jobs go first.
     os.nice(_NICENESS)

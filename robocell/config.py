@@ -1,4 +1,5 @@
-"""``robocell config``, and editing a user's configuration file in place (``calibrate --write-config``).
+"""``robocell config`` and ``robocell schema``, and editing a user's configuration file in place
+(``calibrate --write-config``).
 
 The file is edited with tomlkit, which keeps its comments, its order and its
 layout; the edited text must load as a valid configuration before it
@@ -16,14 +17,89 @@ from typing import Any
 
 from .command import Commands
 
-__all__ = ["register", "update_toml", "write_config"]
+__all__ = ["register", "update_toml", "write_config", "message_schemas", "message_table", "SCHEMA_DIR", "README_TABLE"]
 
 #: Significant digits written: far below any calibration's error.
 _DIGITS = 12
 
 
+#: Where ``robocell schema --write`` puts the wire contract's JSON Schemas: the repository's ``schemas/``.
+SCHEMA_DIR = Path(__file__).resolve().parents[1] / "schemas"
+
+
 def register(commands: Commands) -> None:
     commands.add("config", _print_config, help="print the configuration in effect (defaults + --config), as JSON")
+    schema = commands.add("schema", _schema, help="the wire contract's messages as JSON Schema",
+                          description="Print the JSON Schema of every message on the wire (one document: message "
+                                      "name to schema), generated from the pydantic models of wire/messages.py; "
+                                      "with --write, write them as schemas/<Message>.json (the repository's copy, "
+                                      "which a test checks is current).")
+    schema.add_argument("--write", nargs="?", const=str(SCHEMA_DIR), metavar="DIR",
+                        help=f"write one file per message into DIR (default {SCHEMA_DIR.name}/ of the repository), "
+                             f"removing those of messages that are gone")
+
+
+def message_schemas() -> dict[str, str]:
+    """Each message of the wire contract (the ``Message`` models of ``wire.messages``) as its JSON
+    Schema's text, by file name (``ScanRequest.json``): what ``schema --write`` writes."""
+    import json
+
+    from wire import messages
+
+    models = [getattr(messages, name) for name in messages.__all__]
+    found = {model.__name__: model for model in models
+             if isinstance(model, type) and issubclass(model, messages.Message) and model is not messages.Message}
+    return {f"{name}.json": json.dumps(model.model_json_schema(), indent=2) + "\n"
+            for name, model in sorted(found.items())}
+
+
+#: The README's table of messages lies between these lines; ``schema --write`` rewrites it.
+README_TABLE = ("<!-- messages: made by `robocell schema --write` -->", "<!-- messages end -->")
+
+
+def message_table() -> str:
+    """A Markdown table of the messages: each one's fields, ``?`` after an optional one (it has a
+    default), from the same JSON Schemas."""
+    import json
+
+    rows = ["| message | fields (`?`: optional) |", "|---|---|"]
+    for name, text in message_schemas().items():
+        schema = json.loads(text)
+        required = set(schema.get("required", []))
+        fields = ", ".join(f"`{field}`" + ("" if field in required else "?") for field in schema["properties"])
+        rows.append(f"| [`{name.removesuffix('.json')}`](schemas/{name}) | {fields} |")
+    return "\n".join(rows)
+
+
+def _write_readme_table(readme: Path) -> bool:
+    begin, end = README_TABLE
+    text = readme.read_text(encoding="utf-8")
+    if begin not in text or end not in text:
+        return False
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    readme.write_text(f"{head}{begin}\n{message_table()}\n{end}{tail}", encoding="utf-8")
+    return True
+
+
+def _schema(args: argparse.Namespace) -> int:
+    import json
+
+    schemas = message_schemas()
+    if args.write is None:
+        print(json.dumps({name.removesuffix(".json"): json.loads(text) for name, text in schemas.items()}, indent=2))
+        return 0
+    directory = Path(args.write)
+    directory.mkdir(parents=True, exist_ok=True)
+    for stale in sorted(set(p.name for p in directory.glob("*.json")) - set(schemas)):
+        (directory / stale).unlink()
+    for name, text in schemas.items():
+        (directory / name).write_text(text, encoding="utf-8")
+    print(f"wrote {len(schemas)} schemas to {directory}")
+    readme = directory.parent / "README.md"
+    if readme.is_file() and _write_readme_table(readme):
+        print(f"and the table of messages in {readme}")
+    return 0
 
 
 def _print_config(args: argparse.Namespace) -> int:

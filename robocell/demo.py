@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import socket
 import sys
 from pathlib import Path
@@ -56,18 +57,24 @@ def _row(name: str, truth, fit) -> str:
     return f"  {name:<10} {fmt(truth):<32} {fmt(fit)}"
 
 
-async def _demo(run_dir: Path) -> int:
+#: As a shell reports a program that Ctrl-C stopped.
+_INTERRUPTED = 130
+#: How long an interrupted demo waits for its job's cancel to be accepted.
+_CANCEL_WAIT_S = 3.0
+
+
+async def _demo(run_dir: Path, cells: list) -> int:
     import numpy as np
 
     from core_cy.scoring import centre_error, volumetric_iou
     from core_cy.superquadric import Superquadric
     from wire.client import AsyncCellClient
     from wire.errors import CellError
-    from wire.messages import PickRequest, ScanRequest
+    from wire.messages import JobState, PickRequest, ScanRequest
     from workers.sim.scene import truth_from_config
 
     from .jobs import print_event
-    from .up import CellProcesses
+    from .up import _STOP_WAIT_S, CellProcesses, on_interrupt
 
     config = local_config(run_dir)
     truth = Superquadric.from_dict(truth_from_config(config.sim))
@@ -75,13 +82,42 @@ async def _demo(run_dir: Path) -> int:
     print(f"starting a simulated cell in {run_dir} (a {config.sim.shape} on the table at "
           f"{np.round(target, 3).tolist()} m)", flush=True)
     cell = CellProcesses(config)
-    try:
+    cells.append(cell)
+    job: list[str] = []   # the job's id, once submitted: an interrupted demo cancels it
+
+    async def scan():
         await cell.start()
         async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id) as client:
             # Scan it, then pick it up and set it down 15 cm to the side.
             place = [float(target[0]), float(target[1]) + 0.15]
             request = ScanRequest(target=target.tolist(), label="demo", pick=PickRequest(place=place))
-            result = await client.scan(request, timeout=120, on_event=print_event)
+            client.listen()  # before the submit: the job's first events can come before its answer
+            status = await client.submit(request)
+            job.append(status.job_id)
+            try:
+                final = await client.wait(status.job_id, timeout=120, on_event=print_event)
+            except asyncio.CancelledError:
+                # Stopped by Ctrl-C: the job must not go on moving the robot, nor carry on at the next
+                # demo (the run directory keeps its jobs). The cancel is asked for, and not waited for long.
+                with contextlib.suppress(CellError, TimeoutError):
+                    async with asyncio.timeout(_CANCEL_WAIT_S):
+                        await client.cancel(status.job_id)
+                raise
+            if final.state is not JobState.SUCCEEDED:
+                raise CellError(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}")
+            return await client.result(status.job_id)
+
+    work = asyncio.ensure_future(scan())
+    interrupts = on_interrupt(work, again=f"still stopping the simulated cell (each part gets {_STOP_WAIT_S:g} s, "
+                                         f"then is killed)")
+    try:
+        result = await work
+    except asyncio.CancelledError:
+        if not interrupts():
+            raise
+        print("interrupted: stopping the simulated cell" + (f" (job {job[0]} cancelled)" if job else ""),
+              file=sys.stderr, flush=True)
+        return _INTERRUPTED
     except CellError as exc:
         print(f"robocell demo: {exc}", file=sys.stderr)
         return 1
@@ -119,4 +155,9 @@ async def _demo(run_dir: Path) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    return asyncio.run(_demo(Path(args.run_dir)))
+    cells: list = []
+    try:
+        return asyncio.run(_demo(Path(args.run_dir), cells))
+    finally:
+        for cell in cells:  # only if the stop in _demo could not finish: its loop went away first
+            cell.kill_remaining()

@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 from .command import Commands
 
@@ -16,8 +17,10 @@ if TYPE_CHECKING:
     from wire.client import AsyncCellClient
     from wire.messages import CellStatus, JobEvent, ScanRequest
 
-__all__ = ["register", "format_status", "print_event"]
+__all__ = ["register", "format_status", "format_result", "print_event"]
 
+#: As a shell reports a program that Ctrl-C stopped.
+_INTERRUPTED = 130
 _POSES_SHAPE = "a JSON list of 2 to 16 4x4 flange poses (flange-to-base, metres)"
 
 Action = Callable[["AsyncCellClient", argparse.Namespace], Awaitable[int]]
@@ -38,14 +41,19 @@ def register(commands: Commands) -> None:
     scan.add_argument("--request-id", help="client-chosen id: submitting it again returns the same job")
     scan.add_argument("--timeout", type=float, default=300.0, help="seconds to wait (default %(default)s)")
     scan.add_argument("--no-wait", action="store_true", help="print the job id and return")
+    scan.add_argument("--json", action="store_true",
+                      help="print the result as one JSON document (the progress goes to stderr)")
 
     jobs = commands.add("jobs", _command(_jobs, _job_states), help="list the cell's jobs, newest first")
     jobs.add_argument("--state", action="append", metavar="STATE",
                       help="only jobs in this state (queued, succeeded, failed, ...); may be repeated")
     jobs.add_argument("--limit", type=int, default=20)
+    jobs.add_argument("--json", action="store_true", help="print the jobs' JobStatus as one JSON list")
 
     job = commands.add("job", _command(_job), help="show one job's status and, if done, its result")
     job.add_argument("job_id")
+    job.add_argument("--json", action="store_true",
+                     help="(the default) one JSON document: the JobStatus, with the ScanResult in 'result'")
 
     status = commands.add("status", _command(_status), help="the cell at a glance: workers and their load, the "
                                                             "queue, jobs by state, recent failures")
@@ -54,6 +62,7 @@ def register(commands: Commands) -> None:
 
     cancel = commands.add("cancel", _command(_cancel), help="cancel a job")
     cancel.add_argument("job_id")
+    cancel.add_argument("--json", action="store_true", help="print the job's JobStatus as JSON")
 
 
 def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | None = None):
@@ -65,6 +74,7 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
         from wire.errors import CellError, NoResponder
 
         config = load_config(args.config)
+        args.cell_config = config
         if prepare is not None:
             args.prepared = prepare(args)
         try:
@@ -93,10 +103,10 @@ async def _connected(action: Action, args: argparse.Namespace, config) -> int:
         return await action(client, args)
 
 
-def print_event(event: JobEvent) -> None:
-    """One line of a job's progress."""
+def print_event(event: JobEvent, file: TextIO | None = None) -> None:
+    """One line of a job's progress (on stdout, or ``file``)."""
     print(f"  {time.strftime('%H:%M:%S', time.localtime(event.time))}  {event.state.value:<14} {event.message}",
-          flush=True)
+          file=file or sys.stdout, flush=True)
 
 
 def _scan_request(args: argparse.Namespace) -> ScanRequest:
@@ -132,25 +142,148 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
 
 
 async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
+    """Submit, show the progress, print the result; Ctrl-C cancels the job (a second leaves it running)."""
+    from wire.errors import CellError
     from wire.messages import JobState
 
+    # Progress is for a person: with --json it goes to stderr, and stdout has the one JSON document.
+    progress = sys.stderr if args.json else sys.stdout
+    interrupts: asyncio.Queue[None] = asyncio.Queue()
+    loop = asyncio.get_running_loop()
+    loop.add_signal_handler(signal.SIGINT, interrupts.put_nowait, None)
     if not args.no_wait:
         client.listen()  # before the submit: the job's first events can come before its answer
-    status = await client.submit(args.prepared)
-    print(f"job {status.job_id} {status.state.value}", flush=True)
+    # A Ctrl-C during the submit is heard once its answer says which job to cancel.
+    try:
+        status = await client.submit(args.prepared)
+    except CellError as exc:
+        hint = _plan_hint(args, exc)
+        if not hint:
+            raise
+        print(f"robocell {args.command}: {exc}{hint}", file=sys.stderr)
+        return 1
+    job_id = status.job_id
+    print(f"job {job_id} {status.state.value}", file=progress, flush=True)
     if args.no_wait:
+        if args.json:
+            print(status.model_dump_json())
         return 0
-    final = await client.wait(status.job_id, timeout=args.timeout, on_event=print_event)
+    began = loop.time()
+    return await _watch(client, args, job_id, interrupts, progress, began)
+
+
+async def _watch(client: AsyncCellClient, args: argparse.Namespace, job_id: str, interrupts: asyncio.Queue,
+                 progress: TextIO, began: float) -> int:
+    from wire.errors import CellError
+    from wire.messages import JobState
+
+    loop = asyncio.get_running_loop()
+    heard = ["queued"]  # the job's last state, as its events told
+
+    def on_event(event: JobEvent) -> None:
+        heard[0] = event.state.value
+        print_event(event, file=progress)
+
+    waiting = asyncio.ensure_future(client.wait(job_id, timeout=args.timeout, on_event=on_event))
+    cancelling: asyncio.Future | None = None
+    try:
+        if await _first(waiting, interrupts):
+            print(f"Ctrl-C: cancelling job {job_id} (Ctrl-C again leaves it running)", file=sys.stderr, flush=True)
+            # The cancel is asked while the next Ctrl-C is listened for: a cell slow to answer keeps no one waiting.
+            cancelling = asyncio.ensure_future(client.cancel(job_id))
+            if await _first(waiting, interrupts):
+                print(f"job {job_id} was {heard[0]} when last heard of, and this command no longer watches it: "
+                      f"watch it with robocell job {job_id}, cancel it with robocell cancel {job_id}",
+                      file=sys.stderr, flush=True)
+                return _INTERRUPTED
+            final = waiting.result()
+            if cancelling.done() and not cancelling.cancelled() and isinstance(cancelling.exception(), CellError):
+                print(f"robocell scan: the cancel was refused: {cancelling.exception()}", file=sys.stderr)
+            print(f"job {final.job_id} {final.state.value}" + (f": {final.error}" if final.error else ""),
+                  file=sys.stderr, flush=True)
+            return _INTERRUPTED
+        final = waiting.result()
+    except TimeoutError:
+        print(f"robocell scan: job {job_id} is not finished after {args.timeout:g} s: it goes on; "
+              f"watch it with robocell job {job_id}, cancel it with robocell cancel {job_id}", file=sys.stderr)
+        return 1
+    finally:
+        waiting.cancel()
+        if cancelling is not None and not cancelling.done():
+            cancelling.cancel()  # sent already: the cell acts on it whether or not its answer is heard
+        await asyncio.gather(waiting, *([cancelling] if cancelling else []), return_exceptions=True)
     if final.state is not JobState.SUCCEEDED:
         print(f"job {final.job_id} {final.state.value}: {final.error or ''}", file=sys.stderr)
+        if args.json:
+            print(final.model_dump_json())
         return 1
     result = await client.result(final.job_id)
-    print(json.dumps({"job_id": result.job_id, "superquadric": result.superquadric.model_dump(),
-                      "silhouette_iou": result.silhouette_iou, "timings_ms": result.timings_ms,
-                      "grasps": [grasp.model_dump() for grasp in result.grasps[:3]],
-                      "pick": None if result.pick is None else result.pick.model_dump(),
-                      "recording": result.recording}))
+    if args.json:
+        print(json.dumps(_summary(result)))
+    else:
+        print(format_result(result, seconds=loop.time() - began))
     return 0
+
+
+def _plan_hint(args: argparse.Namespace, error: Exception) -> str:
+    """For views planned around ``--target`` that the workspace refuses: the setting that moves them."""
+    if args.target is None or "outside the workspace" not in str(error):
+        return ""
+    plan = args.cell_config.scan.plan
+    return (f" (the views are planned {plan.standoff:g} m from the target, at elevations "
+            f"{', '.join(f'{e:g}' for e in plan.elevations_deg)} deg: [scan] plan standoff, or elevations_deg, "
+            f"of the configuration moves them)")
+
+
+async def _first(waiting: asyncio.Future, interrupts: asyncio.Queue) -> bool:
+    """Wait for ``waiting`` to end or a Ctrl-C to come: whether a Ctrl-C came first."""
+    interrupted = asyncio.ensure_future(interrupts.get())
+    try:
+        await asyncio.wait({waiting, interrupted}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        interrupted.cancel()
+    if interrupted.done() and not interrupted.cancelled():
+        return True
+    waiting.result()  # its error, if it had one
+    return False
+
+
+def _summary(result) -> dict:
+    """The result's essentials, as ``scan --json`` prints them."""
+    return {"job_id": result.job_id, "superquadric": result.superquadric.model_dump(),
+            "silhouette_iou": result.silhouette_iou, "timings_ms": result.timings_ms,
+            "grasps": [grasp.model_dump() for grasp in result.grasps[:3]],
+            "pick": None if result.pick is None else result.pick.model_dump(),
+            "recording": result.recording}
+
+
+def format_result(result, *, seconds: float | None = None) -> str:
+    """A finished scan's result as a few lines for a person."""
+    sq = result.superquadric
+    size = " x ".join(f"{2 * a * 100:.1f}" for a in sq.size)
+    centre = ", ".join(f"{v:.3f}" for v in (row[3] for row in sq.T_world_object[:3]))
+    took = f" in {seconds:.1f} s" if seconds is not None else ""
+    lines = [f"job {result.job_id} succeeded{took}: a superquadric {size} cm (shape {sq.shape[0]:.2f}, "
+             f"{sq.shape[1]:.2f}) centred at [{centre}] m",
+             "  silhouette IoU " + ", ".join(f"{v:.3f}" for v in result.silhouette_iou)
+             + f"; reconstruction {result.timings_ms.get('total', 0.0):.1f} ms"]
+    if result.grasps:
+        best = result.grasps[0]
+        lines.append(f"  {len(result.grasps)} grasps; the best: {best.approach}, closing across "
+                     f"{best.width * 100:.2f} cm, score {best.score:.2f}")
+    else:
+        lines.append("  no grasp of the cell's gripper holds it")
+    if result.pick is not None:
+        verdict = {True: "held it", False: "missed it", None: "cannot tell whether it held"}[result.pick.held]
+        lines.append(f"  pick with grasp {result.pick.grasp}: {verdict}"
+                     + (f" ({result.pick.reason})" if result.pick.reason and not result.pick.held else "")
+                     + (", and placed it" if result.pick.placed else ""))
+    if result.recording:
+        lines.append(f"  recording {result.recording}; replay it: robocell replay {result.job_id}")
+    else:
+        lines.append(f"  no recording: {result.recording_error}")
+    lines.append(f"  its model for a simulator or MoveIt: robocell export {result.job_id} --format urdf")
+    return "\n".join(lines)
 
 
 def _job_states(args: argparse.Namespace) -> set | None:
@@ -164,7 +297,11 @@ def _job_states(args: argparse.Namespace) -> set | None:
 
 
 async def _jobs(client: AsyncCellClient, args: argparse.Namespace) -> int:
-    for job in await client.list(args.prepared, args.limit):
+    listed = await client.list(args.prepared, args.limit)
+    if args.json:
+        print(json.dumps([job.model_dump(mode="json") for job in listed], indent=1))
+        return 0
+    for job in listed:
         created = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(job.created))
         print(f"{job.job_id}  {created}  {job.state.value:<14} {job.error or job.request.label}")
     return 0
@@ -174,9 +311,10 @@ async def _job(client: AsyncCellClient, args: argparse.Namespace) -> int:
     from wire.messages import JobState
 
     status = await client.status(args.job_id)
-    print(status.model_dump_json(indent=1))
-    if status.state is JobState.SUCCEEDED:
-        print((await client.result(args.job_id)).model_dump_json(indent=1))
+    document = status.model_dump(mode="json")
+    document["result"] = ((await client.result(args.job_id)).model_dump(mode="json")
+                          if status.state is JobState.SUCCEEDED else None)
+    print(json.dumps(document, indent=1))
     return 0
 
 
@@ -188,7 +326,8 @@ async def _status(client: AsyncCellClient, args: argparse.Namespace) -> int:
 
 async def _cancel(client: AsyncCellClient, args: argparse.Namespace) -> int:
     status = await client.cancel(args.job_id)
-    print(f"job {status.job_id}: cancel requested ({status.state.value})")
+    print(status.model_dump_json(indent=1) if args.json else
+          f"job {status.job_id}: cancel requested ({status.state.value})")
     return 0
 
 

@@ -16,19 +16,22 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse
 import logging
+import signal
 import sys
 
 from core_cy.errors import CoreError
 from wire.errors import CellError
 
-from . import calibrate, camera, config, demo, jobs, reconstruct, replay, services, sim
+from . import calibrate, camera, config, demo, export, jobs, reconstruct, replay, services, sim
 from .command import Commands
 
 __all__ = ["build_parser", "main", "MODULES"]
 
-MODULES = (reconstruct, sim, services, jobs, replay, config, calibrate, camera, demo)
+MODULES = (reconstruct, sim, services, jobs, export, replay, config, calibrate, camera, demo)
 #: The exit status of a program whose reader went away (128 + SIGPIPE), as a shell reports it.
 _BROKEN_PIPE_STATUS = 141
+#: Libraries whose INFO messages are left out unless -v.
+_QUIET_LIBRARIES = ("httpx", "httpcore", "PIL", "trimesh", "rosbags")
 #: After Ctrl-C, as a shell reports a program it stopped with SIGINT.
 _INTERRUPTED_STATUS = 130
 
@@ -66,8 +69,15 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if not args.verbose:
+        # Libraries' own progress (httpx logs every request at INFO) is noise to a user; -v shows it.
+        for library in _QUIET_LIBRARIES:
+            logging.getLogger(library).setLevel(logging.WARNING)
     try:
         status = args.run(args)
+        if status == _INTERRUPTED_STATUS:
+            # The command heard Ctrl-C and handled it: one more while it exits has nothing left to stop.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         sys.stdout.flush()  # here, where a closed pipe can still be handled
         return status
     except BrokenPipeError:

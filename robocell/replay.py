@@ -77,6 +77,12 @@ def _replay(args: argparse.Namespace) -> int:
                           "and open the address it prints in a browser")
     argv = replay_command(path, web=args.web, bind=args.bind, web_port=args.web_port, grpc_port=args.grpc_port)
     if args.web:
+        from .up import port_holder
+
+        for option, port in (("--web-port", args.web_port), ("--grpc-port", args.grpc_port)):
+            holder = port_holder(args.bind, port)
+            if holder is not None:
+                raise ConfigError(f"port {port} on {args.bind} is in use by {holder}: give {option} another port")
         print(f"serving {path}: open {web_viewer_address(args.bind, args.web_port, args.grpc_port)} "
               f"(Ctrl-C stops)", flush=True)
     viewer = subprocess.Popen(argv)

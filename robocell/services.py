@@ -31,7 +31,12 @@ def _config(args: argparse.Namespace):
 def _router(args: argparse.Namespace) -> int:
     from cell.service import run_router
 
-    return run_router(_config(args), args.listen)
+    from .up import check_port_free
+
+    config = _config(args)
+    endpoint = args.listen or config.zenoh.router
+    check_port_free(endpoint, what="the router's port", setting="--listen or [zenoh] router")
+    return run_router(config, args.listen)
 
 
 def _worker(args: argparse.Namespace) -> int:

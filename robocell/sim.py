@@ -148,13 +148,28 @@ def run(args: argparse.Namespace) -> int:
 
 # --- sim camera and sim kuka -----------------------------------------------------------------
 
+#: ``sim kuka --fault`` names, and the simulated controller's.
+_FAULTS = {"estop": "emergency_stop", "drives-off": "drives_off", "drop": "drop", "hang": "hang",
+           "unreachable": "unreachable", "grip-stuck": "grip_stuck"}
+
+
 def add_kuka_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``robocell sim kuka``."""
-    parser.add_argument("--protocol", choices=["kvp", "opc"], default="kvp",
-                        help="kvp: KukaVarProxy over TCP; opc: an OpenOPC gateway (Pyro5) (default kvp)")
+    parser.add_argument("--protocol", choices=["kvp", "opc"],
+                        help="kvp: KukaVarProxy over TCP; opc: an OpenOPC gateway (Pyro5) (default: the "
+                             "configuration's [robot.kuka] protocol, else kvp)")
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=int,
-                        help="port (default: the protocol's usual one, as [robot.kuka] port has it)")
+                        help="port (default: the configuration's [robot.kuka] port, else the protocol's usual one)")
+    parser.add_argument("--fault", choices=sorted(_FAULTS),
+                        help="simulate a fault, to try a program's error handling: estop (emergency stop), "
+                             "drives-off (a drive fault), drop (the link to the bridge dropped), hang (the "
+                             "controller stops answering), unreachable (a pose the arm cannot reach), grip-stuck "
+                             "(the gripper's input never changes)")
+    parser.add_argument("--fault-after", type=int, default=0, metavar="N",
+                        help="with --fault: start it as the program takes its command N + 1, after N moves or "
+                             "gripper commands (default 0: the first); SIGUSR1 resets the controller, as after "
+                             "acknowledging the fault")
     parser.add_argument("--speed", type=float, default=500.0, metavar="MM_S",
                         help="linear speed at 100 %% override, mm/s (default 500)")
     parser.add_argument("--rotation-speed", type=float, default=90.0, metavar="DEG_S",
@@ -169,12 +184,21 @@ def _kuka(args: argparse.Namespace) -> int:
     from workers.sim import kuka
     from workers.sim.robot import SceneGripper
 
+    config = load_config(args.config)
     # The gripper's input confirms a hold where the configuration's [gripper] holds its [sim] object.
-    holds = SceneGripper.from_config(load_config(args.config)).holds
+    holds = SceneGripper.from_config(config).holds
+    # Where the configuration's KUKA bridge would look for it, unless told otherwise.
+    configured = config.robot.kuka if config.robot.backend == "kuka" else None
+    protocol = args.protocol or (configured.protocol if configured is not None else "kvp")
+    port = args.port if args.port is not None else (
+        configured.port if configured is not None and configured.protocol == protocol else None)
+    if args.fault is None and args.fault_after:
+        raise ValueError("--fault-after goes with --fault")
+    fault_after = None if args.fault is None else (_FAULTS[args.fault], args.fault_after)
 
     async def serve(stop: asyncio.Event) -> None:
-        await kuka.main(args.protocol, args.host, args.port, stop=stop, speed_mm_s=args.speed,
-                        rotation_deg_s=args.rotation_speed, holds=holds)
+        await kuka.main(protocol, args.host, port, stop=stop, speed_mm_s=args.speed,
+                        rotation_deg_s=args.rotation_speed, holds=holds, fault_after=fault_after)
 
     return run_until_stopped(serve, "simulated KUKA controller")
 

@@ -20,6 +20,7 @@ import logging
 import os
 import signal
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -29,7 +30,7 @@ from wire.config import CellConfig
 from wire.errors import CellError
 from wire.transport import Transport
 
-__all__ = ["CellProcesses", "up", "serves_sim_camera"]
+__all__ = ["CellProcesses", "up", "serves_sim_camera", "on_interrupt", "port_holder", "check_port_free"]
 
 log = logging.getLogger(__name__)
 _STOP_WAIT_S = 5.0
@@ -106,6 +107,7 @@ class CellProcesses:
             children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon"), f"daemon of cell {cell}"))
         self.children = children
         self._environment: dict[str, str] = {}
+        self._stopping: asyncio.Future | None = None
 
     async def start(self, *, ready_timeout: float = 60.0) -> None:
         """Start every child and wait until the daemon and all workers announce themselves.
@@ -116,6 +118,8 @@ class CellProcesses:
             If a child exits during start-up, or the cell is not ready in time (the
             message names what is missing and where its log is).
         """
+        if any(child.name == "router" for child in self.children):
+            self._check_router_port()
         self.log_dir.mkdir(parents=True, exist_ok=True)
         # The JSON masks the camera password; the children get it from the environment instead.
         self.config_path.write_text(self.config.model_dump_json(indent=1))
@@ -126,6 +130,9 @@ class CellProcesses:
         for child in self.children:
             await self._spawn(child)
         await self.wait_ready(ready_timeout)
+
+    def _check_router_port(self) -> None:
+        check_port_free(self.config.zenoh.router, what="the router's port", setting="[zenoh] router")
 
     async def _spawn(self, child: _Child) -> None:
         child.stopped = False
@@ -202,10 +209,11 @@ class CellProcesses:
             If a child exits meanwhile, or something is still missing after ``timeout`` seconds.
         """
         expected, sim_camera = self._expected()
-        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
-                                         connect_timeout_s=min(timeout, 20.0))
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
+        await self._wait_router_listening(deadline)
+        transport = await Transport.open(self.config.zenoh.router, settings=self.config.zenoh.client_settings(),
+                                         connect_timeout_s=min(max(deadline - loop.time(), 1.0), 20.0))
         missing: list[str] = []
         try:
             while loop.time() < deadline:
@@ -225,19 +233,25 @@ class CellProcesses:
         raise CellError(f"the cell was not ready after {timeout:g} s: waiting for "
                         f"{', '.join(missing)}; logs in {self.log_dir}")
 
+    async def _wait_router_listening(self, deadline: float) -> None:
+        """Wait until the router this cell started takes TCP connections. Zenoh's open waits in a
+        thread that a Ctrl-C cannot stop (and the loop's end waits for it): it is begun only once
+        the router is there, so that it returns at once."""
+        router = next((c for c in self.children if c.name == "router"), None)
+        endpoint = self.config.zenoh.router
+        if router is None or router.process is None or not endpoint.startswith(("tcp/", "tls/")):
+            return
+        host, _, port = endpoint.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+        loop = asyncio.get_running_loop()
+        while loop.time() < deadline:
+            self._check_running()
+            if port.isdigit() and await _listening(host.strip("[]"), int(port)):
+                return
+            await asyncio.sleep(0.05)
+
     async def _sim_camera_listening(self) -> bool:
         address = urlsplit(self.config.camera.url)
-        try:
-            _, writer = await asyncio.wait_for(
-                asyncio.open_connection(address.hostname or "127.0.0.1", address.port or 80), 1.0)
-        except (OSError, asyncio.TimeoutError):
-            return False
-        writer.close()
-        try:
-            await writer.wait_closed()
-        except OSError:
-            pass
-        return True
+        return await _listening(address.hostname or "127.0.0.1", address.port or 80)
 
     def _check_running(self) -> None:
         for child in self.children:
@@ -257,9 +271,39 @@ class CellProcesses:
         return next(c for c in self.children if c.name == name)
 
     async def stop(self) -> None:
-        """Stop every child, in reverse start order."""
+        """Stop every child, in reverse start order.
+
+        Once begun, the stop goes on to its end even if the caller is cancelled meanwhile (a
+        second Ctrl-C, say): every wait in it is time-limited, and a stop cut short would leave
+        the remaining children running. The cancellation is raised once all are stopped.
+        """
+        if self._stopping is None or self._stopping.done():
+            self._stopping = asyncio.ensure_future(self._stop_all())
+        cancelled = False
+        while not self._stopping.done():
+            try:
+                await asyncio.shield(self._stopping)
+            except asyncio.CancelledError:
+                cancelled = True
+        self._stopping.result()
+        if cancelled:
+            raise asyncio.CancelledError
+
+    async def _stop_all(self) -> None:
         for child in reversed(self.children):
             await self._stop(child, signal.SIGTERM)
+
+    def kill_remaining(self) -> list[str]:
+        """Kill, at once, every child (and its process group) still running: the last resort of a
+        caller whose event loop is going away. Returns their names."""
+        killed = []
+        for child in self.children:
+            process = child.process
+            if process is None or process.returncode is not None:
+                continue
+            killed.append(child.name)
+            _kill_group(process.pid)
+        return killed
 
     async def _stop(self, child: _Child, signum: int) -> None:
         """Stop a running child. After a SIGTERM, whatever is left of its process group is
@@ -281,6 +325,106 @@ class CellProcesses:
             _kill_group(process.pid)
 
 
+def on_interrupt(task: asyncio.Future, *, again: str) -> Callable[[], int]:
+    """Ctrl-C (SIGINT) and SIGTERM, heard by the running loop: the first cancels ``task``, each
+    later one prints ``again`` (what is still going on) and changes nothing, so that a stop under
+    way is never cut short. Returns a function that says how many signals came."""
+    loop = asyncio.get_running_loop()
+    count = 0
+
+    def heard() -> None:
+        nonlocal count
+        count += 1
+        if count == 1:
+            task.cancel()
+        else:
+            print(again, file=sys.stderr, flush=True)
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(signum, heard)
+    return lambda: count
+
+
+def check_port_free(endpoint: str, *, what: str, setting: str) -> None:
+    """Raise, naming the port and who holds it, if a Zenoh TCP or TLS ``endpoint`` on this machine
+    is taken: before a router fails on it with no more than "Address already in use" in its log.
+
+    Raises
+    ------
+    CellError
+        ``"the router's port 7447 on 127.0.0.1 is in use by process 1234 (...): stop that, or give
+        [zenoh] router another port"``.
+    """
+    if not endpoint.startswith(("tcp/", "tls/")):
+        return
+    host, _, port = endpoint.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+    if not port.isdigit():
+        return
+    host = host.strip("[]")
+    holder = port_holder(host, int(port))
+    if holder is not None:
+        raise CellError(f"{what} {port} on {host} is in use by {holder}: stop that, or give {setting} another port")
+
+
+def port_holder(host: str, port: int) -> str | None:
+    """Who listens on TCP ``port`` of ``host`` already, or None if nobody does: ``"process 1234
+    (python -m robocell router)"``, or ``"another process"`` where it cannot be told (Linux's
+    /proc tells; another user's processes stay hidden)."""
+    import errno
+    import socket
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a listener binds: TIME_WAIT is no holder
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                return None  # not ours to bind (another machine's address): the router will say
+        else:
+            return None
+    return _listener(port) or "another process"
+
+
+def _listener(port: int) -> str | None:
+    inodes = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 9 and fields[3] == "0A" and int(fields[1].rsplit(":", 1)[1], 16) == port:  # LISTEN
+                inodes.add(f"socket:[{fields[9]}]")
+    if not inodes:
+        return None
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if any(os.readlink(fd) in inodes for fd in (entry / "fd").iterdir()):
+                command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+                return f"process {entry.name} ({command or '?'})"
+        except OSError:  # gone meanwhile, or not ours to look into
+            continue
+    return None
+
+
+async def _listening(host: str, port: int) -> bool:
+    """Whether something takes TCP connections at ``host:port`` now."""
+    try:
+        _, writer = await asyncio.wait_for(asyncio.open_connection(host, port), 1.0)
+    except (OSError, asyncio.TimeoutError):
+        return False
+    writer.close()
+    try:
+        await writer.wait_closed()
+    except OSError:
+        pass
+    return True
+
+
 def _kill_group(pgid: int) -> None:
     """Kill what is left of a child's process group (the child itself has exited)."""
     try:
@@ -296,10 +440,21 @@ def up(config: CellConfig) -> int:
         cell = CellProcesses(config, reconstructors=1)
         for part in cell.describe():
             print(f"starting {part}", flush=True)
+        cells.append(cell)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
+        heard = 0
+
+        def on_signal() -> None:
+            nonlocal heard
+            heard += 1
+            if heard > 1:
+                print(f"still stopping the cell (each part gets {_STOP_WAIT_S:g} s, then is killed)",
+                      file=sys.stderr, flush=True)
+            stop.set()
+
         for signum in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(signum, stop.set)
+            loop.add_signal_handler(signum, on_signal)
         try:
             # Ctrl-C is heard while the parts start too (that can take a minute, if one hangs).
             starting = asyncio.ensure_future(cell.start())
@@ -328,4 +483,9 @@ def up(config: CellConfig) -> int:
         finally:
             await cell.stop()
 
-    return asyncio.run(run())
+    cells: list[CellProcesses] = []
+    try:
+        return asyncio.run(run())
+    finally:
+        for cell in cells:  # only if the stop above could not finish: its loop went away first
+            cell.kill_remaining()

@@ -310,15 +310,15 @@ def test_every_query_gets_exactly_one_answer(cell, scanned):
 
 def test_command_line_scan_shows_progress_and_the_result(cell):
     argv = [sys.executable, "-m", "robocell", "--config", str(cell.processes.config_path), "scan",
-            "--target", *map(str, target_from_config(cell.config.sim)), "--timeout", "60"]
+            "--target", *map(str, target_from_config(cell.config.sim)), "--timeout", "60", "--json"]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=90)
     assert done.returncode == 0, done.stderr
-    lines = done.stdout.splitlines()
+    lines = done.stderr.splitlines()  # with --json the progress goes to stderr, the one JSON document to stdout
     assert lines[0].startswith("job ") and lines[0].endswith(" queued")
     # Every step, the first ones too: they can come before the submit's answer.
-    assert [line.split()[1] for line in lines[1:-1]] == [state.value for state, _ in WHOLE_SCAN]
+    assert [line.split()[1] for line in lines[1:]] == [state.value for state, _ in WHOLE_SCAN]
     assert any("capturing view 2" in line for line in lines)
-    result = json.loads(lines[-1])
+    result = json.loads(done.stdout)
     assert result["silhouette_iou"] and result["recording"].endswith(".rrd")
 
 

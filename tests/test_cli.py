@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -302,3 +303,71 @@ def test_scan_place_goes_with_pick(capsys):
     assert main(["scan", "--target", "0.6", "0", "0.05", "--place", "0.6", "0.2"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err == "robocell scan: --place goes with --pick\n"
+
+
+def _held_port() -> socket.socket:
+    """A port this test process listens on."""
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen()
+    return listener
+
+
+def test_up_names_the_process_that_holds_the_routers_port(tmp_path):
+    import asyncio
+
+    from robocell.demo import local_config
+    from robocell.up import CellProcesses
+    from wire.errors import CellError
+
+    with _held_port() as listener:
+        port = listener.getsockname()[1]
+        config = local_config(tmp_path / "runs", zenoh={"router": f"tcp/127.0.0.1:{port}"})
+        cell = CellProcesses(config)
+        with pytest.raises(CellError) as raised:
+            asyncio.run(cell.start(ready_timeout=5))
+    assert str(raised.value).startswith(f"the router's port {port} on 127.0.0.1 is in use by process {os.getpid()} (")
+    assert "give [zenoh] router another port" in str(raised.value)
+    assert all(child.process is None for child in cell.children)  # nothing was started
+
+
+def test_replay_web_on_a_held_port_says_so_before_any_address(recording, capsys):
+    config, _ = recording
+    with _held_port() as listener:
+        port = listener.getsockname()[1]
+        assert main(["--config", str(config), "replay", "j1", "--web", "--web-port", str(port)]) == 1
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(f"robocell replay: port {port} on 127.0.0.1 is in use by process {os.getpid()} (")
+    assert err.rstrip().endswith("give --web-port another port")
+
+
+def test_camera_probe_logs_no_library_chatter(tmp_path):
+    """httpx logs each request at INFO: left out unless -v."""
+    from wire.config import SimConfig
+    from workers.sim.axis import SimCameraServer
+    from workers.sim.scans import default_K, look_at
+    from workers.sim.scene import scene_from_config
+
+    size = (320, 240)
+    pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])
+    with SimCameraServer(scene_from_config(SimConfig()), K=default_K(size), image_size=size,
+                         pose_provider=lambda: pose) as camera:
+        quiet = subprocess.run([sys.executable, "-m", "robocell", "camera", "probe", camera.url], capture_output=True,
+                               text=True, timeout=60)
+        verbose = subprocess.run([sys.executable, "-m", "robocell", "-v", "camera", "probe", camera.url],
+                                 capture_output=True, text=True, timeout=60)
+    assert quiet.returncode == 0, quiet.stderr
+    assert "snapshot     ok" in quiet.stdout
+    assert quiet.stderr == ""
+    assert "httpx" in verbose.stderr  # what was left out is there to be asked for
+
+
+def test_a_router_on_a_held_port_names_its_holder(tmp_path, capsys):
+    with _held_port() as listener:
+        port = listener.getsockname()[1]
+        assert main(["router", "--listen", f"tcp/127.0.0.1:{port}"]) == 1
+    err = capsys.readouterr().err
+    holder = f"process {os.getpid()} ("
+    assert err.startswith(f"robocell router: the router's port {port} on 127.0.0.1 is in use by {holder}")
+    assert err.rstrip().endswith("give --listen or [zenoh] router another port")

@@ -9,7 +9,8 @@ only if ``holds(flange pose)`` says the gripper holds a part there (``robocell s
 kuka`` judges that against the configuration's scene, ``SceneGripper``). Faults on
 demand: emergency stop, drives off, an unreachable pose, a program that is not
 running ("stall"), a bridge that stops answering ("hang") or drops its connections
-("drop"), a gripper whose input never changes ("grip_stuck").
+("drop"), a gripper whose input never changes ("grip_stuck"); each now (:meth:`SimController.inject`)
+or as the program takes a later command (``fault_after``, ``robocell sim kuka --fault``).
 $AXIS_ACT is made up (no kinematic model): it only has the right form.
 
 :class:`KvpServer` speaks KukaVarProxy's framing (``workers.kuka.kvp``);
@@ -24,6 +25,7 @@ import asyncio
 import contextlib
 import logging
 import math
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -61,7 +63,8 @@ class SimController:
                  pickup_s: float = 0.02, reach_mm: float = 1100.0, max_override: int = 30,
                  box_mm=((100.0, -700.0, 50.0), (1000.0, 700.0, 1000.0)), max_tilt_deg: float = 80.0,
                  grip_in: int = 1, grip_timeout_s: float = 2.0, grip_delay_s: float = 0.05,
-                 holds: Callable[[np.ndarray], bool] | None = None) -> None:
+                 holds: Callable[[np.ndarray], bool] | None = None,
+                 fault_after: tuple[Fault, int] | None = None) -> None:
         self.speed_mm_s, self.rotation_deg_s, self.pickup_s = speed_mm_s, rotation_deg_s, pickup_s
         self.reach_mm, self.max_override, self.box_mm, self.max_tilt_deg = reach_mm, max_override, box_mm, max_tilt_deg
         self.grip_timeout_s, self.grip_delay_s, self.holds = grip_timeout_s, grip_delay_s, holds
@@ -81,6 +84,8 @@ class SimController:
         self.unhung = threading.Event()
         self.writes: list[tuple[str, str]] = []  # every accepted write, in order
         self.commands: list[tuple[int, int, str, int]] = []  # (id, command, target, override) the program took
+        #: A fault that starts as the program takes its command number N + 1 (after N commands).
+        self.fault_after = fault_after
 
     # --- what the bridges see ------------------------------------------------------------------
 
@@ -136,12 +141,15 @@ class SimController:
         """Start a fault; :meth:`reset` ends them all."""
         with self._lock:
             self._advance(time.monotonic())
-            if fault in ("emergency_stop", "drives_off"):
-                # The arm stops where it is; the program stays mid-move or mid-wait for the gripper.
-                self._motion = self._grip = None
-            if fault == "hang":
-                self.unhung.clear()
-            self.faults.add(fault)
+            self._start(fault)
+
+    def _start(self, fault: Fault) -> None:
+        if fault in ("emergency_stop", "drives_off"):
+            # The arm stops where it is; the program stays mid-move or mid-wait for the gripper.
+            self._motion = self._grip = None
+        if fault == "hang":
+            self.unhung.clear()
+        self.faults.add(fault)
 
     def acknowledge(self) -> None:
         """Acknowledge the stop and press Start: the program resumes a move it was stopped in."""
@@ -193,6 +201,11 @@ class SimController:
         if ints[v.RC_CMD.name] == v.Command.NONE or self._motion is not None or self._grip is not None \
                 or now < taken_at:
             return
+        if self.fault_after is not None and len(self.commands) >= self.fault_after[1]:
+            fault, self.fault_after = self.fault_after[0], None
+            self._start(fault)  # as the command comes in: an e-stop holds it, a drop cuts the link
+            if self.faults & {"emergency_stop", "drives_off", "stall"}:
+                return
         ints[v.RC_STATUS.name] = v.Status.MOVING
         command, override = ints[v.RC_CMD.name], ints[v.RC_OVERRIDE.name]
         self.commands.append((ints[v.RC_CMD_ID.name], command, format_e6pos(self._target), override))
@@ -376,5 +389,9 @@ async def main(protocol: Literal["kvp", "opc"], host: str = "127.0.0.1", port: i
     """
     port = DEFAULT_PORTS[protocol] if port is None else port
     async with SimKuka(protocol, host, port, **options) as sim:
-        log.info("simulated KUKA controller: %s on %s:%d", protocol, host, sim.port)
+        # SIGUSR1 resets the controller, as acknowledging a fault on the pendant and restarting would.
+        asyncio.get_running_loop().add_signal_handler(signal.SIGUSR1, sim.controller.reset)
+        fault = sim.controller.fault_after
+        log.info("simulated KUKA controller: %s on %s:%d%s", protocol, host, sim.port,
+                 "" if fault is None else f"; {fault[0]} as it takes command {fault[1] + 1} (SIGUSR1 resets)")
         await (stop or asyncio.Event()).wait()
