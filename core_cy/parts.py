@@ -156,7 +156,9 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
-        if len(candidate) <= len(current) or np.mean(candidate_ious) <= np.mean(ious):
+        # More parts must explain more: as much as one part must pay, in as many views.
+        gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
+        if len(candidate) <= len(current) or gained < _views_to_pay(len(cameras)):
             break
         current, ious = candidate, candidate_ious
     return PartsFit(current, ious)
