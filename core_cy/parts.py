@@ -49,13 +49,15 @@ _VIEWS_TO_PAY = 2
 # Edge samples per view for the union: a part may own a tenth of the outline.
 _PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
-_ITERATIONS = 30
+_ITERATIONS = 60
 # A hull point projecting this far (px) outside the union's outline is unexplained in that view.
 _UNEXPLAINED_PX = 2.0
 _MIN_GROUP = 11  # points of an unexplained group to place a part on
 _GROUPS = 2  # the largest groups each make a proposal
 _START_SHAPE = (0.5, 0.5)
 _FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
+# A part tilted this far (degrees) from resting on a face is also tried resting on it.
+_MIN_TILT, _MAX_TILT = 1.0, 30.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,6 +146,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     if max_parts < 2 or not _could_pay(ious):
         return PartsFit((single,), ious)
     points = np.asarray(points, dtype=np.float64)
+    plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
     edges = [edge_samples(silhouette_outline(silhouette), silhouette, None, count=_PART_SAMPLES)
              for silhouette in silhouettes]
     fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
@@ -151,7 +154,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     bounded = 0
     while len(current) < min(max_parts, MAX_PARTS) and _could_pay(ious) and bounded < MAX_PARTS:
         bounded += 1
-        proposals = _splits(current, points) + _additions(current, points, cameras, silhouettes, boxes)
+        proposals = _splits(current, points, plane) + _additions(current, points, cameras, silhouettes, boxes, plane)
         if not proposals:
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS)).parts
@@ -161,7 +164,31 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         if len(candidate) <= len(current) or gained < _views_to_pay(len(cameras)):
             break
         current, ious = candidate, candidate_ious
+    if len(current) > 1 and plane is not None:
+        current, ious = _rested(current, fitter, plane, ious, cameras, silhouettes, boxes)
     return PartsFit(current, ious)
+
+
+def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouettes, boxes):
+    """The union with each part that stands a little tilted tried upright (it rests on a face),
+    kept where that fits the silhouettes better."""
+    best = fitter.descent(parts)
+    for k, part in enumerate(parts):
+        R = part.T_world_object[:3, :3]
+        tilt = np.degrees(np.arccos(min(1.0, float(np.max(np.abs(plane[:3] @ R))))))
+        if not _MIN_TILT < tilt < _MAX_TILT:
+            continue
+        upright = _upright(R, plane[:3])
+        order = np.argsort(np.abs(R.T @ upright), axis=0)[-1]  # the part's axis nearest each new one
+        T = part.T_world_object.copy()
+        T[:3, :3] = upright
+        turned = Superquadric(part.size[order], part.shape if order[2] == 2 else part.shape[::-1], T)
+        other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_ITERATIONS)
+        if other.cost < best.cost:
+            best, parts = other, other.problem.parts(other.x)
+    if best.iterations == 0:
+        return parts, ious
+    return parts, union_ious(parts, cameras, silhouettes, boxes)[0]
 
 
 def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[Superquadric, ...], list[float]]:
@@ -193,8 +220,9 @@ def _box_start(points: np.ndarray, R: np.ndarray, floor: np.ndarray) -> Superqua
     return Superquadric(np.maximum((high - low) / 2, floor), _START_SHAPE, T)
 
 
-def _splits(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
-    """Each part split in two by the plane through its centre across each of its axes."""
+def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+    """Each part split in two by the plane through its centre across each of its axes (on a
+    table, each half's start upright: a part rests on a face)."""
     if len(points) < 2 * _MIN_GROUP:
         return []
     owner = np.argmin(_ratios(parts, points), axis=0)
@@ -208,11 +236,12 @@ def _splits(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
             if min(len(half) for half in halves) < _MIN_GROUP:
                 continue
             floor = _FLOOR * part.size
-            proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, R, floor) for half in halves))
+            frame = R if plane is None else _upright(R, plane[:3])
+            proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, frame, floor) for half in halves))
     return proposals
 
 
-def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes) -> list[tuple[Superquadric, ...]]:
+def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) -> list[tuple[Superquadric, ...]]:
     """The union and one more part on each of the largest groups of unexplained hull points."""
     if len(points) < _MIN_GROUP:
         return []
@@ -249,5 +278,22 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes) -> list[t
         members = unexplained[label == group]
         _, vectors = np.linalg.eigh(np.cov((members - members.mean(axis=0)).T))
         R = vectors if np.linalg.det(vectors) > 0 else vectors * [-1, 1, 1]
+        if plane is None:
+            proposals.append(tuple(parts) + (_box_start(members, R, floor),))
+            continue
+        # On a table a part rests on a face: its frame upright (a strong start, not a rule), and,
+        # since what lies below it may hide behind the parts in front, also reaching down to the table.
+        R = _upright(R, plane[:3])
         proposals.append(tuple(parts) + (_box_start(members, R, floor),))
+        height = members @ plane[:3] + plane[3]
+        proposals.append(tuple(parts) + (_box_start(np.vstack([members, members - height[:, None] * plane[:3]]),
+                                                    R, floor),))
     return proposals
+
+
+def _upright(R: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The frame R turned so that its axis nearest ``normal`` is ``normal`` (as its z axis)."""
+    k = int(np.argmax(np.abs(normal @ R)))
+    first = R[:, (k + 1) % 3] - (R[:, (k + 1) % 3] @ normal) * normal
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(normal, first), normal], axis=1)
