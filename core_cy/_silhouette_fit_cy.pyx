@@ -251,16 +251,18 @@ cdef enum:
 
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
                                 const double* e, const double* t, double R[3][3], const double* cosines,
-                                const double* sines, double tilt, double* best_m) noexcept nogil:
+                                const double* sines, double tilt, double bound, double* best_m) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
     ray by -tilt, 0, tilt and the parabola's vertex; best_m gets that plane's normal (its offset is
-    returned through best_m[3])."""
+    returned through best_m[3]). The plane through the ray untilted comes first: turning it only
+    lowers the least reach, so where that reach is already below ``bound`` it is returned at once."""
     cdef double m[3]
     cdef double v[3]
     cdef double reaches[3]
     cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
-    cdef int j, k
-    for j in range(4):
+    cdef int j, k, step
+    for step in range(4):
+        j = 1 if step == 0 else (0 if step == 1 else step)  # untilted, -tilt, +tilt, the vertex
         if j < 3:
             cs = cosines[j]
             sn = sines[j]
@@ -286,7 +288,7 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
             for k in range(3):
                 best_m[k] = m[k]
             best_m[3] = offset
-        if tilt <= 0:
+        if tilt <= 0 or best < bound:
             break
     return best
 
@@ -374,8 +376,9 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                 best = -1e300
                 chosen = 0
                 for p in range(P):
+                    # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
                     reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
-                                                          cosines, sines, tilt, m)
+                                                          cosines, sines, tilt, best / planes[p, i, 4], m)
                     if reach > best:
                         best = reach
                         chosen = p

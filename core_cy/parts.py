@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _Fitter
+from .silhouette_fit import _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
@@ -46,7 +46,7 @@ MAX_PARTS = 6
 # silhouette IoU, in two views (every view, with fewer).
 PART_GAIN = 0.02
 _VIEWS_TO_PAY = 2
-# Edge samples per view for the union: a part may own a tenth of the outline.
+# Edge samples per view for the union: a part that owns a tenth of the outline has ten.
 _PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
 _ITERATIONS = 60
@@ -183,8 +183,9 @@ def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouette
         T = part.T_world_object.copy()
         T[:3, :3] = upright
         turned = Superquadric(part.size[order], part.shape if order[2] == 2 else part.shape[::-1], T)
-        other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_ITERATIONS)
+        other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
         if other.cost < best.cost:
+            other.run(_ITERATIONS)
             best, parts = other, other.problem.parts(other.x)
     if best.iterations == 0:
         return parts, ious
