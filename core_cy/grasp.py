@@ -451,12 +451,11 @@ def _fingers_inside(c, pose, dz, half, centre, g: Gripper, other_parts) -> np.nd
     local[..., 0] = c["dx"][pose][:, None, None, None, None] + across[None, :, None, None, None]
     local[..., 1] = (np.array([-1.0, 1.0])[None, None, :, None, None] * levels[:, None, None, :, None])
     local[..., 2] = dz[:, None, None, None, None] + along[None, None, None, None, :]
-    local = local.reshape(m, -1, 3)
-    world = centre + np.einsum("mab,mnb->mna", c["R"][pose], local).reshape(-1, 3)
+    world = centre + np.einsum("mab,mnb->mna", c["R"][pose], local.reshape(m, -1, 3)).reshape(-1, 3)
     inside = np.zeros(len(world), bool)
     for part in other_parts:
         inside |= inside_outside(world, part) < 1.0
-    return inside.reshape(m, -1).any(axis=1)
+    return np.asarray(inside.reshape(m, -1).any(axis=1))
 
 
 # Fixed draws of the model's error, in standard errors: semi-axes along the grasp

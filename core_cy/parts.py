@@ -54,7 +54,7 @@ _ITERATIONS = 60
 _UNEXPLAINED_PX = 2.0
 _MIN_GROUP = 11  # points of an unexplained group to place a part on
 _GROUPS = 2  # the largest groups each make a proposal
-_START_SHAPE = (0.5, 0.5)
+_START_SHAPE = np.array([0.5, 0.5])
 _FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
 # A part tilted this far (degrees) from resting on a face is also tried resting on it.
 _MIN_TILT, _MAX_TILT = 1.0, 30.0
