@@ -77,7 +77,7 @@ from ._grasp_cy import perturbed_margins as _perturbed_margins
 from ._grasp_cy import surface_samples as _surface_samples
 from .errors import CoreError
 from .gripper import DEFAULT_GRIPPER, Grasp, Gripper, grasps_to_json
-from .superquadric import Superquadric, inside_outside, surface_points
+from .superquadric import Superquadric, inside_outside, surface_points, upright_box
 
 __all__ = ["Gripper", "Grasp", "DEFAULT_GRIPPER", "plan_grasps", "grasps_to_json", "model_error"]
 
@@ -649,25 +649,9 @@ def plan_grasps(model, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *
         # The superquadric describes the object poorly (an L): plan on the hull's upright box
         # too. The box bounds all the views saw; the hull checks keep its grasps where the
         # hull has the surface the box claims.
-        box = _upright_box(points, plane)
+        box = upright_box(points, plane[:3])
         grasps = _merged(grasps, _plan(box, plane, gripper, math.inf, None, points, max_grasps, min_score), max_grasps)
     return grasps
-
-
-def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
-    """The box around the hull's points standing on the plane, its horizontal axes the
-    points' principal axes in the plane."""
-    normal = plane[:3]
-    basis = np.stack(_level_axes(normal), axis=1)  # (3, 2)
-    flat = points @ basis
-    _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
-    first = basis @ vectors[:, 1]
-    R = np.stack([first, _cross(normal, first), normal], axis=1)
-    local = points @ R
-    low, high = local.min(axis=0), local.max(axis=0)
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
-    return Superquadric(np.maximum((high - low) / 2, 1e-9), np.array([0.1, 0.1]), T)
 
 
 def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Grasp]:

@@ -11,7 +11,9 @@ Otherwise parts are proposed, each round from the union so far:
 
 - **split** a part by the plane through its centre across one of its axes
   (Vezzani et al.'s superquadric-lib): the hull points that part explains best,
-  on either side, each give a part (their box in the part's frame);
+  on either side, each give a part (their box in the part's frame, upright on a
+  table); in the first round the hull's upright box is split the same way, in
+  case the one superquadric sits in a bad minimum;
 - **add** a part where the silhouettes are unexplained: the hull points that
   project outside the union's outline in two views or more, grouped into
   neighbourhoods (as Liu et al.'s hierarchical EMS takes the points a part
@@ -37,7 +39,7 @@ from scipy.sparse.csgraph import connected_components
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
 from .silhouette_fit import _SEARCH_ITERATIONS, _Fitter
-from .superquadric import Superquadric, inside_outside
+from .superquadric import Superquadric, inside_outside, resting_on, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
 
@@ -155,6 +157,10 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     while len(current) < min(max_parts, MAX_PARTS) and _could_pay(ious) and bounded < MAX_PARTS:
         bounded += 1
         proposals = _splits(current, points, plane) + _additions(current, points, cameras, silhouettes, boxes, plane)
+        if len(current) == 1 and plane is not None:
+            # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
+            # also split the box of the whole hull, standing on the table.
+            proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS)).parts
@@ -174,15 +180,9 @@ def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouette
     kept where that fits the silhouettes better."""
     best = fitter.descent(parts)
     for k, part in enumerate(parts):
-        R = part.T_world_object[:3, :3]
-        tilt = np.degrees(np.arccos(min(1.0, float(np.max(np.abs(plane[:3] @ R))))))
+        turned, tilt = resting_on(part, plane[:3])
         if not _MIN_TILT < tilt < _MAX_TILT:
             continue
-        upright = _upright(R, plane[:3])
-        order = np.argsort(np.abs(R.T @ upright), axis=0)[-1]  # the part's axis nearest each new one
-        T = part.T_world_object.copy()
-        T[:3, :3] = upright
-        turned = Superquadric(part.size[order], part.shape if order[2] == 2 else part.shape[::-1], T)
         other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
         if other.cost < best.cost:
             other.run(_ITERATIONS)

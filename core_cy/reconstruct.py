@@ -22,11 +22,15 @@ from .quality import radial_residual
 from .segment import RED_HSV, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
-from .superquadric import Superquadric, fit_superquadric, start_superquadrics
+from .superquadric import Superquadric, fit_superquadric, resting_on, start_superquadrics, upright_box
 
 __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
 
 _JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
+# A view whose silhouette IoU stays below this clearly disagrees with the one-superquadric fit:
+# every start is then taken to its end (at most this many steps each).
+_DISAGREE = 0.8
+_RESTART_ITERATIONS = 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,22 +255,39 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     stride = max(1, len(points) // options.fit_points)
     if options.silhouette_fit:
         starts = start_superquadrics(points[::stride], support_plane=plane)
+        if plane is not None:
+            # An object on a table rests on a face or a side (DESIGN.md §1.12): a strong start, not a rule.
+            starts += [rested for rested, tilt in (resting_on(start, plane[:3]) for start in starts) if tilt > 1.0]
+            starts.append(upright_box(points, plane[:3]))
         lap("start")
         superquadric = fit_to_silhouettes(starts, cameras, edges, support_plane=plane).superquadric
         lap("fit")
+        ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
+        if min(ious) < _DISAGREE:
+            # A view clearly disagrees with the model: a bad local minimum (a slab seen edge-on, a
+            # tilted start) or an object that is no superquadric. Every start goes to its end, and
+            # the one that agrees best with all the silhouettes is kept (DESIGN.md §1.12).
+            for other in starts:
+                fitted = fit_to_silhouettes(other, cameras, edges, support_plane=plane,
+                                            max_iterations=_RESTART_ITERATIONS).superquadric
+                other_ious, _ = union_ious((fitted,), cameras, silhouettes, boxes)
+                if np.mean(other_ious) > np.mean(ious):
+                    superquadric, ious = fitted, other_ious
+            lap("fit")
     else:
         superquadric = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
                                         outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
                                         support_plane=plane).superquadric
         lap("fit")
-    ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
+    if not options.silhouette_fit:
+        ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
     lap("quality")
     parts: tuple[Superquadric, ...] = (superquadric,)
     if options.silhouette_fit and options.max_parts > 1:
-        model = fit_parts(superquadric, points[::stride], cameras, silhouettes, boxes, ious=ious,
+        model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
                           support_plane=plane, max_parts=options.max_parts)
         parts, ious = model.parts, model.silhouette_iou
-        lap("parts")
+        lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
     return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts)
