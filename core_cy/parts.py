@@ -153,11 +153,17 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
              for silhouette in silhouettes]
     fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
     current: tuple[Superquadric, ...] = (single,)
+    # A union of every part paying that does not yet explain more than ``current`` (a dumbbell's
+    # two weights without the bar between them) goes one round on before it is given up.
+    trial: tuple[Superquadric, ...] | None = None
     bounded = 0
-    while len(current) < min(max_parts, MAX_PARTS) and _could_pay(ious) and bounded < MAX_PARTS:
+    while bounded < MAX_PARTS:
         bounded += 1
-        proposals = _splits(current, points, plane) + _additions(current, points, cameras, silhouettes, boxes, plane)
-        if len(current) == 1 and plane is not None:
+        base = current if trial is None else trial
+        if len(base) >= min(max_parts, MAX_PARTS) or not _could_pay(ious):
+            break
+        proposals = _splits(base, points, plane) + _additions(base, points, cameras, silhouettes, boxes, plane)
+        if len(base) == 1 and plane is not None:
             # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
             # also split the box of the whole hull, standing on the table.
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
@@ -167,9 +173,12 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
         # More parts must explain more: as much as one part must pay, in as many views.
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
-        if len(candidate) <= len(current) or gained < _views_to_pay(len(cameras)):
+        if len(candidate) > len(current) and gained >= _views_to_pay(len(cameras)):
+            current, ious, trial = candidate, candidate_ious, None
+        elif trial is None and len(candidate) > len(base):
+            trial = candidate
+        else:
             break
-        current, ious = candidate, candidate_ious
     if len(current) > 1 and plane is not None:
         current, ious = _rested(current, fitter, plane, ious, cameras, silhouettes, boxes)
     return PartsFit(current, ious)
