@@ -53,8 +53,8 @@ MAX_PARTS = 6
 # silhouette IoU, in two views (every view, with fewer).
 PART_GAIN = 0.02
 _VIEWS_TO_PAY = 2
-# Edge samples per view for the union: a part that owns a tenth of the outline has six.
-_PART_SAMPLES = 64
+# Edge samples per view for the union: a part that owns a tenth of the outline has ten.
+_PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
 _ITERATIONS = 30
 # A hull point projecting this far (px) outside the union's outline is unexplained in that view.
