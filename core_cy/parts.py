@@ -24,9 +24,9 @@ together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouett
 a few steps; the best goes on to convergence; the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
 if it has more parts than before and gains ``PART_GAIN`` of IoU over the model
-before it in two views (a union whose parts all pay but that gains nothing
-yet, a dumbbell's two weights without the bar, goes one round on before it is
-given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
+before it in two views (a union whose parts all pay but that gains so in one
+view only, a dumbbell's two weights without the bar, goes one round on before
+it is given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
 tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
 and a part that floats (what holds it up hidden behind it in every view) is
 taken down to the table where that explains the silhouettes as well.
@@ -162,7 +162,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
              for silhouette in silhouettes]
     fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
     current: tuple[Superquadric, ...] = (single,)
-    # A union of every part paying that does not yet explain more than ``current`` (a dumbbell's
+    # A union of every part paying that explains more in one view but not yet in two (a dumbbell's
     # two weights without the bar between them) goes one round on before it is given up.
     trial: tuple[Superquadric, ...] | None = None
     bounded = 0
@@ -184,8 +184,8 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
         if len(candidate) > len(current) and gained >= _views_to_pay(len(cameras)):
             current, ious, trial = candidate, candidate_ious, None
-        elif trial is None and len(candidate) > len(base):
-            trial = candidate
+        elif trial is None and len(candidate) > len(base) and gained >= 1:
+            trial = candidate  # it explains more in one view at least: not just a part cut in two
         else:
             break
     if len(current) > 1 and plane is not None:
