@@ -33,8 +33,8 @@ def test_the_step_solves_the_damped_normal_equations_within_bounds():
     bounded_step(JtJ, Jtr, 0.1, x, low, high, trial)
     np.testing.assert_allclose(trial, free / 2, rtol=1e-10)
     assert bounded_step(-np.eye(11), Jtr, 0.1, x, low, high, trial) == -1.0  # not positive definite
-    with pytest.raises(ValueError, match="n <= 16"):
-        bounded_step(np.eye(17), np.zeros(17), 0.1, np.zeros(17), np.zeros(17), np.zeros(17), np.empty(17))
+    with pytest.raises(ValueError, match="n <= 66"):  # six parts of a union, 11 parameters each
+        bounded_step(np.eye(67), np.zeros(67), 0.1, np.zeros(67), np.zeros(67), np.zeros(67), np.empty(67))
 
 
 class _Circle:
