@@ -62,6 +62,7 @@ from wire.bundle import load_bundle  # noqa: E402
 from workers.sim.judge import Part, parts_from_truth, union_iou, union_silhouette_iou  # noqa: E402
 from workers.sim.objects import EVERYDAY  # noqa: E402
 from workers.sim.scans import BROAD_FAMILIES, broad_set, compound_set, one_sided_set, standard_set  # noqa: E402
+from core_cy.errors import CoreError  # noqa: E402
 from core_cy.quality import silhouette_iou  # noqa: E402
 from core_cy.reconstruct import Options, View, reconstruct  # noqa: E402
 from core_cy.scoring import volumetric_iou  # noqa: E402
@@ -295,7 +296,11 @@ def views_monotone(out: Path, per_family: int) -> None:
         seen = bundle.views[:scan.n_seen]
 
         def score(views) -> float:
-            result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
+            try:
+                result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
+            except CoreError as exc:  # a valid scan refused: counted as IoU 0, and said
+                print(f"  {scan.spec.name}, {len(views)} views: the reconstruction refused it: {exc}")
+                return 0.0
             return union_iou(model_parts(result), truth)
 
         before = score(seen)
