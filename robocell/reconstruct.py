@@ -68,7 +68,7 @@ def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
     from core_cy.gripper import grasps_to_json
 
     start = time.perf_counter()
-    grasps = plan_grasps(result.superquadric, bundle.support_plane, gripper, residual=result.residual,
+    grasps = plan_grasps(result.parts, bundle.support_plane, gripper, residual=result.residual,
                          silhouette_iou=result.silhouette_iou, points=result.points, max_grasps=max_grasps)
     ms = (time.perf_counter() - start) * 1e3
     timings = line["timings_ms"]

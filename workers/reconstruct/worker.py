@@ -82,7 +82,7 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
     if request.gripper is not None:
         began = time.perf_counter()
         try:
-            planned = plan_grasps(result.superquadric, request.support_plane, Gripper.from_dict(request.gripper),
+            planned = plan_grasps(result.parts, request.support_plane, Gripper.from_dict(request.gripper),
                                   residual=result.residual, silhouette_iou=result.silhouette_iou, points=result.points,
                                   max_grasps=request.max_grasps)
         except CoreError as exc:
@@ -98,7 +98,8 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         result=Reconstruction(superquadric=Superquadric.model_validate(summary["superquadric"]),
                               silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
                               timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
-                              radius=float(result.radius), grasps=grasps),
+                              radius=float(result.radius), grasps=grasps,
+                              parts=[Superquadric.model_validate(part) for part in summary["parts"]]),
         silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
         points=Blob(encoding=POINTS_ENCODING, length=len(points)))
     return reply.model_dump_json(), b"".join(silhouettes) + points
