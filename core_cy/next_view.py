@@ -3,8 +3,8 @@
 The silhouettes seen so far leave the model unsure where other models explain
 them nearly as well. The competing hypotheses are the silhouette fit from each
 of the point fit's starts (each axis of the hull as the object's z axis, and
-the 45-degree turns), and, for a model in parts, the one superquadric closest
-to the whole: those whose projections agree with the silhouettes nearly as well
+the 45-degree turns), and, for a model in parts, other part counts (the one
+superquadric closest to the whole, the union without each of its parts): those whose projections agree with the silhouettes nearly as well
 as the model's does are kept beside it. Where they disagree, a view tells
 them apart; where they agree, it does not.
 
@@ -170,7 +170,9 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
     silhouettes = reconstruction.silhouettes
     rivals: list[list[Superquadric]] = []
     if len(model) > 1:
-        rivals.append([reconstruction.superquadric])  # another part count: one superquadric
+        # Other part counts: the one superquadric, and the union without each of its parts.
+        rivals.append([reconstruction.superquadric])
+        rivals.extend(model[:k] + model[k + 1:] for k in range(len(model)))
     points = reconstruction.points
     edges = []
     for silhouette in silhouettes:
