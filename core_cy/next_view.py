@@ -168,11 +168,24 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
     """The model, and the competing fits whose silhouettes agree with the views nearly as well."""
     model = _model_pieces(reconstruction)
     silhouettes = reconstruction.silhouettes
-    rivals: list[list[Superquadric]] = []
+    # Agreement at full resolution: the hypotheses differ by a pixel or two where the views saw them.
+    canvases = [_Canvas(camera, image_size=(s.shape[1], s.shape[0])) for camera, s in zip(cameras, silhouettes)]
+    seen = [s != 0 for s in silhouettes]
+
+    def miss(parts) -> float:
+        drawn = [c.draw(_superquadric_body(parts)) for c in canvases]
+        return float(np.mean([1.0 if d is None else 1.0 - _iou(d, s) for d, s in zip(drawn, seen)]))
+
+    bar = _MISS_RATIO * miss(model) + _MISS_SLACK
+    kept = [model]
     if len(model) > 1:
-        # Other part counts: the one superquadric, and the union without each of its parts.
-        rivals.append([reconstruction.superquadric])
-        rivals.extend(model[:k] + model[k + 1:] for k in range(len(model)))
+        # Other part counts: the union without each of its parts, and the one superquadric. That one is
+        # the best of the silhouette fits from the point fit's starts: where it explains the views too
+        # poorly, so do the others, which are not fitted.
+        kept.extend(rival for rival in (model[:k] + model[k + 1:] for k in range(len(model))) if miss(rival) <= bar)
+        if miss([reconstruction.superquadric]) > bar:
+            return kept
+        kept.append([reconstruction.superquadric])
     points = reconstruction.points
     edges = []
     for silhouette in silhouettes:
@@ -189,17 +202,9 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
             fit = fit_to_silhouettes(start, cameras, edges, support_plane=plane, max_iterations=_FIT_ITERATIONS)
         except FitError:
             continue
-        rivals.append([fit.superquadric])
-    # Agreement at full resolution: the hypotheses differ by a pixel or two where the views saw them.
-    canvases = [_Canvas(camera, image_size=(s.shape[1], s.shape[0])) for camera, s in zip(cameras, silhouettes)]
-    seen = [s != 0 for s in silhouettes]
-
-    def miss(parts) -> float:
-        drawn = [c.draw(_superquadric_body(parts)) for c in canvases]
-        return float(np.mean([1.0 if d is None else 1.0 - _iou(d, s) for d, s in zip(drawn, seen)]))
-
-    bar = _MISS_RATIO * miss(model) + _MISS_SLACK
-    return [model] + [rival for rival in rivals if miss(rival) <= bar]
+        if miss([fit.superquadric]) <= bar:
+            kept.append([fit.superquadric])
+    return kept
 
 
 def propose_views(centre, cameras, count: int = _AROUND) -> list[Camera]:
