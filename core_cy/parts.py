@@ -23,8 +23,13 @@ Every proposal is refined against the silhouettes of the union (all parts
 together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
 a few steps; the best goes on to convergence; the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
-if it has more parts than before and covers the silhouettes better; at most
-``MAX_PARTS`` parts.
+if it has more parts than before and gains ``PART_GAIN`` of IoU over the model
+before it in two views (a union whose parts all pay but that gains nothing
+yet, a dumbbell's two weights without the bar, goes one round on before it is
+given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
+tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
+and a part that floats (what holds it up hidden behind it in every view) is
+taken down to the table where that explains the silhouettes as well.
 """
 
 from __future__ import annotations
@@ -58,8 +63,12 @@ _MIN_GROUP = 11  # points of an unexplained group to place a part on
 _GROUPS = 2  # the largest groups each make a proposal
 _START_SHAPE = np.array([0.5, 0.5])
 _FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
-# A part tilted this far (degrees) from resting on a face is also tried resting on it.
-_MIN_TILT, _MAX_TILT = 1.0, 30.0
+# A part tilted more than this (degrees) from resting on a face is also tried resting on it.
+_MIN_TILT, _MAX_TILT = 1.0, 90.0
+# A part taken down to the table is kept where the silhouettes' cost grows by no more than this factor
+# (the noise of a few steps).
+_GROUNDED_COST = 1.1
+_GROUNDED_STEPS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +178,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS)).parts
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, halving=False)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
         # More parts must explain more: as much as one part must pay, in as many views.
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
@@ -185,20 +194,45 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
 
 
 def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouettes, boxes):
-    """The union with each part that stands a little tilted tried upright (it rests on a face),
-    kept where that fits the silhouettes better."""
+    """The union with each part that stands tilted tried upright (it rests on a face), kept where
+    that fits the silhouettes better; and each upright part that floats (what holds it up hidden
+    behind it in every view) taken down to the table (through the parts it stands on, whose volume
+    it then shares), kept where that explains them about as well."""
     best = fitter.descent(parts)
     for k, part in enumerate(parts):
-        turned, tilt = resting_on(part, plane[:3])
-        if not _MIN_TILT < tilt < _MAX_TILT:
-            continue
-        other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
-        if other.cost < best.cost:
-            other.run(_ITERATIONS)
-            best, parts = other, other.problem.parts(other.x)
+        upright, tilt = resting_on(part, plane[:3])
+        if _MIN_TILT < tilt:
+            other = fitter.descent(parts[:k] + (upright,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
+            if other.cost < best.cost:
+                other.run(_ITERATIONS)
+                best, parts = other, other.problem.parts(other.x)
+        grounded = _grounded(upright, plane)
+        if grounded is not None:
+            other = fitter.descent(parts[:k] + (grounded,) + parts[k + 1:]).run(_GROUNDED_STEPS)
+            if other.cost <= _GROUNDED_COST * best.cost:
+                best, parts = other, other.problem.parts(other.x)
     if best.iterations == 0:
         return parts, ious
     return parts, union_ious(parts, cameras, silhouettes, boxes)[0]
+
+
+def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
+    """The part, resting on a face or a side, stretched down to the plane with its top kept;
+    None if no axis of it is upright or it already reaches the plane."""
+    R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+    normal = plane[:3]
+    k = int(np.argmax(np.abs(normal @ R)))
+    if abs(float(normal @ R[:, k])) < np.cos(np.radians(_MIN_TILT)):
+        return None
+    height = float(normal @ centre + plane[3])
+    top, bottom = height + part.size[k], height - part.size[k]
+    if bottom < _FLOOR * part.size[k]:
+        return None
+    T = part.T_world_object.copy()
+    T[:3, 3] = centre - (height - top / 2) * normal
+    size = part.size.copy()
+    size[k] = top / 2
+    return Superquadric(size, part.shape, T)
 
 
 def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[Superquadric, ...], list[float]]:
