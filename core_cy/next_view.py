@@ -209,7 +209,16 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
 
 def propose_views(centre, cameras, count: int = _AROUND) -> list[Camera]:
     """``count`` cameras evenly around ``centre`` (about the support's up, world z), at the
-    views' mean distance and elevation from it, aimed at it, with the first view's K."""
+    views' mean distance and elevation from it, aimed at it, with the first view's K.
+
+    Examples
+    --------
+    >>> K = [[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]]
+    >>> views = [Camera(K=K, T_world_cam=look_at([0.3, 0.0, 0.4], [0.0, 0.0, 0.0]))]
+    >>> ring = propose_views([0.0, 0.0, 0.0], views, count=4)
+    >>> [np.round(c.center, 3).tolist() for c in ring][:2]
+    [[0.3, 0.0, 0.4], [0.0, 0.3, 0.4]]
+    """
     centre = np.asarray(centre, dtype=np.float64).reshape(3)
     offsets = np.array([c.center - centre for c in cameras])
     distance = float(np.mean(np.linalg.norm(offsets, axis=1)))
