@@ -62,7 +62,7 @@ def measure(scan, out: Path) -> dict:
         try:
             result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
         except CoreError as exc:
-            failures.append(f"{scan.spec.name}, {len(views)} views: {exc}")
+            failures.append(f"{scan.spec.name} of scene seed {scan.spec.seed}, {len(views)} views: {exc}")
             return 0.0
         return union_iou(model_parts(result), truth)
 
@@ -111,6 +111,9 @@ def report(rows: list[dict]) -> None:
           f"of those, the chosen gains >= 70 % of the best in "
           f"{sum(r['gains'][r['chosen']] >= 0.7 * r['gains'].max() for r in worth)}, more than the average in "
           f"{sum(r['gains'][r['chosen']] > r['gains'].mean() for r in worth)})")
+    idle = [r for r in rows if r["gains"].max() <= _WORTH]
+    print(f"'sure' (uncertainty < 0.02): {sum(r['sure'] for r in worth)} of the {len(worth)} scans where a view gains "
+          f"more than {_WORTH}, {sum(r['sure'] for r in idle)} of the {len(idle)} where none does")
 
 
 def main() -> None:
