@@ -56,7 +56,7 @@ _VIEWS_TO_PAY = 2
 # Edge samples per view for the union: a part that owns a tenth of the outline has ten.
 _PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
-_ITERATIONS = 60
+_ITERATIONS = 30
 # A hull point projecting this far (px) outside the union's outline is unexplained in that view.
 _UNEXPLAINED_PX = 2.0
 _MIN_GROUP = 11  # points of an unexplained group to place a part on
@@ -178,7 +178,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, halving=False)).parts
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
         # More parts must explain more: as much as one part must pay, in as many views.
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)

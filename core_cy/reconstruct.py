@@ -31,6 +31,7 @@ _JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
 # every start is then taken to its end (at most this many steps each).
 _DISAGREE = 0.8
 _RESTART_ITERATIONS = 20
+_RESTING_TILT = 30.0  # degrees
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,8 +258,11 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
         starts = start_superquadrics(points[::stride], support_plane=plane)
         if plane is not None:
             # An object on a table rests on a face or a side (DESIGN.md §1.12): a strong start, not a rule.
-            starts += [rested for rested, tilt in (resting_on(start, plane[:3]) for start in starts) if tilt > 1.0]
-            starts.append(upright_box(points, plane[:3]))
+            # A start tilted less than that is set resting; one tilted more is kept and also tried resting.
+            rested = [resting_on(start, plane[:3]) for start in starts]
+            starts = ([upright if tilt < _RESTING_TILT else start for start, (upright, tilt) in zip(starts, rested)]
+                      + [upright for upright, tilt in rested if tilt >= _RESTING_TILT]
+                      + [upright_box(points, plane[:3])])
         lap("start")
         superquadric = fit_to_silhouettes(starts, cameras, edges, support_plane=plane).superquadric
         lap("fit")

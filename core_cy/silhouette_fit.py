@@ -47,8 +47,9 @@ _SHAPE_BOUNDS = (0.1, 1.0)
 _TILT = 0.05
 # Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object.
 _LOG_SIZE_RANGE = 4.0
-# With several starts, each takes this many steps before the better half goes on (successive halving).
+# With several starts, each takes this many steps; the best two this many more; the best of them goes on.
 _SEARCH_ITERATIONS = 2
+_FINALISTS, _FINAL_ITERATIONS = 2, 6
 # Edge samples lie this close (px, RMS) to the true outline: colour edges ~0.15, binary masks ~0.3.
 _NOISE_PX = 0.5
 
@@ -208,24 +209,19 @@ class _Fitter:
         problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
-    def best_of(self, starts, max_iterations: int, halving: bool = True) -> Descent:
-        """The start whose descent fits best, by successive halving: every start a few steps,
-        the better half twice as many more, and so on until one is left, which goes on to
-        convergence. Two bodies (a lying cylinder and a bar) may explain the views alike after
-        a step or two, and only further on tell apart. Without ``halving``, the best after the
-        first few steps goes on (the parts' proposals: many quick guesses at a structure)."""
+    def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS) -> Descent:
+        """The start whose descent fits best: every start a few steps, the ``finalists`` best of
+        them a few more, and the best of those on to convergence. Two bodies (a lying cylinder and a
+        bar) may explain the views alike after a step or two, and only a few steps on tell apart."""
         alive = [self.descent(start) for start in starts]
-        steps = _SEARCH_ITERATIONS
-        if not halving and len(alive) > 1:
+        if len(alive) > 1:
             for descent in alive:
-                descent.run(steps)
-            alive = [min(alive, key=lambda descent: descent.cost)]
-        while len(alive) > 1:
+                descent.run(_SEARCH_ITERATIONS)
+            alive = sorted(alive, key=lambda descent: descent.cost)[:max(1, finalists)]
+        if len(alive) > 1:
             for descent in alive:
-                descent.run(steps)
-            alive = sorted(alive, key=lambda descent: descent.cost)[:(len(alive) + 1) // 2 if len(alive) > 2 else 1]
-            steps *= 2
-        best = alive[0]
+                descent.run(_FINAL_ITERATIONS)
+        best = min(alive, key=lambda descent: descent.cost)
         if not np.isfinite(best.cost):
             raise FitError("every start reaches behind a camera")
         return best.run(max_iterations)
