@@ -36,6 +36,9 @@ def register(commands: Commands) -> None:
     parser.add_argument("--masks-out", metavar="DIR",
                         help="write the silhouettes each reconstruction used as DIR/<bundle name>/mask<i>.png "
                              "(255 = object), one per view in scan.json's order")
+    parser.add_argument("--next-view", action="store_true",
+                        help="add the view that would most reduce the model's uncertainty: one of scan.json's "
+                             "'candidates', or a pose proposed at the views' distance")
 
 
 def _positive(text: str) -> int:
@@ -89,6 +92,22 @@ def _write_masks(directory: str, scan: str, silhouettes) -> None:
             raise OSError(f"cannot write {out / f'mask{index}.png'}")
 
 
+def _with_next_view(line: dict, result, bundle) -> dict:
+    """Add ``next_view`` (core_cy.next_view) to a result line, and its time to ``timings_ms``."""
+    from core_cy.next_view import choose_next_view
+
+    start = time.perf_counter()
+    choice = choose_next_view(result, [view.camera for view in bundle.views], bundle.candidates,
+                              support_plane=bundle.support_plane)
+    ms = (time.perf_counter() - start) * 1e3
+    timings = line["timings_ms"]
+    timings["next_view"] = round(ms, 3)
+    timings["total"] = round(timings["total"] + ms, 3)
+    return {**line, "next_view": {"candidate": choice.candidate, "T_world_cam": choice.T_world_cam.tolist(),
+                                  "expected_gain": round(choice.expected_gain, 4),
+                                  "uncertainty": round(choice.uncertainty, 4), "sure": choice.sure}}
+
+
 def _reconstruct(args: argparse.Namespace) -> int:
     from core_cy.errors import CoreError
     from core_cy.reconstruct import Options, reconstruct
@@ -118,6 +137,8 @@ def _reconstruct(args: argparse.Namespace) -> int:
                 _write_masks(args.masks_out, scan, result.silhouettes)
             if gripper is not None:
                 line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
+            if args.next_view:
+                line = _with_next_view(line, result, bundle)
         except (BundleError, CoreError, OSError) as exc:
             failures += 1
             line = {"scan": scan, "error": str(exc)}

@@ -1,4 +1,5 @@
-"""Does a parallel-jaw grasp hold the true object? The DESIGN.md §3 "holds" test.
+"""Does a parallel-jaw grasp hold the true object (the DESIGN.md §3 "holds" test)? And how much of
+the true object does a model fill (:func:`union_iou`, :func:`union_silhouette_iou`, for unions of parts)?
 
 Written apart from the planner (core_cy.grasp) on purpose: it imports nothing
 from core_cy, and computes the true object's geometry its own way, by
