@@ -1,8 +1,8 @@
 """A job's pictures on disk, so that a daemon that stops after taking them need not take them again.
 
 ``<run dir>/pictures/<job id>/view<i>.jpg``, and beside each ``view<i>.json``
-with where the robot and the camera stood. Written in the store's thread before
-the job is stored as reconstructing, read back by a restarted daemon, removed
+with where the robot and the camera stood. Written in the store's thread as each is
+taken, read back by a restarted daemon, removed
 when the job ends (the job's recording keeps them).
 """
 
@@ -28,14 +28,14 @@ class Pictures:
     def __init__(self, run_dir: Path) -> None:
         self.root = Path(run_dir) / "pictures"
 
-    def save(self, job_id: str, pictures: list[Picture]) -> None:
-        """Keep the job's pictures (replacing any kept before)."""
+    def add(self, job_id: str, view: int, picture: Picture) -> None:
+        """Keep the job's picture of ``view`` (replacing one kept before); its pose is written
+        last, so a picture whose pose is there is whole."""
         directory = self.root / job_id
         directory.mkdir(parents=True, exist_ok=True)
-        for view, picture in enumerate(pictures):
-            (directory / f"view{view}.jpg").write_bytes(picture.jpeg)
-            where = {"T_base_flange": picture.T_base_flange.tolist(), "T_base_cam": picture.T_base_cam.tolist()}
-            (directory / f"view{view}.json").write_text(json.dumps(where))
+        (directory / f"view{view}.jpg").write_bytes(picture.jpeg)
+        where = {"T_base_flange": picture.T_base_flange.tolist(), "T_base_cam": picture.T_base_cam.tolist()}
+        (directory / f"view{view}.json").write_text(json.dumps(where))
 
     def load(self, job_id: str, n_views: int) -> list[Picture] | None:
         """The job's ``n_views`` pictures, or None unless every one of them is there whole."""

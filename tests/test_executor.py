@@ -1,10 +1,9 @@
-"""The daemon's store thread (``cell.executor.Serial``): what is handed to it runs in the order it was
-handed, deferred work included, on a real thread and a real event loop."""
+"""The daemon's store thread (``cell.executor.Serial``): calls run in the order they were made, in
+one thread of their own, and a call's error comes back to its caller."""
 
 from __future__ import annotations
 
 import asyncio
-import logging
 import threading
 
 import pytest
@@ -16,95 +15,42 @@ def _run(coroutine):
     return asyncio.run(asyncio.wait_for(coroutine, timeout=10.0))
 
 
-def test_posts_and_calls_run_in_order_in_one_thread_of_their_own():
+def test_calls_run_in_the_order_they_were_made_in_one_thread_of_their_own():
     async def main():
         serial, ran = Serial("test"), []
         try:
-            serial.post(lambda: ran.append(("post", threading.current_thread().name)))
-            answer = serial.call(lambda: ran.append(("call", threading.current_thread().name)) or 42)
-            serial.post(ran.append, ("last", "-"))
-            assert await answer == 42
-            await serial.call(lambda: None)
+            first = serial.call(lambda: ran.append(("first", threading.current_thread().name)) or 1)
+            second = serial.call(lambda: ran.append(("second", threading.current_thread().name)) or 2)
+            assert await second == 2 and await first == 1  # awaited out of order, run in order
         finally:
             serial.close()
         return ran
 
     ran = _run(main())
-    assert [what for what, _ in ran] == ["post", "call", "last"]
-    assert ran[0][1] == ran[1][1] and ran[0][1].startswith("test")  # the thread's, not the loop's
+    assert [what for what, _ in ran] == ["first", "second"]
+    assert {thread for _, thread in ran} == {"test_0"} and "test_0" != threading.current_thread().name
 
 
-def test_deferred_work_waits_for_a_flush_or_for_what_comes_after_it():
+def test_a_failing_call_raises_in_its_caller_and_the_next_call_still_runs():
     async def main():
-        serial, ran = Serial("test"), []
+        serial = Serial("test")
         try:
-            serial.defer(ran.append, "deferred 1")
-            serial.defer(ran.append, "deferred 2")
-            await asyncio.sleep(0.05)
-            held = list(ran)                       # nothing yet: no flush, nothing after them
-            serial.flush()
-            await serial.call(lambda: None, ahead=True)
-            flushed = list(ran)
-            serial.defer(ran.append, "deferred 3")
-            await serial.call(ran.append, "a read")  # a call goes after what was deferred before it
-            serial.defer(ran.append, "deferred 4")
-            serial.post(ran.append, "a write")       # so does a post
-            await serial.call(lambda: None)
-        finally:
-            serial.close()
-        return held, flushed, ran
-
-    held, flushed, ran = _run(main())
-    assert held == []
-    assert flushed == ["deferred 1", "deferred 2"]
-    assert ran == ["deferred 1", "deferred 2", "deferred 3", "a read", "deferred 4", "a write"]
-
-
-def test_a_call_ahead_goes_before_what_is_deferred_and_its_then_after_it_ran():
-    async def main():
-        serial, ran = Serial("test"), []
-        done = asyncio.Event()
-        try:
-            serial.defer(ran.append, "deferred", then=done.set)
-            await serial.call(ran.append, "ahead", ahead=True)
-            before = list(ran)
-            serial.flush()
-            await done.wait()
-        finally:
-            serial.close()
-        return before, ran
-
-    before, ran = _run(main())
-    assert before == ["ahead"]
-    assert ran == ["ahead", "deferred"]
-
-
-def test_a_failed_post_is_logged_and_the_thread_goes_on(caplog):
-    def broken():
-        raise KeyError("no job 'nope'")
-
-    async def main():
-        serial = Serial("job-store")
-        try:
-            serial.post(broken)
-            serial.defer(broken)
+            with pytest.raises(ZeroDivisionError):
+                await serial.call(lambda: 1 / 0)
             return await serial.call(lambda: "still here")
         finally:
             serial.close()
 
-    with caplog.at_level(logging.ERROR):
-        assert _run(main()) == "still here"
-    failures = [r.getMessage() for r in caplog.records if r.name == "cell.executor"]
-    assert failures == ["job-store: KeyError: \"no job 'nope'\""] * 2
+    assert _run(main()) == "still here"
 
 
-def test_a_failed_call_raises_in_the_caller():
+def test_close_runs_what_was_handed_over():
+    ran = []
+
     async def main():
         serial = Serial("test")
-        try:
-            await serial.call(int, "not a number")
-        finally:
-            serial.close()
+        serial.call(ran.append, "handed over before the close")
+        serial.close()
 
-    with pytest.raises(ValueError, match="not a number"):
-        _run(main())
+    _run(main())
+    assert ran == ["handed over before the close"]
