@@ -162,13 +162,12 @@ class Reconstruct(Step):
         attempts = config.reconstruct.max_attempts
         payload = b"".join(c.jpeg for c in job.captures)
         request = _reconstruct_request(job, config)
-        adaptive = job.request.views == "adaptive" and len(job.captures) < job.request.max_views
-        candidates = cell.candidates(job) if adaptive else []
+        # Asked at the cap too: the scan then ends saying how unsure its model is.
+        candidates = cell.candidates(job) if job.request.views == "adaptive" else []
         if candidates:
             request.next_view = NextViewQuery.model_validate({
                 "candidates": [{"K": config.camera.K, "T_world_cam": T.tolist()}
-                               for T in camera_poses(candidates, config.T_flange_cam)],
-                "workspace_min": config.robot.workspace.min, "workspace_max": config.robot.workspace.max})
+                               for T in camera_poses(candidates, config.T_flange_cam)]})
         failures: list[str] = []      # "attempt <k> on <worker>: <why>"
         tried: set[str] = set()
         sent = 0
@@ -224,7 +223,8 @@ class Reconstruct(Step):
         if nxt is not None and nxt.sure:
             await cell.note(job, f"the model is sure after {views} views (uncertainty {nxt.uncertainty:.3g})")
             return None
-        if nxt is None or nxt.candidate is None or not 0 <= nxt.candidate < len(candidates):
+        if views >= job.request.max_views or nxt is None or nxt.candidate is None \
+                or not 0 <= nxt.candidate < len(candidates):
             why = (f"the scan has its {job.request.max_views} views" if views >= job.request.max_views
                    else "no view the robot may take would help")
             unsure = f" (uncertainty {nxt.uncertainty:.3g})" if nxt is not None else ""

@@ -433,9 +433,6 @@ class NextViewQuery(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     candidates: Annotated[list[NextViewCandidate], Field(min_length=1, max_length=64)]
-    #: The box the camera must stay in, metres (the daemon's candidates already do).
-    workspace_min: Point | None = None
-    workspace_max: Point | None = None
 
 
 class NextViewAnswer(BaseModel):

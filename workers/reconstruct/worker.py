@@ -35,8 +35,8 @@ from wire import keys
 from wire.bundle import core_segmentation
 from wire.config import CellConfig
 from wire.errors import TransportError
-from wire.messages import (POINTS_ENCODING, Blob, Grasp, Reconstruction, ReconstructReply, ReconstructRequest,
-                           Superquadric, WorkerLoad, parse)
+from wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer, Reconstruction, ReconstructReply,
+                           ReconstructRequest, Superquadric, WorkerLoad, parse)
 from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
@@ -91,6 +91,7 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         grasps = [Grasp(T_world_grasp=g.T_world_grasp.tolist(), width=g.width, score=g.score, approach=g.approach)
                   for g in planned]
         summary["timings_ms"]["grasp"] = round(1000 * (time.perf_counter() - began), 3)
+    next_view = _next_view(request, result, [view.camera for view in views]) if request.next_view else None
     silhouettes = [cv2.imencode(".png", s)[1].tobytes() for s in result.silhouettes]
     points = np.ascontiguousarray(result.points, dtype="<f4").tobytes()
     reply = ReconstructReply(
@@ -98,10 +99,28 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         result=Reconstruction(superquadric=Superquadric.model_validate(summary["superquadric"]),
                               silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
                               timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
-                              radius=float(result.radius), grasps=grasps),
+                              radius=float(result.radius), grasps=grasps, next_view=next_view),
         silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
         points=Blob(encoding=POINTS_ENCODING, length=len(points)))
     return reply.model_dump_json(), b"".join(silhouettes) + points
+
+
+def _next_view(request: ReconstructRequest, result, cameras: list[Camera]) -> NextViewAnswer | None:
+    """The best of the request's candidate next views (``core_cy.next_view``), or None when the core
+    can choose none (none of them is in the workspace, say): the scan then ends with what it has."""
+    from core_cy.next_view import choose_next_view  # the core's planner, loaded when a scan asks for it
+
+    assert request.next_view is not None
+    candidates = [Camera(K=c.K, T_world_cam=c.T_world_cam, view=len(cameras) + k)
+                  for k, c in enumerate(request.next_view.candidates)]
+    try:
+        chosen = choose_next_view(result, cameras, candidates, support_plane=request.support_plane)
+    except CoreError as exc:
+        log.warning("job %s: no next view: %s", request.job_id, exc)
+        return None
+    return NextViewAnswer(candidate=chosen.candidate, T_world_cam=np.asarray(chosen.T_world_cam).tolist(),
+                          expected_gain=float(chosen.expected_gain), uncertainty=float(chosen.uncertainty),
+                          sure=bool(chosen.sure))
 
 
 #: What a worker runs for each request, in a pool process: (ReconstructRequest JSON, payload,
