@@ -9,7 +9,7 @@ from collections.abc import Awaitable, Callable
 from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, LinkDown, NoResponder,
                          RemoteError, TransportError, TransportTimeout, wire_kind)
 from wire.messages import Message
-from wire.transport import Reply, Transport
+from wire.transport import Reply, BaseTransport
 
 from .job import Job
 from .presence import Absent, Presence
@@ -23,7 +23,7 @@ _RETRY_S = 0.5              # between two tries of a step whose part is away
 class Asker:
     """Asks the workers of a cell through ``transport``; ``note`` tells a job's listeners why it waits."""
 
-    def __init__(self, transport: Transport, presence: Presence, outage_s: float,
+    def __init__(self, transport: BaseTransport, presence: Presence, outage_s: float,
                  note: Callable[[Job, str], Awaitable[None]]) -> None:
         self._transport, self._presence, self._outage_s, self._note = transport, presence, outage_s, note
 

@@ -35,7 +35,7 @@ from wire import keys
 from wire.config import CellConfig
 from wire.errors import CellError, ConfigError, StoreError
 from wire.messages import JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest
-from wire.transport import Transport
+from wire.transport import BaseTransport
 
 from .asking import Asker
 from .executor import Serial
@@ -65,7 +65,7 @@ class CellDaemon(RequestHandlers):
     """Runs the jobs of one cell. Create, then ``await run(stop)``; the job store is ``store_path``
     (default ``<run dir>/jobs.sqlite``), opened by ``run`` in the store's own thread."""
 
-    def __init__(self, config: CellConfig, transport: Transport, *, store_path: Path | None = None,
+    def __init__(self, config: CellConfig, transport: BaseTransport, *, store_path: Path | None = None,
                  clock: Callable[[], float] = time.time) -> None:
         self.config = config
         self.cell = config.cell_id

@@ -38,7 +38,7 @@ from typing import Any
 from wire import keys
 from wire.errors import CellError, LinkDown, NoResponder, RemoteError, TransportError, TransportTimeout
 from wire.messages import ReconstructorStatus, WorkerLoad, parse
-from wire.transport import Reply, Transport
+from wire.transport import Reply, BaseTransport
 
 __all__ = ["ReconstructorPool", "AttemptFailed", "NoReconstructor"]
 
@@ -108,7 +108,7 @@ class ReconstructorPool:
     subscribes, :meth:`close` undoes it.
     """
 
-    def __init__(self, transport: Transport, *, heartbeat_s: float, clock=time.monotonic) -> None:
+    def __init__(self, transport: BaseTransport, *, heartbeat_s: float, clock=time.monotonic) -> None:
         self._transport = transport
         self.heartbeat_s = heartbeat_s
         self._clock = clock
