@@ -75,8 +75,7 @@ class CellDaemon(RequestHandlers):
         self._transport = transport
         self._store: JobStore | None = None     # used in the store thread only
         self._db = Serial("job-store")
-        self._recorder = Recorder(n_points=config.reconstruct.n_points,
-                                  sim=config.sim.model_dump() if config.robot.backend == "sim" else None)
+        self._recorder = Recorder(n_points=config.reconstruct.n_points)
         self._live: dict[str, JobHandle] = {}   # the jobs not yet ended, in the order they came
         self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)

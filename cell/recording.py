@@ -32,7 +32,7 @@ from rerun.error_utils import RerunWarning
 
 from core_cy.superquadric import Superquadric, mesh
 
-__all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command"]
+__all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command", "shared_parts"]
 
 _log = logging.getLogger(__name__)
 
@@ -268,15 +268,23 @@ def _rerun_executable() -> str:
     return found
 
 
+def shared_parts(path: Path) -> list[Path]:
+    """The other files of the recording at ``path`` (``<job id>.<part>.rrd``, made by other
+    processes with the same recording id: the simulator's truth, say), which a viewer shows with it."""
+    path = Path(path)
+    return sorted(path.parent.glob(f"{path.stem}.*.rrd"))
+
+
 def replay_command(path: Path, *, web: bool = False, bind: str = "127.0.0.1", web_port: int = 9090,
                    grpc_port: int = 9876) -> list[str]:
-    """The argv that opens a recording in the native viewer, or serves it to a browser.
+    """The argv that opens a recording (with its :func:`shared_parts`) in the native viewer, or serves
+    it to a browser.
 
     The viewer's servers listen on ``bind``, loopback by default (rerun's own default is
     0.0.0.0). With ``web`` the recording is served over gRPC on ``grpc_port`` and the web
     viewer on ``web_port``, and no browser is opened.
     """
-    argv = [_rerun_executable(), str(path), "--bind", bind]
+    argv = [_rerun_executable(), str(path), *map(str, shared_parts(path)), "--bind", bind]
     if web:
         argv += ["--serve-web", "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
     return argv

@@ -27,7 +27,7 @@ def test_a_new_recorder_process_takes_over_and_the_old_one_ends_with_its_last_re
     """Rerun never frees a recording's threads: a recorder process makes a bounded number of
     recordings. One open across the change stays whole in the old process."""
     paths = {job: tmp_path / f"{job}.rrd" for job in ("j1", "j2", "j3", "j4", "j5")}
-    recorder = Recorder(n_points=100, sim=None, recordings_per_process=2)
+    recorder = Recorder(n_points=100, recordings_per_process=2)
     recorder.start()
     try:
         for job in ("j1", "j2", "j3"):  # j3 is the first of a second process; j1 and j2 stay in the first
