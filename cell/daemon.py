@@ -13,8 +13,8 @@ Reconstructions go to the pool of reconstruction workers that every cell on the
 network shares (``cell.pool``); clients' queries are answered by ``cell.requests``.
 
 After a crash, the restarted daemon carries every accepted job on from its checkpoint
-(its plan so far, the steps done, ``cell.job.Checkpoint``) with the pictures it kept
-(``cell.pictures``); a job whose pick had begun fails instead (the gripper may hold the
+(its plan so far, the steps done, ``cell.job.Checkpoint``) with the pictures the store kept;
+a job whose pick had begun fails instead (the gripper may hold the
 object), and a job being cancelled is cancelled.
 """
 
@@ -43,7 +43,6 @@ from .handle import JobHandle
 from .job import Checkpoint, Job, Picture
 from .lane import MotionLane
 from .lock import RunDirLock
-from .pictures import Pictures
 from .pool import ReconstructorPool
 from .presence import Presence
 from .publisher import Publisher
@@ -77,7 +76,6 @@ class CellDaemon(RequestHandlers):
         self._db = Serial("job-store")
         self._recorder = Recorder(n_points=config.reconstruct.n_points)
         self._live: dict[str, JobHandle] = {}   # the jobs not yet ended, in the order they came
-        self._pictures = Pictures(self.run_dir)     # used in the store's thread
         self._presence = Presence(transport, self.cell)
         self._asker = Asker(transport, self._presence, config.timeouts.outage_s, self.note)
         self.ask, self.wait_link = self._asker.ask, self._asker.wait_link
@@ -171,8 +169,12 @@ class CellDaemon(RequestHandlers):
                 await handle.change(message, lifecycle=to, error_kind=kind)
                 continue
             n_pictures = sum(isinstance(step, View) for step in job.plan[:job.done])
-            pictures = await self._db.call(self._pictures.load, job.job_id, n_pictures) if n_pictures else []
-            if pictures is None:  # not all of them whole: from the first view again
+            kept = await self._db.call(self._jobs.pictures, job.job_id)
+            try:
+                pictures = [Picture.kept(jpeg, poses) for jpeg, poses in kept[:n_pictures]]
+            except ValueError:
+                pictures = []
+            if len(pictures) < n_pictures:  # not all of them kept: from the first view again
                 job.done, pictures = 0, []
             job.captures = pictures
             self._launch(handle)
@@ -223,7 +225,7 @@ class CellDaemon(RequestHandlers):
             update={"activity": activity, "doing": doing}))
 
     async def keep(self, job: Job, picture: Picture) -> None:
-        await self._db.call(self._pictures.add, job.job_id, len(job.captures), picture)
+        await self._db.call(self._jobs.keep_picture, job.job_id, len(job.captures), picture.jpeg, picture.poses())
 
     def candidates(self, job: Job) -> list[np.ndarray]:
         request = job.request
@@ -237,15 +239,8 @@ class CellDaemon(RequestHandlers):
     async def store(self, event: JobEvent, *, sync: bool, error_kind: str | None,
                     checkpoint: Checkpoint | None) -> None:
         n_views = None if checkpoint is None else sum(spec["kind"] == View.kind for spec in checkpoint.plan)
-        await self._db.call(self._write, event, error_kind, checkpoint.model_dump_json() if checkpoint else None,
-                            n_views, sync)
-
-    def _write(self, event: JobEvent, error_kind: str | None, checkpoint: str | None, n_views: int | None,
-               sync: bool) -> None:
-        """In the store's thread: the change, and a finished job's pictures dropped (its recording has them)."""
-        self._jobs.change(event, error_kind=error_kind, checkpoint=checkpoint, n_views=n_views, durable=sync)
-        if event.lifecycle.finished:
-            self._pictures.drop(event.job_id)
+        await self._db.call(self._jobs.change, event, error_kind=error_kind, n_views=n_views, durable=sync,
+                            checkpoint=checkpoint.model_dump_json() if checkpoint else None)
 
     def publish(self, event: JobEvent) -> None:
         self._publisher.put(keys.events(self.cell, event.job_id), event.model_dump_json())

@@ -21,6 +21,7 @@ job goes through its handle (``cell.handle``).
 from __future__ import annotations
 
 import asyncio
+import json
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -70,6 +71,20 @@ class Picture:
     jpeg: bytes
     T_base_flange: np.ndarray
     T_base_cam: np.ndarray
+
+    def poses(self) -> str:
+        """Where it was taken from, as the store keeps it (JSON)."""
+        return json.dumps({"T_base_flange": self.T_base_flange.tolist(), "T_base_cam": self.T_base_cam.tolist()})
+
+    @classmethod
+    def kept(cls, jpeg: bytes, poses: str) -> Picture:
+        """The picture the store kept; ``ValueError`` if its poses cannot be read."""
+        try:
+            where = json.loads(poses)
+            return cls(jpeg, np.asarray(where["T_base_flange"], dtype=np.float64),
+                       np.asarray(where["T_base_cam"], dtype=np.float64))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"a kept picture's poses cannot be read: {exc}") from None
 
 
 class Checkpoint(BaseModel):

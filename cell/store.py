@@ -10,7 +10,9 @@ durable one: a ``kill -9`` loses nothing written; after a power cut a restarted
 daemon may find a job a step behind, and carries it on from there.
 
 A job's checkpoint (``cell.job.Checkpoint``: its plan so far, the steps done)
-is kept with it, replaced by each change that carries one.
+is kept with it, replaced by each change that carries one, and so are the
+pictures it has taken (:meth:`JobStore.keep_picture`) until it ends: a
+restarted daemon carries it on from them, and the job's recording keeps them.
 
 Job ids look like ``20261122-000042``: the UTC day the job was submitted, then
 the job counter (the row number; jobs are never deleted). They are unique within a
@@ -39,7 +41,9 @@ SCHEMA_VERSION = 3
 _T = TypeVar("_T")
 # What each version adds to the one before it.
 _UPGRADES = {2: ("ALTER TABLE jobs ADD COLUMN error_kind TEXT",),
-             3: ("ALTER TABLE jobs ADD COLUMN progress TEXT", "ALTER TABLE jobs ADD COLUMN checkpoint TEXT")}
+             3: ("ALTER TABLE jobs ADD COLUMN progress TEXT", "ALTER TABLE jobs ADD COLUMN checkpoint TEXT",
+                 "CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,"
+                 " jpeg BLOB NOT NULL, poses TEXT NOT NULL, PRIMARY KEY (job_id, view))")}
 
 # One statement each: sqlite3 runs one at a time inside our transaction (executescript would commit).
 _SCHEMA = (
@@ -59,6 +63,9 @@ _SCHEMA = (
     "CREATE INDEX events_job ON events (job_id)",
     """CREATE TABLE results (job_id TEXT PRIMARY KEY REFERENCES jobs (job_id),
         result TEXT NOT NULL)                       -- ScanResult JSON""",
+    """CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,
+        jpeg BLOB NOT NULL, poses TEXT NOT NULL,    -- JSON: where the flange and the camera stood
+        PRIMARY KEY (job_id, view))""",
 )
 _COLUMNS = "job_id, state, view, n_views, error, created, updated, recording, request, error_kind, progress"
 
@@ -190,7 +197,36 @@ class JobStore:
                  recording, event.time, job_id),
             )
             self._insert_event(db, event)
+            if state.finished:
+                db.execute("DELETE FROM pictures WHERE job_id = ?", (job_id,))
             return self._get(db, job_id)
+
+    def keep_picture(self, job_id: str, view: int, jpeg: bytes, poses: str) -> None:
+        """Keep the picture of the job's ``view`` (replacing one kept before), with ``poses``
+        (JSON); not waited for on disk (see the module's text).
+
+        Raises
+        ------
+        KeyError
+            There is no job ``job_id``.
+        """
+        with self._write(durable=False) as db:
+            if db.execute("SELECT 1 FROM jobs WHERE job_id = ?", (job_id,)).fetchone() is None:
+                raise KeyError(f"no job {job_id!r}")
+            db.execute("INSERT OR REPLACE INTO pictures (job_id, view, jpeg, poses) VALUES (?, ?, ?, ?)",
+                       (job_id, view, jpeg, poses))
+
+    def pictures(self, job_id: str) -> builtins.list[tuple[bytes, str]]:
+        """The pictures kept of the job, (JPEG, poses JSON), in the order of their views 0, 1, ...:
+        as many as there are from view 0 on without a gap."""
+        rows = self._read("SELECT view, jpeg, poses FROM pictures WHERE job_id = ? ORDER BY view", [job_id],
+                          lambda row: row)
+        kept = []
+        for expected, (view, jpeg, poses) in enumerate(rows):
+            if view != expected:
+                break
+            kept.append((bytes(jpeg), poses))
+        return kept
 
     def set_recording(self, job_id: str, recording: str) -> None:
         """Name the job's Rerun recording (not waited for on disk)."""

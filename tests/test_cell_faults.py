@@ -204,7 +204,8 @@ def test_a_daemon_killed_during_a_reconstruction_resumes_it_from_the_pictures(ri
     assert rig.camera.server.request_count == pictures_taken  # no picture taken again
     states = [e.state for e in cell.events(status.job_id)]
     assert states.count(JobState.MOVING) == 3 and states[-1] is JobState.SUCCEEDED
-    assert not (cell.config.run_dir / "pictures" / status.job_id).exists()  # the recording keeps them
+    with JobStore(cell.config.run_dir / "jobs.sqlite") as store:
+        assert store.pictures(status.job_id) == []  # the recording keeps them
 
 
 def test_a_daemon_killed_during_the_views_takes_them_again(rig):

@@ -290,7 +290,9 @@ def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
     robocell opens with its jobs."""
     path = tmp_path / "jobs.sqlite"
     db = sqlite3.connect(path, isolation_level=None)
-    for statement in _SCHEMA:  # version 1: the same tables without jobs.error_kind, progress, checkpoint
+    for statement in _SCHEMA:  # version 1: without jobs.error_kind, progress, checkpoint, nor pictures
+        if "CREATE TABLE pictures" in statement:
+            continue
         db.execute(re.sub(r",(\s*--[^\n]*)?\n\s*error_kind TEXT,.*?checkpoint TEXT\)[^\n]*", ")", statement,
                           flags=re.S))
     db.execute("PRAGMA user_version = 1")
@@ -322,3 +324,19 @@ def test_a_damaged_store_is_refused_at_open(tmp_path):
         file.write(os.urandom(65536))
     with pytest.raises(StoreError, match=r"jobs.sqlite is damaged \(.*\): move it aside"):
         JobStore(path)
+
+
+def test_a_job_keeps_its_pictures_until_it_ends(store):
+    job, _ = store.add(request(), n_views=3, now=T0)
+    other, _ = store.add(request(), n_views=3, now=T0)
+    store.keep_picture(job.job_id, 0, b"jpeg 0", '{"at": 0}')
+    store.keep_picture(job.job_id, 2, b"jpeg 2", '{"at": 2}')
+    store.keep_picture(other.job_id, 0, b"other's", "{}")
+    assert store.pictures(job.job_id) == [(b"jpeg 0", '{"at": 0}')]  # view 1 is missing: 2 is not whole
+    store.keep_picture(job.job_id, 1, b"jpeg 1", '{"at": 1}')
+    store.keep_picture(job.job_id, 0, b"jpeg 0 again", '{"at": 0}')
+    assert [jpeg for jpeg, _ in store.pictures(job.job_id)] == [b"jpeg 0 again", b"jpeg 1", b"jpeg 2"]
+    with pytest.raises(KeyError, match="nope"):
+        store.keep_picture("nope", 0, b"", "{}")
+    change(store, job.job_id, JobState.FAILED, message="gone", now=T0 + 1)
+    assert store.pictures(job.job_id) == [] and store.pictures(other.job_id) == [(b"other's", "{}")]
