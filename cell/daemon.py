@@ -5,7 +5,7 @@ of its own from the moment it is accepted. Steps that need the robot and its cam
 run in the motion lane (``cell.lane``), one job at a time, in the order the jobs came;
 the others (the reconstruction) outside it, so that job k's reconstruction overlaps
 job k+1's motion. Every change of a job goes through its handle (``cell.handle``):
-into the store (``cell.store``, in its own thread), then to its listeners (a
+into the store (``cell.store``; its syncs in a thread), then to its listeners (a
 JobEvent, put by ``cell.publisher``), then into its Rerun recording (written by a
 process of its own: ``cell.recorder``); the handle's table says what is synced first.
 
@@ -38,7 +38,6 @@ from wire.messages import JobEvent, JobState, JobStatus, Lifecycle, Progress, Sc
 from wire.transport import BaseTransport
 
 from .asking import Asker
-from .executor import Serial
 from .handle import JobHandle
 from .job import Checkpoint, Job, Picture
 from .lane import MotionLane
@@ -56,6 +55,7 @@ __all__ = ["CellDaemon", "MAX_PLAN_STEPS"]
 
 log = logging.getLogger(__name__)
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
+_STORE_BUSY_S = 1.0         # how long a write waits for the store's lock
 #: The most steps a job's plan may grow to: past it, the job ends with what it has, and says so.
 MAX_PLAN_STEPS = 64
 
@@ -72,8 +72,7 @@ class CellDaemon(RequestHandlers):
         self.clock = clock
         self._store_path = store_path or self.run_dir / "jobs.sqlite"
         self._transport = transport
-        self._store: JobStore | None = None     # used in the store thread only
-        self._db = Serial("job-store")
+        self._store: JobStore | None = None
         self._recorder = Recorder(n_points=config.reconstruct.n_points)
         self._live: dict[str, JobHandle] = {}   # the jobs not yet ended, in the order they came
         self._presence = Presence(transport, self.cell)
@@ -87,7 +86,6 @@ class CellDaemon(RequestHandlers):
 
     @property
     def _jobs(self) -> JobStore:
-        """The job store, to be called in its own thread (``self._db``)."""
         assert self._store is not None, "run() opens the store"
         return self._store
 
@@ -111,7 +109,8 @@ class CellDaemon(RequestHandlers):
         lock.acquire()
         try:
             await self._refuse_a_second_daemon()
-            self._store = await self._db.call(JobStore, self._store_path)
+            # Only this daemon writes it (the run directory's lock): a lock held long is a fault.
+            self._store = JobStore(self._store_path, timeout=_STORE_BUSY_S)
             self._recorder.start()
             self._publisher.start()
             try:
@@ -119,10 +118,9 @@ class CellDaemon(RequestHandlers):
                 await self._serve(stop)
             finally:
                 await asyncio.to_thread(self._recorder.stop)  # it closes the recordings still open
-                await self._db.call(self._jobs.close)
+                self._jobs.close()
                 await asyncio.to_thread(self._publisher.close)
         finally:
-            await asyncio.to_thread(self._db.close)
             lock.release()
 
     async def _refuse_a_second_daemon(self) -> None:
@@ -159,8 +157,8 @@ class CellDaemon(RequestHandlers):
 
     async def _recover(self) -> None:
         """After a restart every accepted job is carried on from its checkpoint, in the order they came."""
-        for status in await self._db.call(self._jobs.unfinished):
-            raw = await self._db.call(self._jobs.checkpoint, status.job_id)
+        for status in self._jobs.unfinished():
+            raw = self._jobs.checkpoint(status.job_id)
             job = Job(status.job_id, status.request, [], lifecycle=status.lifecycle, progress=status.progress)
             handle = self._live[job.job_id] = JobHandle(job, self, self.clock)
             end = resume(job, raw, lambda: job_steps(job.request, self._flange_poses(job.request)))
@@ -169,7 +167,7 @@ class CellDaemon(RequestHandlers):
                 await handle.change(message, lifecycle=to, error_kind=kind)
                 continue
             n_pictures = sum(isinstance(step, View) for step in job.plan[:job.done])
-            kept = await self._db.call(self._jobs.pictures, job.job_id)
+            kept = self._jobs.pictures(job.job_id)
             try:
                 pictures = [Picture.kept(jpeg, poses) for jpeg, poses in kept[:n_pictures]]
             except ValueError:
@@ -225,7 +223,7 @@ class CellDaemon(RequestHandlers):
             update={"activity": activity, "doing": doing}))
 
     async def keep(self, job: Job, picture: Picture) -> None:
-        await self._db.call(self._jobs.keep_picture, job.job_id, len(job.captures), picture.jpeg, picture.poses())
+        self._jobs.keep_picture(job.job_id, len(job.captures), picture.jpeg, picture.poses())
 
     def candidates(self, job: Job) -> list[np.ndarray]:
         request = job.request
@@ -239,8 +237,10 @@ class CellDaemon(RequestHandlers):
     async def store(self, event: JobEvent, *, sync: bool, error_kind: str | None,
                     checkpoint: Checkpoint | None) -> None:
         n_views = None if checkpoint is None else sum(spec["kind"] == View.kind for spec in checkpoint.plan)
-        await self._db.call(self._jobs.change, event, error_kind=error_kind, n_views=n_views, durable=sync,
-                            checkpoint=checkpoint.model_dump_json() if checkpoint else None)
+        self._jobs.change(event, error_kind=error_kind, n_views=n_views,
+                          checkpoint=checkpoint.model_dump_json() if checkpoint else None)
+        if sync:
+            await asyncio.to_thread(self._jobs.sync)
 
     def publish(self, event: JobEvent) -> None:
         self._publisher.put(keys.events(self.cell, event.job_id), event.model_dump_json())

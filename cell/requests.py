@@ -15,7 +15,6 @@ from wire.errors import StoreError
 from wire.messages import CellStatus, FailedJob, JobState, JobStatus, ScanRequest, parse
 from wire.transport import Request, RequestError, Response
 
-from .executor import Serial
 from .handle import JobHandle
 from .job import Checkpoint, IllegalTransition
 from .plan import job_steps
@@ -39,7 +38,6 @@ class RequestHandlers:
     cell: str
     clock: Callable[[], float]
     pool: ReconstructorPool
-    _db: Serial
     _live: dict[str, JobHandle]
     _presence: Presence
     _started: float
@@ -69,7 +67,7 @@ class RequestHandlers:
                     raise RequestError(f"pick.place: {'xy'[axis]} = {value:g} m is outside the workspace's "
                                        f"{low:g} to {high:g} m")
         if scan.request_id is not None:  # submitted before: the same job, even when the queue is full
-            known = await self._db.call(self._jobs.find_request, scan.request_id)
+            known = self._jobs.find_request(scan.request_id)
             if known is not None:
                 return Response(known.model_dump_json())
         if self._queued() >= self.config.max_queued:
@@ -77,8 +75,8 @@ class RequestHandlers:
         plan = job_steps(scan, poses)
         point = Checkpoint(plan=[step.spec() for step in plan], done=0).model_dump_json()
         try:  # on disk before the answer, so an answered submit survives a crash
-            status, created = await self._db.call(self._jobs.add, scan, n_views=len(poses), now=self.clock(),
-                                                  checkpoint=point)
+            status, created = self._jobs.add(scan, n_views=len(poses), now=self.clock(), checkpoint=point)
+            await asyncio.to_thread(self._jobs.sync)
         except StoreError as exc:
             raise StoreError(f"the job store could not take the job: {exc}") from None
         if created:
@@ -96,7 +94,7 @@ class RequestHandlers:
             failed = store.list(states={JobState.FAILED}, limit=n_failures) if n_failures else []
             return store.counts(), failed
 
-        counts, failed = await self._db.call(read, self._jobs)
+        counts, failed = read(self._jobs)
         status = CellStatus(
             cell=self.cell, time=self.clock(), started=self._started,
             workers={part: part in self._presence for part in ("robot", "camera")},
@@ -113,7 +111,7 @@ class RequestHandlers:
             limit = int(request.parameters.get("limit", 50))
         except ValueError as exc:
             raise RequestError(f"bad parameters: {exc}") from None
-        statuses = await self._db.call(self._jobs.list, states=states, limit=max(1, min(limit, 1000)))
+        statuses = self._jobs.list(states=states, limit=max(1, min(limit, 1000)))
         return Response("[" + ",".join(s.model_dump_json() for s in statuses) + "]")
 
     async def _on_job_query(self, request: Request) -> Response:
@@ -126,14 +124,14 @@ class RequestHandlers:
         status = await self._status(job_id)
         if what == "status":
             return Response(status.model_dump_json())
-        result = await self._db.call(self._jobs.result, job_id)
+        result = self._jobs.result(job_id)
         if result is None:
             raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
                                + (f" ({status.error})" if status.error else ""))
         return Response(result.model_dump_json())
 
     async def _status(self, job_id: str) -> JobStatus:
-        status = await self._db.call(self._jobs.get, job_id)
+        status = self._jobs.get(job_id)
         if status is None:
             raise RequestError(f"no job {job_id!r} in cell {self.cell}")
         return status

@@ -1,13 +1,13 @@
 """The cell daemon's job store: every scan job, its events and its result in one SQLite file.
 
-Each method is one short transaction. A store belongs to the thread that opened
-it (an SQLite connection does): the daemon keeps its own in a thread of its
-own, and calls it there, in order. Every change of a job is one call of
-:meth:`JobStore.change` (the daemon's ``cell.handle`` decides what is synced:
-``durable``); a durable change is on disk when the method returns (WAL journal,
-``synchronous=FULL``), one that is not is written, and synced with the next
-durable one: a ``kill -9`` loses nothing written; after a power cut a restarted
-daemon may find a job a step behind, and carries it on from there.
+Each method is one short transaction (a millisecond at most: the daemon calls
+them on its event loop), committed without waiting for the disk (WAL journal,
+``synchronous=NORMAL``): a ``kill -9`` loses nothing committed. :meth:`JobStore.sync`
+puts every commit so far on disk (an ``fsync`` of the journal, which needs no
+connection, so that the daemon runs it in a thread while its loop goes on);
+the daemon's ``cell.handle`` says which changes wait for it. After a power cut
+a restarted daemon may find a job a step behind what it had not synced, and
+carries it on from there. Every change of a job is one call of :meth:`JobStore.change`.
 
 A job's checkpoint (``cell.job.Checkpoint``: its plan so far, the steps done)
 is kept with it, replaced by each change that carries one, and so are the
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import builtins
 import contextlib
+import os
 import sqlite3
 import time
 from collections.abc import Callable, Iterator
@@ -97,7 +98,7 @@ class JobStore:
                     raise StoreError(f"job store {self.path} is damaged ({'; '.join(damage[:3])}): move it aside "
                                      f"(a new one is made) or restore it from a backup")
                 self._db.execute("PRAGMA journal_mode = WAL")      # readers don't block the writer
-                self._db.execute("PRAGMA synchronous = FULL")      # fsync every commit
+                self._db.execute("PRAGMA synchronous = NORMAL")    # on disk at sync(), see the module's text
                 self._db.execute("PRAGMA foreign_keys = ON")
                 with self._write() as db:
                     version = db.execute("PRAGMA user_version").fetchone()[0]
@@ -135,7 +136,7 @@ class JobStore:
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
         ``checkpoint``: the job's plan, as
-        JSON (see :meth:`checkpoint`). On disk when it returns.
+        JSON (see :meth:`checkpoint`). On disk once :meth:`sync` returns.
 
         Raises
         ------
@@ -165,13 +166,34 @@ class JobStore:
             self._insert_event(db, queued_event(status))
             return status, True
 
+    def sync(self) -> None:
+        """Put every commit so far on disk: the journal synced (a checkpoint syncs the database file
+        before it empties the journal). Needs no connection: any thread may call it.
+
+        Raises
+        ------
+        StoreError
+            The journal cannot be synced (the disk failed, say).
+        """
+        try:
+            wal = os.open(f"{self.path}-wal", os.O_RDONLY)
+        except FileNotFoundError:  # checkpointed and removed: the database file has it all
+            return
+        except OSError as exc:
+            raise StoreError(f"job store {self.path}: cannot open its journal: {exc.strerror or exc}") from exc
+        try:
+            os.fsync(wal)
+        except OSError as exc:
+            raise StoreError(f"job store {self.path}: cannot sync its journal: {exc.strerror or exc}") from exc
+        finally:
+            os.close(wal)
+
     def change(self, event: JobEvent, *, error_kind: str | None = None, checkpoint: str | None = None,
-               n_views: int | None = None, recording: str | None = None, durable: bool = True) -> JobStatus:
+               n_views: int | None = None, recording: str | None = None) -> JobStatus:
         """A change of a job, as its ``event`` says: its state and progress, the event in its
         history, its result (stored once, not in the history) if the event carries one; all of it or
         none. A failure's message is the job's ``error``, of kind ``error_kind``. ``checkpoint``
-        (JSON) and ``n_views`` replace the job's when given, ``recording`` names its recording. Not
-        ``durable``: the commit does not wait for the disk (see the module's text).
+        (JSON) and ``n_views`` replace the job's when given, ``recording`` names its recording.
 
         Raises
         ------
@@ -183,7 +205,7 @@ class JobStore:
         job_id, state = event.job_id, JobState(event.state)
         failed = state is JobState.FAILED
         result = event.result
-        with self._write(durable=durable) as db:
+        with self._write() as db:
             self._check_open(db, job_id, state)
             if result is not None:
                 db.execute("INSERT INTO results (job_id, result) VALUES (?, ?)", (job_id, result.model_dump_json()))
@@ -203,14 +225,14 @@ class JobStore:
 
     def keep_picture(self, job_id: str, view: int, jpeg: bytes, poses: str) -> None:
         """Keep the picture of the job's ``view`` (replacing one kept before), with ``poses``
-        (JSON); not waited for on disk (see the module's text).
+        (JSON).
 
         Raises
         ------
         KeyError
             There is no job ``job_id``.
         """
-        with self._write(durable=False) as db:
+        with self._write() as db:
             if db.execute("SELECT 1 FROM jobs WHERE job_id = ?", (job_id,)).fetchone() is None:
                 raise KeyError(f"no job {job_id!r}")
             db.execute("INSERT OR REPLACE INTO pictures (job_id, view, jpeg, poses) VALUES (?, ?, ?, ?)",
@@ -229,8 +251,8 @@ class JobStore:
         return kept
 
     def set_recording(self, job_id: str, recording: str) -> None:
-        """Name the job's Rerun recording (not waited for on disk)."""
-        with self._write(durable=False) as db:
+        """Name the job's Rerun recording."""
+        with self._write() as db:
             db.execute("UPDATE jobs SET recording = ? WHERE job_id = ?", (recording, job_id))
 
     # --- reading ----------------------------------------------------------------------------
@@ -309,12 +331,10 @@ class JobStore:
             return [convert(row) for row in self._db.execute(sql, params)]
 
     @contextlib.contextmanager
-    def _write(self, *, durable: bool = True) -> Iterator[sqlite3.Connection]:
-        """One write transaction: committed if the block returns, rolled back if it raises; a
-        durable one is on disk when the block's caller goes on."""
+    def _write(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction: committed if the block returns, rolled back if it raises."""
         with self._errors():
             db = self._db
-            db.execute(f"PRAGMA synchronous = {'FULL' if durable else 'NORMAL'}")
             db.execute("BEGIN IMMEDIATE")  # take the write lock now, not half-way through
             try:
                 yield db

@@ -340,3 +340,15 @@ def test_a_job_keeps_its_pictures_until_it_ends(store):
         store.keep_picture("nope", 0, b"", "{}")
     change(store, job.job_id, JobState.FAILED, message="gone", now=T0 + 1)
     assert store.pictures(job.job_id) == [] and store.pictures(other.job_id) == [(b"other's", "{}")]
+
+
+def test_sync_puts_the_journal_on_disk_and_has_nothing_to_do_once_it_was_checkpointed_away(tmp_path):
+    path = tmp_path / "jobs.sqlite"
+    with JobStore(path) as store:
+        status, _ = store.add(request(), n_views=3, now=T0)
+        assert (tmp_path / "jobs.sqlite-wal").stat().st_size > 0
+        store.sync()
+    assert not (tmp_path / "jobs.sqlite-wal").exists()  # the last connection closed: all in the database file
+    with JobStore(path) as store:
+        store.sync()
+        assert store.get(status.job_id).state is JobState.QUEUED
