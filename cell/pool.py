@@ -2,7 +2,7 @@
 
 Every worker announces itself (liveliness token), its health and its load
 (heartbeat: capacity, requests in flight and their tickets); the contract is
-in ``cell/keys.py``. :class:`ReconstructorPool` follows them and runs one
+in ``wire/keys.py``. :class:`ReconstructorPool` follows them and runs one
 *attempt* at a reconstruction at a time for its caller::
 
     pool = ReconstructorPool(transport, heartbeat_s=5.0)

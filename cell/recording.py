@@ -30,6 +30,8 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
+from core_cy.meshes import vertex_normals
+from wire import keys
 from core_cy.superquadric import Superquadric, mesh
 
 __all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command", "shared_parts"]
@@ -41,17 +43,6 @@ _OBJECT_CLASSES = rr.AnnotationContext([(0, "background", (0, 0, 0, 0)), (1, "ob
 _FLANGE_AXIS_LENGTH = 0.1  # metres
 # Rerun's level names; "WARNING" is Python's spelling of its "WARN".
 _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
-
-
-def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    # Without normals the viewer draws a mesh flat, as a uniform blob.
-    corners = vertices[triangles]
-    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # area-weighted
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.where(length > 0, length, 1.0)
 
 
 def _transform(T) -> rr.Transform3D:
@@ -90,7 +81,7 @@ class JobRecording:
     ['TextLog']
     """
 
-    def __init__(self, path: Path, job_id: str, *, application_id: str = "robocell") -> None:
+    def __init__(self, path: Path, job_id: str, *, application_id: str = keys.RECORDING_APPLICATION_ID) -> None:
         self.path = Path(path)
         self.job_id = job_id
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -174,7 +165,7 @@ class JobRecording:
             raise ValueError(f"need vertices (V, 3) and triangles (F, 3), got {vertices.shape} "
                              f"and {triangles.shape}")
         self._log(f"world/{name}", rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles,
-                                              vertex_normals=_vertex_normals(vertices, triangles),
+                                              vertex_normals=vertex_normals(vertices, triangles),
                                               albedo_factor=colour))
 
     def log_grasps(self, grasps, widths, chosen: int | None, gripper: dict) -> None:

@@ -297,7 +297,7 @@ class ScanResult(Message):
     durations_s: dict[str, float] = {}
     recording: str | None = None             # the job's Rerun .rrd; None: see recording_error
     recording_error: str | None = None       # why the job has no recording, if it has none
-    #: The reconstruction worker that made this result, and on which attempt (see ``cell/keys.py``).
+    #: The reconstruction worker that made this result, and on which attempt (see ``wire/keys.py``).
     worker: str | None = None
     attempts: Annotated[int, Field(ge=1)] = 1
     #: An adaptive scan's last word on how unsure its model is (``core_cy.next_view``); None otherwise.

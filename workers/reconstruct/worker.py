@@ -10,7 +10,7 @@ naming the field.
 
 The worker tells every cell what it can take: its capacity (the pool's size)
 and its load (requests in flight, with their tickets), in a heartbeat and on
-its info key; see ``cell/keys.py`` for the pool's contract.
+its info key; see ``wire/keys.py`` for the pool's contract.
 """
 
 from __future__ import annotations
@@ -133,7 +133,7 @@ Run = Callable[[str, bytes], Awaitable[tuple[str, bytes]]]
 
 
 class ReconstructWorker:
-    """One worker's face on the pool keys (``cell/keys.py``): the work, its load, its token.
+    """One worker's face on the pool keys (``wire/keys.py``): the work, its load, its token.
 
     ``run`` does one reconstruction; ``capacity`` is how many the worker does at
     a time (more wait in its queue, and count in ``in_flight``). The heartbeat

@@ -15,6 +15,7 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
+from core_cy.meshes import vertex_normals
 from wire import keys
 from wire.messages import JobEvent, parse
 from wire.transport import BaseTransport
@@ -33,16 +34,20 @@ def truth_path(run_dir: Path, job_id: str) -> Path:
 
 
 def write_truth(path: Path, job_id: str, scene: Sequence[SimObject]) -> None:
-    """Log the true objects' meshes as ``world/truth`` into job ``job_id``'s shared recording."""
-    from cell.recording import JobRecording  # the same recording: its application id, entities and meshes
+    """Log the true objects' meshes as ``world/truth`` (static) into job ``job_id``'s shared recording."""
+    import rerun as rr
 
-    recording = JobRecording(path, job_id)
+    recording = rr.RecordingStream(keys.RECORDING_APPLICATION_ID, recording_id=job_id)
+    recording.save(path)
     try:
-        for obj in scene:
+        for k, obj in enumerate(scene):
             vertices, triangles = obj.mesh()
-            recording.log_mesh("truth", vertices, triangles)
+            recording.log("world/truth" if k == 0 else f"world/truth/{k}", rr.Mesh3D(
+                vertex_positions=vertices, triangle_indices=triangles,
+                vertex_normals=vertex_normals(vertices, triangles), albedo_factor=(200, 200, 200, 120)), static=True)
     finally:
-        recording.close()
+        recording.flush()
+        recording.disconnect()
 
 
 class TruthLog:
