@@ -250,11 +250,6 @@ class JobStore:
             kept.append((bytes(jpeg), poses))
         return kept
 
-    def set_recording(self, job_id: str, recording: str) -> None:
-        """Name the job's Rerun recording."""
-        with self._write() as db:
-            db.execute("UPDATE jobs SET recording = ? WHERE job_id = ?", (recording, job_id))
-
     # --- reading ----------------------------------------------------------------------------
 
     def get(self, job_id: str) -> JobStatus | None:
