@@ -1,6 +1,6 @@
 """Benchmark of the reconstruction core: accuracy on a broad simulated set, speed, real photographs.
 
-    .venv/bin/python bench/bench_core.py [--keep DIR] [--repeat N] [--per-family N]
+    .venv/bin/python bench/bench_core.py [--keep DIR] [--repeat N] [--per-family N] [--per-kind N] [--only SECTION]
 
 (a) accuracy on `robocell sim --set broad`: seven families (box, flat box with a half-size of
     8-12 mm, cylinder, lying cylinder, standing plate, ellipsoid, rounded box), 2-15 cm, each object
@@ -16,7 +16,16 @@
     user sees it (wall time between its output lines, and the whole run over 60 with its start-up),
     beside the in-process time of the same bundles in the same run.
 (c) real photographs, supplied masks: ../shared/data/bunny, and dtu65 with three and with six views
-    (silhouette IoU per view; the three-view fit is also scored on all six views).
+    (silhouette IoU per view; the three-view fit is also scored on all six views); beside it the model's
+    union of parts (its one superquadric until the fit makes parts) projected by the judge
+    (workers/sim/judge.py, written apart from the fit).
+(d) compound objects (`workers.sim.scans.compound_set`: a bottle, a mug, a dumbbell, a T of two bars,
+    offset boxes, a spray bottle, a lamp, a box with a can on it, an L, a hammer, stacked boxes), three
+    views all around: volumetric IoU of the model's union of parts against the true union (the judge's
+    Monte Carlo, not the fit's code), mean and worst per kind, and the parts used.
+(e) views-monotone: objects seen from one side (three views over 60 degrees of azimuth; one of each
+    broad family, and compound objects whose handle or second part faces away), then each of twelve
+    fourth views around: how often, and by how much, the added view lowers the volumetric IoU.
     With --ceiling, also the best mean silhouette IoU on the bunny that a direct search of the mean
     IoU itself finds (Powell from the point fit's starts and from the silhouette fit, then a
     differential evolution about the latter): how far a single superquadric can go on that object
@@ -50,7 +59,10 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.scans import BROAD_FAMILIES, broad_set, standard_set  # noqa: E402
+from workers.sim.judge import Part, parts_from_truth, union_iou, union_silhouette_iou  # noqa: E402
+from workers.sim.objects import EVERYDAY  # noqa: E402
+from workers.sim.scans import BROAD_FAMILIES, broad_set, compound_set, one_sided_set, standard_set  # noqa: E402
+from core_cy.errors import CoreError  # noqa: E402
 from core_cy.quality import silhouette_iou  # noqa: E402
 from core_cy.reconstruct import Options, View, reconstruct  # noqa: E402
 from core_cy.scoring import volumetric_iou  # noqa: E402
@@ -237,6 +249,73 @@ def outside(bundles, core: int | None) -> None:
     print(f"  CPU time / {len(dirs)} (start-up included)           {np.median(cpus):7.2f} ms")
 
 
+def model_parts(result) -> list[Part]:
+    """The model as the judge's parts: the reconstruction's ``parts`` where it has them (DESIGN.md §1.11),
+    else its one superquadric."""
+    parts = getattr(result, "parts", None) or [result.superquadric]
+    return [Part.from_dict(part.to_dict()) for part in parts]
+
+
+def accuracy_compound(out: Path, per_kind: int) -> None:
+    """(d) Everyday compound objects, three views all around: union IoU against the true union, parts used."""
+    specs = compound_set(0, per_kind=per_kind)
+    bundles = written(specs, out)
+    ious, counts = defaultdict(list), defaultdict(list)
+    for spec, bundle in zip(specs, bundles):
+        parts = model_parts(run(bundle, Options()))
+        truth = parts_from_truth(spec.objects[0].truth())
+        kind = spec.name.rsplit("-", 1)[0]
+        ious[kind].append(union_iou(parts, truth))
+        counts[kind].append(len(parts))
+    print(f"\n(d) compound objects: {len(specs)} scans, {per_kind} per kind, 3 views at 35-55 degrees, "
+          f"silhouette fit on the photographs: volumetric IoU of the model (its union of parts) against the true union")
+    print(f"{'kind':<16}{'mean':>8}{'worst':>8}{'parts (true)':>14}{'parts used':>12}")
+    for kind in EVERYDAY:
+        true_parts = len(parts_from_truth(next(s for s in specs if s.name.startswith(kind + "-")).objects[0].truth()))
+        print(f"{kind:<16}{np.mean(ious[kind]):>8.3f}{np.min(ious[kind]):>8.3f}{true_parts:>14}"
+              f"{np.mean(counts[kind]):>9.1f} (max {max(counts[kind])})")
+    everything = [v for values in ious.values() for v in values]
+    print(f"{'all':<16}{np.mean(everything):>8.3f}{np.min(everything):>8.3f}"
+          f"{'':>14}{np.mean([c for v in counts.values() for c in v]):>9.1f}"
+          f" (max {max(c for v in counts.values() for c in v)})")
+
+
+def views_monotone(out: Path, per_family: int) -> None:
+    """(e) Does a view added ever make the model worse? Three one-sided views (60 degrees of azimuth), then each
+    of twelve fourth views around the object; volumetric IoU (of the union) against the truth."""
+    scans = one_sided_set(0, per_family=per_family)
+    bundles = written([scan.spec for scan in scans], out)
+    print(f"\n(e) views-monotone check: {len(scans)} objects seen from one side (3 views over 60 degrees), "
+          f"then each of 12 fourth views all around (40 degrees up): how often and by how much the 4-view model "
+          f"is worse than the 3-view one (volumetric IoU against the truth)")
+    print(f"{'family':<16}{'3 views':>9}{'4 views: mean':>15}{'worst':>8}{'lower':>7}{'by > 0.02':>11}"
+          f"{'worst drop':>12}")
+    totals = [0, 0, 0]
+    for scan, bundle in zip(scans, bundles):
+        truth = parts_from_truth(scan.spec.objects[0].truth())
+        seen = bundle.views[:scan.n_seen]
+
+        def score(views) -> float:
+            try:
+                result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
+            except CoreError as exc:  # a valid scan refused: counted as IoU 0, and said
+                print(f"  {scan.spec.name}, {len(views)} views: the reconstruction refused it: {exc}")
+                return 0.0
+            return union_iou(model_parts(result), truth)
+
+        before = score(seen)
+        after = np.array([score([*seen, view]) for view in bundle.views[scan.n_seen:]])
+        drops = before - after
+        lower, large = int(np.sum(drops > 0.005)), int(np.sum(drops > 0.02))
+        totals[0] += len(after)
+        totals[1] += lower
+        totals[2] += large
+        print(f"{scan.family:<16}{before:>9.3f}{after.mean():>15.3f}{after.min():>8.3f}{lower:>7}{large:>11}"
+              f"{max(0.0, drops.max()):>12.3f}")
+    print(f"{'all':<16}{'':>9}{'':>15}{'':>8}{totals[1]:>7}{totals[2]:>11}   of {totals[0]} added views "
+          f"('lower': by more than 0.005, the scores' own noise)")
+
+
 def real_photographs() -> None:
     print("\n(c) real photographs, supplied masks: silhouette IoU per view")
     bunny = DATA / "bunny"
@@ -245,6 +324,7 @@ def real_photographs() -> None:
         names = [view["mask"] for view in json.loads((bunny / "scan.json").read_text())["views"]]
         print(f"  bunny         " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
               + f"   mean {np.mean(result.silhouette_iou):.3f}")
+        union_line("bunny", result, load_bundle(bunny), names)
     else:
         print(f"  {bunny} not found")
     fits = {}
@@ -255,17 +335,31 @@ def real_photographs() -> None:
             continue
         bundle = load_bundle(path)
         result = run(bundle, Options())
-        fits[name] = result.superquadric
+        fits[name] = result
         names = [view["mask"] for view in json.loads((path / "scan.json").read_text())["views"]]
         print(f"  dtu65 {name:<7} " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
               + f"   mean {np.mean(result.silhouette_iou):.3f}")
+        union_line(f"dtu65 {name}", result, bundle, names)
     if len(fits) == 2:
         six = load_bundle(DATA / "dtu65" / "six")
         silhouettes = [mask_with_outline(cv2.imdecode(np.frombuffer(v.mask, np.uint8), cv2.IMREAD_GRAYSCALE))[0]
                        for v in six.views]
         for name, fit in fits.items():
-            ious = [silhouette_iou(fit, v.camera, s) for v, s in zip(six.views, silhouettes)]
-            print(f"  dtu65 {name}-view fit seen by all six views: mean {np.mean(ious):.3f}")
+            ious = [silhouette_iou(fit.superquadric, v.camera, s) for v, s in zip(six.views, silhouettes)]
+            union = [union_silhouette_iou(model_parts(fit), v.camera.K, v.camera.T_world_cam, s)
+                     for v, s in zip(six.views, silhouettes)]
+            print(f"  dtu65 {name}-view fit seen by all six views: mean {np.mean(ious):.3f} (its one superquadric), "
+                  f"{np.mean(union):.3f} (its union of {len(model_parts(fit))} parts, judged)")
+
+
+def union_line(label: str, result, bundle, names) -> None:
+    """The model's silhouette IoU per view as the judge projects it: its union of parts (one superquadric
+    until the fit makes parts), against the silhouettes the reconstruction used."""
+    parts = model_parts(result)
+    ious = [union_silhouette_iou(parts, v.camera.K, v.camera.T_world_cam, s)
+            for v, s in zip(bundle.views, result.silhouettes)]
+    print(f"  {label:<13} union of {len(parts)} part{'s' if len(parts) > 1 else ''}, judged: "
+          + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, ious)) + f"   mean {np.mean(ious):.3f}")
 
 
 def silhouette_ceiling(evaluations: int = 3000) -> None:
@@ -322,16 +416,27 @@ def main() -> None:
     parser.add_argument("--keep", help="keep the simulated sets here (and reuse them) instead of a temporary directory")
     parser.add_argument("--per-family", type=int, default=6, help="objects per family in the broad set (default 6)")
     parser.add_argument("--ceiling", action="store_true", help="also search the bunny's best mean silhouette IoU")
+    parser.add_argument("--per-kind", type=int, default=2, help="scans per compound kind (default 2)")
+    parser.add_argument("--only", choices=("broad", "standard", "compound", "monotone", "photographs"), action="append",
+                        help="run only these sections (repeatable; default: all)")
     args = parser.parse_args()
     core = _first_core()
     defaults = Options()
     print(f"robocell core benchmark: n_points={defaults.n_points}, edge_samples={defaults.edge_samples}")
+    sections = set(args.only or ("broad", "standard", "compound", "monotone", "photographs"))
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(args.keep or scratch)
-        accuracy_broad(out / "broad", args.per_family)
-        superquadrics = accuracy_standard(out / "standard")
-        timing(superquadrics, args.repeat, core)
-    real_photographs()
+        if "broad" in sections:
+            accuracy_broad(out / "broad", args.per_family)
+        if "standard" in sections:
+            superquadrics = accuracy_standard(out / "standard")
+            timing(superquadrics, args.repeat, core)
+        if "compound" in sections:
+            accuracy_compound(out / "compound", args.per_kind)
+        if "monotone" in sections:
+            views_monotone(out / "one-sided", 1)
+    if "photographs" in sections:
+        real_photographs()
     if args.ceiling:
         silhouette_ceiling()
 

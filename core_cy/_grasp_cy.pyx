@@ -592,3 +592,33 @@ def pad_extent(const double[:, ::1] offsets not None, const double[:, :, ::1] R 
                     if -y > bottom:
                         bottom = -y
             extent[m, 0], extent[m, 1], extent[m, 2] = top, bottom, count
+
+
+def in_finger_path(const double[:, ::1] offsets not None, const double[:, :, ::1] R not None,
+                   const double[:, ::1] origin not None, const double[::1] half not None, double finger_half_width,
+                   double palm, double tip, double half_open, double finger_thickness, double slack,
+                   unsigned char[::1] hit not None):
+    """Whether any point lies where a finger of a grasp goes, open or closing onto its part.
+
+    offsets (P, 3) the points (of the other parts of a union) less the model's centre; R (M,
+    3, 3) the grasp axes; origin (M, 3) each grasp's origin in its axes about the centre; half
+    (M,) the half-width of the grasped part between the pads. Writes hit (M,): 1 where a
+    point has |x| <= finger_half_width, palm <= z <= tip and half + slack <= |y| <= half_open
+    + finger_thickness in the grasp frame (a finger would meet it first or cut it), else 0.
+    """
+    cdef Py_ssize_t m, p, n_points = offsets.shape[0]
+    cdef double x, y, z
+    cdef double r[9]
+    if R.shape[0] != origin.shape[0] or R.shape[0] != half.shape[0] or R.shape[0] != hit.shape[0]:
+        raise ValueError("R, origin, half and hit need one row per grasp")
+    with nogil:
+        for m in range(R.shape[0]):
+            hit[m] = 0
+            _load(R, m, r)
+            for p in range(n_points):
+                _to_grasp(r, offsets[p, 0], offsets[p, 1], offsets[p, 2], &x, &y, &z)
+                x, y, z = fabs(x - origin[m, 0]), fabs(y - origin[m, 1]), z - origin[m, 2]
+                if (x <= finger_half_width and z >= palm and z <= tip and y >= half[m] + slack
+                        and y <= half_open + finger_thickness):
+                    hit[m] = 1
+                    break

@@ -4,7 +4,7 @@
 from libc.math cimport sqrt
 
 cdef enum:
-    MAX_PARAMETERS = 16
+    MAX_PARAMETERS = 66  # six parts of a union, 11 each
 
 
 cdef bint _cholesky_array(double A[MAX_PARAMETERS][MAX_PARAMETERS], double damping, Py_ssize_t n,

@@ -245,50 +245,111 @@ cdef inline double _reach(const double* a, const double* e, const double* t, dou
     return m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support(a, e, v, dh_da, dh_de, dh_dv) - offset
 
 
-def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not None,
-                     const double[::1] t0 not None, double scale, const double[:, ::1] planes not None,
-                     double loss_scale, const double[::1] support_plane not None, double plane_weight,
-                     double tilt, double[:, ::1] JtJ not None, double[::1] Jtr not None, bint jacobian=True):
-    """Robust cost of the samples' residuals and, with ``jacobian``, the Gauss-Newton normal equations.
+cdef enum:
+    MAX_PARTS = 6
 
-    Residual of sample i: ``w_i (h(m) - m . c)``, how far (pixels) the
-    superquadric reaches beyond the plane through its ray, h being its support
-    function; positive where the sample lies inside the outline. The plane of
-    :func:`tangent_planes` comes from a polygon outline; the tangent plane
-    through the ray is the one of least reach, so the plane is turned about
-    the ray by -``tilt``, 0 and ``tilt`` (radians), a parabola through the
-    three reaches points to a fourth, and the least of them counts. The loss
-    is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
-    quadratic for small residuals, linear for large ones. With
-    ``plane_weight > 0`` the superquadric's reach below ``support_plane`` (n,
-    d; unit n; the object where n . x + d >= 0) is one more residual, times
-    ``plane_weight``, under the same loss: the object stands on the plane,
-    touching it. Fills ``JtJ`` (11, 11) with J^T W J and ``Jtr`` with J^T W r
-    (W the IRLS weights of the loss) and returns the cost.
-    """
-    cdef Py_ssize_t n = planes.shape[0], i, j, k, q, rows
-    cdef double R[3][3]
-    cdef double dR[3][3][3]
-    cdef double a[3]
-    cdef double v[3]
+
+cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
+                                const double* e, const double* t, double R[3][3], const double* cosines,
+                                const double* sines, double tilt, double bound, double* best_m) noexcept nogil:
+    """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
+    ray by -tilt, 0, tilt and the parabola's vertex; best_m gets that plane's normal (its offset is
+    returned through best_m[3]). The plane through the ray untilted comes first: turning it only
+    lowers the least reach, so where that reach is already below ``bound`` it is returned at once."""
     cdef double m[3]
-    cdef double best_m[3]
+    cdef double v[3]
+    cdef double reaches[3]
+    cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
+    cdef int j, k, step
+    for step in range(4):
+        j = 1 if step == 0 else (0 if step == 1 else step)  # untilted, -tilt, +tilt, the vertex
+        if j < 3:
+            cs = cosines[j]
+            sn = sines[j]
+        else:  # the parabola's vertex, if it opens upwards, within the three
+            curvature = reaches[0] - 2.0 * reaches[1] + reaches[2]
+            if curvature <= 0 or tilt <= 0:
+                break
+            psi = 0.5 * tilt * (reaches[0] - reaches[2]) / curvature
+            if psi < -tilt or psi > tilt:
+                break
+            cs = cos(psi)
+            sn = sin(psi)
+        for k in range(3):
+            m[k] = cs * planes[p, i, k] + sn * planes[p, i, 5 + k]
+        offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
+        for k in range(3):
+            v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, e, v) - offset
+        if j < 3:
+            reaches[j] = reach
+        if reach < best:
+            best = reach
+            for k in range(3):
+                best_m[k] = m[k]
+            best_m[3] = offset
+        if tilt <= 0 or best < bound:
+            break
+    return best
+
+
+def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 not None,
+                     const double[:, ::1] t0 not None, const double[::1] scale not None,
+                     const double[:, :, ::1] planes not None, double loss_scale,
+                     const double[::1] support_plane not None, double plane_weight, double tilt,
+                     double[:, ::1] JtJ not None, double[::1] Jtr not None, bint jacobian=True,
+                     Py_ssize_t[::1] owner=None):
+    """Robust cost of the samples' residuals against a union of P parts and, with ``jacobian``,
+    the Gauss-Newton normal equations of its 11 P parameters.
+
+    Part p has parameters ``x[11 p: 11 p + 11]`` about its frame ``R0[p]``, ``t0[p]``,
+    ``scale[p]``; ``planes[p]`` (N, 9) are :func:`tangent_planes` of the samples against part
+    p's outline. Residual of sample i against part p: ``w (h(m) - m . c)``, how far (pixels)
+    the part reaches beyond the plane through the sample's ray, h being its support
+    function; positive where the sample lies inside the part's outline. The plane comes
+    from a polygon outline; the tangent plane through the ray is the one of least reach, so
+    the plane is turned about the ray by -``tilt``, 0 and ``tilt`` (radians), a parabola
+    through the three reaches points to a fourth, and the least of them counts. The union's
+    outline is the outermost of its parts': the sample's residual is the largest of its
+    parts' (the part that reaches farthest past it answers for it; ``owner[i]`` gets which,
+    when given). The loss is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
+    quadratic for small residuals, linear for large ones. With ``plane_weight > 0`` each
+    part's reach below ``support_plane`` (n, d; unit n; the object where n . x + d >= 0),
+    times ``plane_weight``, is one more residual under the same loss: the lowest part stands
+    on the plane, touching it, and no other part reaches below it. Fills ``JtJ`` (11 P, 11 P)
+    with J^T W J (block diagonal: each residual is one part's) and ``Jtr`` with J^T W r (W
+    the IRLS weights of the loss) and returns the cost.
+    """
+    cdef Py_ssize_t P = R0.shape[0], n = planes.shape[1], i, j, k, q, p, base, chosen, lowest
+    cdef double R[MAX_PARTS][3][3]
+    cdef double dR[MAX_PARTS][3][3][3]
+    cdef double a[MAX_PARTS][3]
+    cdef double t[MAX_PARTS][3]
+    cdef double below[MAX_PARTS]
+    cdef double v[3]
+    cdef double m[4]
+    cdef double best_m[4]
     cdef double J[11]
     cdef double dh_da[3]
     cdef double dh_de[2]
     cdef double dh_dv[3]
-    cdef double t[3]
-    cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, best_offset
-    cdef double psi, cs, sn, reach, best, curvature
+    cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, reach, best, deepest
     cdef double cosines[3]
     cdef double sines[3]
-    cdef double reaches[3]
-    if x.shape[0] != 11 or JtJ.shape[0] != 11 or JtJ.shape[1] != 11 or Jtr.shape[0] != 11:
-        raise ValueError("x and Jtr must have 11 entries, JtJ 11 x 11")
-    if planes.shape[1] != 9 or support_plane.shape[0] != 4:
-        raise ValueError("planes must be (N, 9) and support_plane (4,)")
+    if P < 1 or P > MAX_PARTS or x.shape[0] != 11 * P or JtJ.shape[0] != 11 * P or JtJ.shape[1] != 11 * P \
+            or Jtr.shape[0] != 11 * P:
+        raise ValueError(f"need 1 to {MAX_PARTS} parts, x and Jtr of 11 per part, JtJ square of that")
+    if (R0.shape[1] != 3 or R0.shape[2] != 3 or t0.shape[0] != P or t0.shape[1] != 3 or scale.shape[0] != P
+            or planes.shape[0] != P or planes.shape[2] != 9 or support_plane.shape[0] != 4):
+        raise ValueError("R0 must be (P, 3, 3), t0 (P, 3), scale (P,), planes (P, N, 9) and support_plane (4,)")
+    if owner is not None and owner.shape[0] != n:
+        raise ValueError("owner must have one entry per sample")
+    for p in range(P):
+        _rotation(R0[p], x[11 * p + 8], x[11 * p + 9], x[11 * p + 10], R[p], dR[p])
+        for k in range(3):
+            a[p][k] = exp(x[11 * p + k])
+            t[p][k] = t0[p, k] + scale[p] * x[11 * p + 5 + k]
     with nogil:
-        _pose(x, R0, t0, scale, R, dR, a, t)
         cosines[0] = cos(tilt)
         cosines[1] = 1.0
         cosines[2] = cosines[0]
@@ -296,73 +357,71 @@ def normal_equations(const double[::1] x not None, const double[:, ::1] R0 not N
         sines[1] = 0.0
         sines[2] = -sines[0]
         if jacobian:
-            for j in range(11):
+            for j in range(11 * P):
                 Jtr[j] = 0.0
-                for k in range(11):
+                for k in range(11 * P):
                     JtJ[j, k] = 0.0
-        rows = n + 1 if plane_weight > 0 else n
-        for i in range(rows):
+        lowest = 0
+        if plane_weight > 0:
+            deepest = -1e300
+            for k in range(3):
+                m[k] = -support_plane[k]
+            for p in range(P):
+                below[p] = _reach(a[p], &x[11 * p + 3], t[p], R[p], m, support_plane[3], v, dh_da, dh_de, dh_dv)
+                if below[p] > deepest:
+                    deepest = below[p]
+                    lowest = p
+        for i in range(n + (P if plane_weight > 0 else 0)):
             if i < n:
-                weight = planes[i, 4]
-                best = 1e300
-                for j in range(4):
-                    if j < 3:
-                        cs = cosines[j]
-                        sn = sines[j]
-                    else:  # the parabola's vertex, if it opens upwards, within the three
-                        curvature = reaches[0] - 2.0 * reaches[1] + reaches[2]
-                        if curvature <= 0 or tilt <= 0:
-                            break
-                        psi = 0.5 * tilt * (reaches[0] - reaches[2]) / curvature
-                        if psi < -tilt or psi > tilt:
-                            break
-                        cs = cos(psi)
-                        sn = sin(psi)
-                    for k in range(3):
-                        m[k] = cs * planes[i, k] + sn * planes[i, 5 + k]
-                    offset = cs * planes[i, 3] + sn * planes[i, 8]
-                    for k in range(3):
-                        v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
-                    reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, &x[3], v) - offset
-                    if j < 3:
-                        reaches[j] = reach
-                    if reach < best:
+                best = -1e300
+                chosen = 0
+                for p in range(P):
+                    # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
+                    reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
+                                                          cosines, sines, tilt, best / planes[p, i, 4], m)
+                    if reach > best:
                         best = reach
-                        best_offset = offset
-                        for k in range(3):
+                        chosen = p
+                        for k in range(4):
                             best_m[k] = m[k]
-                    if tilt <= 0:
-                        break
-                for k in range(3):
+                if owner is not None:
+                    owner[i] = chosen
+                weight = planes[chosen, i, 4]
+                for k in range(4):
                     m[k] = best_m[k]
-                offset = best_offset
-            else:  # the support plane: the superquadric's reach along -n beyond d
+                offset = m[3]
+            else:  # the support plane: each part's reach along -n beyond d
+                chosen = i - n
+                if chosen != lowest and below[chosen] <= 0:
+                    continue  # a part above the plane, not the one standing on it
                 for k in range(3):
                     m[k] = -support_plane[k]
                 offset = support_plane[3]
                 weight = plane_weight
-            r = weight * _reach(a, &x[3], t, R, m, offset, v, dh_da, dh_de, dh_dv)
+            p = chosen
+            base = 11 * p
+            r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
             root = sqrt(1.0 + r * r / c2)
             cost += c2 * (root - 1.0)
             if not jacobian:
                 continue
             w = 1.0 / root
             for k in range(3):
-                J[k] = weight * dh_da[k] * a[k]
-                J[5 + k] = weight * scale * m[k]
+                J[k] = weight * dh_da[k] * a[p][k]
+                J[5 + k] = weight * scale[p] * m[k]
             J[3] = weight * dh_de[0]
             J[4] = weight * dh_de[1]
             for q in range(3):  # d(R^T m)/d angle = dR^T m
                 J[8 + q] = 0.0
                 for k in range(3):
-                    J[8 + q] += dh_dv[k] * (dR[q][0][k] * m[0] + dR[q][1][k] * m[1] + dR[q][2][k] * m[2])
+                    J[8 + q] += dh_dv[k] * (dR[p][q][0][k] * m[0] + dR[p][q][1][k] * m[1] + dR[p][q][2][k] * m[2])
                 J[8 + q] *= weight
             for j in range(11):
-                Jtr[j] += w * J[j] * r
+                Jtr[base + j] += w * J[j] * r
                 for k in range(j, 11):
-                    JtJ[j, k] += w * J[j] * J[k]
+                    JtJ[base + j, base + k] += w * J[j] * J[k]
         if jacobian:
-            for j in range(11):
+            for j in range(11 * P):
                 for k in range(j):
                     JtJ[j, k] = JtJ[k, j]
     return cost

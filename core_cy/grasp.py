@@ -69,6 +69,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from ._grasp_cy import hull_reach as _hull_reach
+from ._grasp_cy import in_finger_path as _in_finger_path
 from ._grasp_cy import in_open_fingers as _in_open_fingers
 from ._grasp_cy import nominal_margins as _nominal_margins
 from ._grasp_cy import pad_extent as _pad_extent
@@ -76,7 +77,7 @@ from ._grasp_cy import perturbed_margins as _perturbed_margins
 from ._grasp_cy import surface_samples as _surface_samples
 from .errors import CoreError
 from .gripper import DEFAULT_GRIPPER, Grasp, Gripper, grasps_to_json
-from .superquadric import Superquadric, inside_outside
+from .superquadric import Superquadric, inside_outside, surface_points, upright_box
 
 __all__ = ["Gripper", "Grasp", "DEFAULT_GRIPPER", "plan_grasps", "grasps_to_json", "model_error"]
 
@@ -99,6 +100,9 @@ _MIN_SCORE = 0.05
 _POOR_COVER = 0.15
 _SCORE_STEP = 0.05  # scores closer than this rank as equal
 _HULL_POINTS = 400  # at most this many hull points are checked
+# Surface points of each other part of a union that no finger or palm may meet: their spacing
+# (a tenth of a turn) is below a finger's thickness on parts of a graspable size.
+_OBSTACLE_GRID = (12, 32)
 _SLIDES = (0.5, -0.5, 1.0, -1.0)  # of the way from the model's middle to its end
 # The exponents' error: rounder, and boxier (fits of boxes come out rounder than they are).
 _SHAPE_ERROR = (0.2, -0.3)
@@ -341,6 +345,18 @@ def _hull(c, points: np.ndarray | None, radial: np.ndarray | None, sq: Superquad
     return nearest, column, offsets[radial > 2 * length]
 
 
+def _palm_reach(c, obstacles: np.ndarray, sq: Superquadric, gripper: Gripper) -> np.ndarray:
+    """The nearest point of the other parts within the palm's footprint along each candidate's
+    approach (n,), as :func:`_hull`'s nearest (+inf with none)."""
+    n = len(c["i"])
+    offsets = np.ascontiguousarray(obstacles - sq.T_world_object[:3, 3])
+    nearest, column = np.empty(n), np.empty(n)
+    _hull_reach(offsets, c["R"], c["dx"], np.argsort(c["pose"], kind="stable"), gripper.palm_width / 2,
+                gripper.max_opening / 2 + gripper.finger_thickness, gripper.finger_width / 2, gripper.max_opening / 2,
+                np.empty_like(offsets), nearest, column)
+    return nearest
+
+
 def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gripper, length: float,
                bloat: float) -> np.ndarray:
     """How well the hull bears out the model where the pads meet it: the chance (M,) that the
@@ -363,7 +379,8 @@ def _agreement(pairs, points: np.ndarray | None, centre: np.ndarray, gripper: Gr
     return np.where(extent[:, 2] > 0, ndtr((2 * length + bloat - apart) / length), 1.0)
 
 
-def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull):
+def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hull, obstacles=None,
+             other_parts=()):
     """Closed-form checks of every candidate at its depths (kernel in Cython).
 
     Returns the passing (candidate, depth) pairs with their reach ``e`` past the
@@ -400,11 +417,45 @@ def _nominal(c, centre, plane, gripper: Gripper, error: tuple[float, float], hul
         _in_open_fingers(unexplained, c["R"][pair[alive]], origin,
                          g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, g.finger_thickness, hit)
         ok[alive] &= hit == 0
+    if obstacles is not None and len(obstacles):
+        # The other parts of a union: no finger may cut one, open or closing onto this part.
+        alive = np.flatnonzero(ok)
+        hit = np.empty(len(alive), np.uint8)
+        origin = np.stack([c["dx"][pair[alive]], np.zeros(len(alive)), dz[alive]], 1)
+        _in_finger_path(np.ascontiguousarray(obstacles - centre), c["R"][pair[alive]], origin, half[alive],
+                        g.finger_width / 2, g.palm, g.tip, g.max_opening / 2, g.finger_thickness,
+                        _COMPLIANCE * g.pad_length, hit)
+        ok[alive] &= hit == 0
+    if other_parts:
+        # A finger wholly inside another part has none of its surface points to meet: its volume
+        # (at full opening, and on its way to the pads) must lie outside every other part.
+        alive = np.flatnonzero(ok)
+        if len(alive):
+            ok[alive] &= ~_fingers_inside(c, pair[alive], dz[alive], half[alive], centre, g, other_parts)
     keep = np.flatnonzero(ok)
     out = _take(c, pair[keep])
     out.update(e=depth[keep], dz=dz[keep], half=half[keep], hull=hull_near[pair[keep]],
                first=np.prod(ndtr(margins[keep]), axis=1))
     return out
+
+
+def _fingers_inside(c, pose, dz, half, centre, g: Gripper, other_parts) -> np.ndarray:
+    """(M,) True where a sample of a finger's volume (open, or halfway to the pads) lies inside
+    one of ``other_parts``."""
+    m = len(pose)
+    open_y = g.max_opening / 2 + g.finger_thickness / 2
+    across = np.array([-1.0, 1.0]) * g.finger_width / 2
+    along = g.palm + np.linspace(0.0, 1.0, 4) * (g.tip - g.palm)
+    levels = np.stack([np.full(m, open_y), (half + open_y) / 2], axis=1)  # (M, 2)
+    local = np.empty((m, 2, 2, 2, 4, 3))  # across, side, level, along
+    local[..., 0] = c["dx"][pose][:, None, None, None, None] + across[None, :, None, None, None]
+    local[..., 1] = (np.array([-1.0, 1.0])[None, None, :, None, None] * levels[:, None, None, :, None])
+    local[..., 2] = dz[:, None, None, None, None] + along[None, None, None, None, :]
+    world = centre + np.einsum("mab,mnb->mna", c["R"][pose], local.reshape(m, -1, 3)).reshape(-1, 3)
+    inside = np.zeros(len(world), bool)
+    for part in other_parts:
+        inside |= inside_outside(world, part) < 1.0
+    return np.asarray(inside.reshape(m, -1).any(axis=1))
 
 
 # Fixed draws of the model's error, in standard errors: semi-axes along the grasp
@@ -512,15 +563,20 @@ def _alike(R: np.ndarray, origin: np.ndarray, tolerance: float) -> np.ndarray:
     return same & (across < tolerance)
 
 
-def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *,
+def plan_grasps(model, support_plane=None, gripper: Gripper = DEFAULT_GRIPPER, *,
                 residual: float = 0.0, silhouette_iou=None, points=None, max_grasps: int = 10,
                 min_score: float = _MIN_SCORE) -> list[Grasp]:
-    """Parallel-jaw grasps of a superquadric, best first (see the module docstring).
+    """Parallel-jaw grasps of a superquadric or a union of them, best first (see the module docstring).
+
+    On a union (DESIGN.md §1.11) each part is planned on as above, its contacts on that
+    part, and a grasp is kept only where no other part comes between the palm and the
+    object, lies where a finger goes (open, or closing onto the pads) or holds a finger
+    inside it; the parts' lists are merged by score.
 
     Parameters
     ----------
-    superquadric : Superquadric
-        The model, convex (exponents below 2).
+    model : Superquadric or sequence of Superquadric
+        The model, convex (exponents below 2), or the parts of a union.
     support_plane : (4,) array_like, optional
         ``[nx, ny, nz, d]``: the object stands where ``n . x + d >= 0``; no part
         of the gripper may come near the other side, and no approach comes from it.
@@ -559,12 +615,14 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
     >>> best.approach, round(best.width, 3), best.T_world_grasp[:3, 1].round(3).tolist()
     ('top', 0.04, [0.0, 1.0, 0.0])
     """
-    if not isinstance(superquadric, Superquadric):
-        raise CoreError(f"superquadric must be a Superquadric, got {type(superquadric).__name__}")
+    parts = [model] if isinstance(model, Superquadric) else list(model) if isinstance(model, (list, tuple)) else None
+    if not parts or not all(isinstance(part, Superquadric) for part in parts):
+        raise CoreError(f"model must be a Superquadric or a non-empty sequence of them, got {type(model).__name__}")
     if not isinstance(gripper, Gripper):
         raise CoreError(f"gripper must be a Gripper, got {type(gripper).__name__}")
-    if np.any(superquadric.shape >= 2):
-        raise CoreError(f"grasps need a convex superquadric (exponents below 2), got {superquadric.shape}")
+    for part in parts:
+        if np.any(part.shape >= 2):
+            raise CoreError(f"grasps need convex superquadrics (exponents below 2), got {part.shape}")
     if not (isinstance(max_grasps, numbers.Integral) and max_grasps >= 1):
         raise CoreError(f"max_grasps must be a positive integer, got {max_grasps!r}")
     if not (isinstance(min_score, numbers.Real) and 0 <= min_score <= 1):
@@ -581,31 +639,19 @@ def plan_grasps(superquadric: Superquadric, support_plane=None, gripper: Gripper
             raise CoreError(f"points must be an (N, 3) array of finite numbers, got shape {points.shape}")
         points = points[:: max(1, len(points) // _HULL_POINTS)]
     plane = _check_plane(support_plane)
-    grasps = _plan(superquadric, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score)
+    grasps: list[Grasp] = []
+    for k, part in enumerate(parts):
+        others = tuple(parts[:k] + parts[k + 1:])
+        grasps = _merged(grasps, _plan(part, plane, gripper, residual, silhouette_iou, points, max_grasps, min_score,
+                                       others), max_grasps)
     miss = _miss(silhouette_iou)
     if plane is not None and points is not None and len(points) >= 4 and miss > _POOR_COVER:
         # The superquadric describes the object poorly (an L): plan on the hull's upright box
         # too. The box bounds all the views saw; the hull checks keep its grasps where the
         # hull has the surface the box claims.
-        box = _upright_box(points, plane)
+        box = upright_box(points, plane[:3])
         grasps = _merged(grasps, _plan(box, plane, gripper, math.inf, None, points, max_grasps, min_score), max_grasps)
     return grasps
-
-
-def _upright_box(points: np.ndarray, plane: np.ndarray) -> Superquadric:
-    """The box around the hull's points standing on the plane, its horizontal axes the
-    points' principal axes in the plane."""
-    normal = plane[:3]
-    basis = np.stack(_level_axes(normal), axis=1)  # (3, 2)
-    flat = points @ basis
-    _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
-    first = basis @ vectors[:, 1]
-    R = np.stack([first, _cross(normal, first), normal], axis=1)
-    local = points @ R
-    low, high = local.min(axis=0), local.max(axis=0)
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
-    return Superquadric(np.maximum((high - low) / 2, 1e-9), np.array([0.1, 0.1]), T)
 
 
 def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Grasp]:
@@ -617,11 +663,13 @@ def _merged(first: list[Grasp], second: list[Grasp], max_grasps: int) -> list[Gr
 
 
 def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper, residual: float, silhouette_iou,
-          points: np.ndarray | None, max_grasps: int, min_score: float) -> list[Grasp]:
-    """:func:`plan_grasps` on checked arguments."""
+          points: np.ndarray | None, max_grasps: int, min_score: float, others=()) -> list[Grasp]:
+    """:func:`plan_grasps` on checked arguments: contacts on ``superquadric``, clear of the
+    ``others`` (the rest of a union)."""
     radial, bloat = None, 0.0
     if points is not None and len(points):
-        radial = _radial(points, superquadric)
+        # What the hull has and the model lacks is measured from the whole union.
+        radial = np.min([_radial(points, part) for part in (superquadric, *others)], axis=0)
         # The hull's typical distance from the model (the median's, scaled to a standard
         # deviation's): the model's own error, apart from what it leaves out (a handle),
         # which the hull checks cover; and how far the hull bulges past the object.
@@ -631,8 +679,12 @@ def _plan(superquadric: Superquadric, plane: np.ndarray | None, gripper: Gripper
     centre = superquadric.T_world_object[:3, 3]
 
     candidates = _candidates(superquadric, plane, gripper)
-    pairs = _nominal(candidates, centre, plane, gripper, error,
-                     _hull(candidates, points, radial, superquadric, gripper, error[0]))
+    hull = _hull(candidates, points, radial, superquadric, gripper, error[0])
+    obstacles = None
+    if others:
+        obstacles = np.concatenate([surface_points(part, *_OBSTACLE_GRID) for part in others])
+        hull = (np.minimum(hull[0], _palm_reach(candidates, obstacles, superquadric, gripper)),) + hull[1:]
+    pairs = _nominal(candidates, centre, plane, gripper, error, hull, obstacles, others)
     if len(pairs["i"]) == 0:
         return []
     preference = _approach_preference(pairs["R"][:, :, 2], plane)

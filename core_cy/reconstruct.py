@@ -17,15 +17,21 @@ from .carve import carve, check_support_plane, clip_to_plane, occupancy
 from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
-from .quality import radial_residual, silhouette_iou
+from .parts import MAX_PARTS, fit_parts, union_ious
+from .quality import radial_residual
 from .segment import RED_HSV, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
-from .superquadric import Superquadric, fit_superquadric, start_superquadrics
+from .superquadric import Superquadric, fit_superquadric, resting_on, start_superquadrics, upright_box
 
 __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
 
 _JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
+# A view whose silhouette IoU stays below this clearly disagrees with the one-superquadric fit:
+# every start is then taken to its end (at most this many steps each).
+_DISAGREE = 0.8
+_RESTART_ITERATIONS = 20
+_RESTING_TILT = 30.0  # degrees
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,6 +76,9 @@ class Options:
         only then) is the result, as before the silhouette fit existed.
     edge_samples : int
         Edge samples per view for the silhouette fit.
+    max_parts : int
+        The model may be a union of up to this many superquadrics (DESIGN.md §1.11;
+        with the silhouette fit only); 1 keeps it one superquadric.
     """
 
     n_points: int = 1000
@@ -80,6 +89,7 @@ class Options:
     fit_points: int = 250
     silhouette_fit: bool = True
     edge_samples: int = 32
+    max_parts: int = MAX_PARTS
 
     def __post_init__(self) -> None:
         if self.n_points < 50:
@@ -92,6 +102,8 @@ class Options:
             raise ValueError(f"radius_margin must be >= 1, got {self.radius_margin}")
         if self.edge_samples < 4:
             raise ValueError(f"edge_samples must be >= 4, got {self.edge_samples}")
+        if not 1 <= self.max_parts <= MAX_PARTS:
+            raise ValueError(f"max_parts must be 1 to {MAX_PARTS}, got {self.max_parts}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,9 +112,11 @@ class Reconstruction:
 
     ``points`` (N, 3) is the carved cloud (unseen directions, and those with no edge, dropped);
     ``silhouettes`` the ideal-pinhole silhouettes the hull was carved from;
-    ``silhouette_iou`` how well the superquadric's projection covers each;
-    ``residual`` the points' RMS radial distance from its surface, in the bundle's units;
-    ``timings_ms`` the wall time of each stage and the total.
+    ``silhouette_iou`` how well the model's projection (the union of its parts) covers each;
+    ``residual`` the points' RMS radial distance from the superquadric's surface, in the bundle's units;
+    ``timings_ms`` the wall time of each stage and the total;
+    ``parts`` the model (DESIGN.md §1.11): the object is their union, one part for an object
+    that is one superquadric. ``superquadric`` is the one superquadric closest to the whole.
     """
 
     superquadric: Superquadric
@@ -113,11 +127,17 @@ class Reconstruction:
     silhouette_iou: list[float]
     residual: float
     timings_ms: dict[str, float] = field(default_factory=dict)
+    parts: tuple[Superquadric, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.parts:
+            object.__setattr__(self, "parts", (self.superquadric,))
 
     def to_dict(self, *, points: bool = False) -> dict:
         """The JSON result of DESIGN.md §3 (without the ``scan`` key)."""
         result = {
             "superquadric": self.superquadric.to_dict(),
+            "parts": [part.to_dict() for part in self.parts],
             "timings_ms": {stage: round(ms, 3) for stage, ms in self.timings_ms.items()},
             "silhouette_iou": [round(iou, 4) for iou in self.silhouette_iou],
             "residual": self.residual,
@@ -236,16 +256,42 @@ def reconstruct(views, *, segmentation: Segmentation = RED_HSV, support_plane=No
     stride = max(1, len(points) // options.fit_points)
     if options.silhouette_fit:
         starts = start_superquadrics(points[::stride], support_plane=plane)
+        if plane is not None:
+            # An object on a table rests on a face or a side (DESIGN.md §1.12): a strong start, not a rule.
+            # A start tilted less than that is set resting; one tilted more is kept and also tried resting.
+            rested = [resting_on(start, plane[:3]) for start in starts]
+            starts = ([upright if tilt < _RESTING_TILT else start for start, (upright, tilt) in zip(starts, rested)]
+                      + [upright for upright, tilt in rested if tilt >= _RESTING_TILT]
+                      + [upright_box(points, plane[:3])])
         lap("start")
         superquadric = fit_to_silhouettes(starts, cameras, edges, support_plane=plane).superquadric
         lap("fit")
+        ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
+        if min(ious) < _DISAGREE:
+            # A view clearly disagrees with the model: a bad local minimum (a slab seen edge-on, a
+            # tilted start) or an object that is no superquadric. Every start goes to its end, and
+            # the one that agrees best with all the silhouettes is kept (DESIGN.md §1.12).
+            for other in starts:
+                fitted = fit_to_silhouettes(other, cameras, edges, support_plane=plane,
+                                            max_iterations=_RESTART_ITERATIONS).superquadric
+                other_ious, _ = union_ious((fitted,), cameras, silhouettes, boxes)
+                if np.mean(other_ious) > np.mean(ious):
+                    superquadric, ious = fitted, other_ious
+            lap("fit")
     else:
         superquadric = fit_superquadric(points[::stride], inside_weight=options.inside_weight,
                                         outside_loss=options.outside_loss, cauchy_scale=options.cauchy_scale,
                                         support_plane=plane).superquadric
         lap("fit")
-    ious = [silhouette_iou(superquadric, camera, s, box) for camera, s, box in zip(cameras, silhouettes, boxes)]
+    if not options.silhouette_fit:
+        ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
     lap("quality")
+    parts: tuple[Superquadric, ...] = (superquadric,)
+    if options.silhouette_fit and options.max_parts > 1:
+        model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
+                          support_plane=plane, max_parts=options.max_parts)
+        parts, ious = model.parts, model.silhouette_iou
+        lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
-    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings)
+    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts)

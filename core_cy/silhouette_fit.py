@@ -47,8 +47,9 @@ _SHAPE_BOUNDS = (0.1, 1.0)
 _TILT = 0.05
 # Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object.
 _LOG_SIZE_RANGE = 4.0
-# With several starts, each takes this many steps before the best goes on.
+# With several starts, each takes this many steps; the best two this many more; the best of them goes on.
 _SEARCH_ITERATIONS = 2
+_FINALISTS, _FINAL_ITERATIONS = 2, 6
 # Edge samples lie this close (px, RMS) to the true outline: colour edges ~0.15, binary masks ~0.3.
 _NOISE_PX = 0.5
 
@@ -59,17 +60,23 @@ class SilhouetteFit:
 
     Attributes
     ----------
-    superquadric : Superquadric
+    parts : tuple of Superquadric
+        The model: one superquadric, or the parts of a union.
     rms_px : float
-        RMS distance (pixels) of the edge samples from the superquadric's outlines
+        RMS distance (pixels) of the edge samples from the model's outlines
         (read from the robust cost: exact when they are all alike).
     iterations : int
         Levenberg-Marquardt steps tried from the start that won.
     """
 
-    superquadric: Superquadric
+    parts: tuple[Superquadric, ...]
     rms_px: float
     iterations: int
+
+    @property
+    def superquadric(self) -> Superquadric:
+        """The first part (the only one of a one-part model)."""
+        return self.parts[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,41 +114,57 @@ class _Views:
 
 
 class _Problem:
-    """The silhouette fit about one start: parameters to tangent planes, cost and normal equations."""
+    """The silhouette fit of a union of parts about one start: parameters to tangent planes, cost
+    and normal equations. Part p's 11 parameters are ``x[11 p: 11 p + 11]``."""
 
-    def __init__(self, start: Superquadric, views: _Views, support_plane, plane_weight, loss_scale):
-        self.R0 = np.ascontiguousarray(start.T_world_object[:3, :3])
-        self.t0 = start.T_world_object[:3, 3].copy()
-        self.scale = float(np.mean(start.size))
+    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale):
+        parts = [start] if isinstance(start, Superquadric) else list(start)
+        self.count = len(parts)
+        self.R0 = np.ascontiguousarray([part.T_world_object[:3, :3] for part in parts])
+        self.t0 = np.ascontiguousarray([part.T_world_object[:3, 3] for part in parts])
+        self.scale = np.array([float(np.mean(part.size)) for part in parts])
         self.views, self.support_plane, self.plane_weight, self.loss_scale = (
             views, support_plane, plane_weight, loss_scale)
         grid = len(_ETA) * len(_OMEGA) + 2
         self.grid = np.empty((grid, 6))
         self.uv = np.empty((len(views.samples), grid, 2), np.float32)
         self.counts = np.empty(len(views.samples), np.intp)
-        self.planes, self.trial_planes = np.empty((views.count, 9)), np.empty((views.count, 9))
-        self.x0 = np.concatenate([np.log(start.size), np.clip(start.shape, *_SHAPE_BOUNDS), np.zeros(6)])
-        self.low, self.high = np.full(11, -np.inf), np.full(11, np.inf)
-        self.low[3:5], self.high[3:5] = _SHAPE_BOUNDS
-        self.low[:3], self.high[:3] = self.x0[:3] - _LOG_SIZE_RANGE, self.x0[:3] + _LOG_SIZE_RANGE
+        shape = (self.count, views.count, 9)
+        self.planes, self.trial_planes = np.empty(shape), np.empty(shape)
+        self.x0 = np.concatenate([np.concatenate([np.log(part.size), np.clip(part.shape, *_SHAPE_BOUNDS), np.zeros(6)])
+                                  for part in parts])
+        self.low, self.high = np.full(len(self.x0), -np.inf), np.full(len(self.x0), np.inf)
+        for p in range(self.count):
+            block = slice(11 * p, 11 * p + 11)
+            low, high, x0 = self.low[block], self.high[block], self.x0[block]
+            low[3:5], high[3:5] = _SHAPE_BOUNDS
+            low[:3], high[:3] = x0[:3] - _LOG_SIZE_RANGE, x0[:3] + _LOG_SIZE_RANGE
+
+    def part(self, x: np.ndarray, p: int) -> Superquadric:
+        y = x[11 * p: 11 * p + 11]
+        T = np.eye(4)
+        T[:3, :3] = _rotation(self.R0[p], y[8:11])
+        T[:3, 3] = self.t0[p] + self.scale[p] * y[5:8]
+        return Superquadric(np.exp(y[:3]), y[3:5], T)
+
+    def parts(self, x: np.ndarray) -> tuple[Superquadric, ...]:
+        return tuple(self.part(x, p) for p in range(self.count))
 
     def superquadric(self, x: np.ndarray) -> Superquadric:
-        T = np.eye(4)
-        T[:3, :3] = _rotation(self.R0, x[8:11])
-        T[:3, 3] = self.t0 + self.scale * x[5:8]
-        return Superquadric(np.exp(x[:3]), x[3:5], T)
+        return self.part(x, 0)
 
     def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
         views, planes = self.views, self.trial_planes
-        if not outline_points(x, self.R0, self.t0, self.scale, _ETA, _OMEGA, views.projections, views.centres,
-                              self.grid, self.uv, self.counts):
-            return np.inf  # the superquadric reaches behind a camera
-        for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
-                zip(views.samples, views.rows, views.cameras)):
-            hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
-            if len(hull) < 3:
-                return np.inf
-            tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[rows])
+        for p in range(self.count):
+            if not outline_points(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
+                                  views.projections, views.centres, self.grid, self.uv, self.counts):
+                return np.inf  # the part reaches behind a camera
+            for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
+                    zip(views.samples, views.rows, views.cameras)):
+                hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
+                if len(hull) < 3:
+                    return np.inf
+                tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[p, rows])
         return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
                                 self.plane_weight, _TILT, JtJ, Jtr)
 
@@ -162,16 +185,72 @@ def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
     return turned
 
 
+class _Fitter:
+    """The views packed once, and the settings every start shares: descents from starts."""
+
+    def __init__(self, cameras, edges, reference, support_plane, loss_scale: float):
+        if len(cameras) != len(edges):
+            raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
+        self.views = views = _Views.pack(cameras, edges, reference)
+        if views.count < 11:
+            raise FitError(f"need at least 11 edge samples (one per parameter), got {views.count}")
+        if support_plane is None:
+            self.plane, self.plane_weight = np.zeros(4), 0.0
+        else:
+            # The support plane is as sure as a whole view's samples, each seen at the views' mean scale.
+            self.plane = np.asarray(support_plane, dtype=np.float64)
+            self.plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
+        self.loss_scale = float(loss_scale)
+        # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
+        self.tolerance = 0.5 * 1e-4 * views.count
+
+    def descent(self, start) -> Descent:
+        """A descent from ``start`` (a Superquadric, or the parts of a union), not yet run."""
+        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale)
+        return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
+
+    def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS) -> Descent:
+        """The start whose descent fits best: every start a few steps, the ``finalists`` best of
+        them a few more, and the best of those on to convergence. Two bodies (a lying cylinder and a
+        bar) may explain the views alike after a step or two, and only a few steps on tell apart."""
+        alive = [self.descent(start) for start in starts]
+        if len(alive) > 1:
+            for descent in alive:
+                descent.run(_SEARCH_ITERATIONS)
+            alive = sorted(alive, key=lambda descent: descent.cost)[:max(1, finalists)]
+        if len(alive) > 1:
+            for descent in alive:
+                descent.run(_FINAL_ITERATIONS)
+        best = min(alive, key=lambda descent: descent.cost)
+        if not np.isfinite(best.cost):
+            raise FitError("every start reaches behind a camera")
+        return best.run(max_iterations)
+
+    def rms(self, cost: float) -> float:
+        return _rms(cost, self.views.count, self.loss_scale)
+
+    def result(self, descent: Descent) -> SilhouetteFit:
+        return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations)
+
+
+def _first_part(start) -> Superquadric:
+    return start if isinstance(start, Superquadric) else list(start)[0]
+
+
 def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
                        max_iterations: int = 40) -> SilhouetteFit:
-    """Refine a superquadric until its outline in every view runs through that view's edge samples.
+    """Refine a model until its outline in every view runs through that view's edge samples.
+
+    The model is one superquadric, or a union of parts: the union's outline is the
+    outermost of its parts', so each sample answers to the part that reaches farthest
+    past it, and the parts are refined together.
 
     Parameters
     ----------
-    starts : Superquadric or sequence of Superquadric
-        Where to start (the point fit's candidates); each must lie in front
-        of every camera. With several, each takes a few steps and the one
-        whose outlines then fit best goes on.
+    starts : Superquadric or sequence
+        Where to start (the point fit's candidates): each a Superquadric, or a tuple of
+        Superquadric (the parts of a union); each must lie in front of every camera. With
+        several, each takes a few steps and the one whose outlines then fit best goes on.
     cameras : sequence of Camera
         Ideal pinhole cameras of the views.
     edges : sequence of (N_i, 2) array_like
@@ -198,43 +277,18 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     starts = [starts] if isinstance(starts, Superquadric) else list(starts)
     if not starts:
         raise FitError("need at least one start")
-    if len(cameras) != len(edges):
-        raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
-    views = _Views.pack(cameras, edges, starts[0].T_world_object[:3, 3])
-    if views.count < 11:
-        raise FitError(f"need at least 11 edge samples (one per parameter), got {views.count}")
-    if support_plane is None:
-        plane, plane_weight = np.zeros(4), 0.0
-    else:
-        # The support plane is as sure as a whole view's samples, each seen at the views' mean scale.
-        plane = np.asarray(support_plane, dtype=np.float64)
-        plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
-    # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
-    tolerance = 0.5 * 1e-4 * views.count
-
-    def descend_from(start: Superquadric) -> Descent:
-        problem = _Problem(start, views, plane, plane_weight, float(loss_scale))
-        return Descent(problem, problem.x0, problem.low, problem.high, tolerance)
-
-    descents = [descend_from(start) for start in starts]
-    if len(descents) > 1:
-        for descent in descents:
-            descent.run(_SEARCH_ITERATIONS)
-    best = min(descents, key=lambda descent: descent.cost)
-    if not np.isfinite(best.cost):
-        raise FitError("every start reaches behind a camera")
-    best.run(max_iterations)
+    fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale)
+    best = fitter.best_of(starts, max_iterations)
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
     # with another of its axes as z can only be reached by a jump, so try both, each going on only
     # if a few steps bring it below the best so far. Not needed where the outlines already run
     # through the samples to within the edges' own noise: no other body can explain them better.
-    if _rms(best.cost, views.count, loss_scale) > _NOISE_PX:
+    if best.problem.count == 1 and fitter.rms(best.cost) > _NOISE_PX:
         for turned in _other_axes_as_z(best.problem.superquadric(best.x)):
-            other = descend_from(turned).run(_SEARCH_ITERATIONS)
+            other = fitter.descent(turned).run(_SEARCH_ITERATIONS)
             if other.cost < best.cost:
                 best = other.run(max_iterations)
-    rms = _rms(best.cost, views.count, loss_scale)
-    return SilhouetteFit(best.problem.superquadric(best.x), rms, best.iterations)
+    return fitter.result(best)
 
 
 def _rms(cost: float, count: int, loss_scale: float) -> float:

@@ -32,6 +32,8 @@ __all__ = [
     "fit_superquadric",
     "inside_outside",
     "start_superquadrics",
+    "resting_on",
+    "upright_box",
     "mesh",
     "surface_points",
 ]
@@ -562,3 +564,54 @@ def fit_superquadric(points, *, inside_weight: float = 10.0, outside_loss: str =
     F = inside_outside(search.points, sq)
     residual = math.sqrt(np.prod(sq.size)) * np.sqrt(np.mean((F ** sq.shape[0] - 1) ** 2))
     return SuperquadricFit(sq, float(residual), float(result.fun), int(iterations), axis_order)
+
+
+def upright_box(points, normal) -> Superquadric:
+    """The box around ``points`` standing on a plane of unit ``normal``: its z axis the normal,
+    its horizontal axes the points' principal axes in the plane.
+
+    Examples
+    --------
+    >>> box = upright_box([[0, 0, 0], [4, 0, 0], [4, 2, 0], [0, 2, 1]], [0.0, 0.0, 1.0])
+    >>> np.sort(box.size).round(3).tolist(), box.T_world_object[:3, 2].round(3).tolist()
+    ([0.5, 1.0, 2.0], [0.0, 0.0, 1.0])
+    """
+    points = _points(points)
+    normal = _vector(normal, 3, "normal")
+    side = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    basis = np.stack([side, np.cross(normal, side)], axis=1)  # (3, 2)
+    flat = points @ basis
+    _, vectors = np.linalg.eigh(np.cov((flat - flat.mean(axis=0)).T))
+    first = basis @ vectors[:, 1]
+    R = np.stack([first, np.cross(normal, first), normal], axis=1)
+    local = points @ R
+    low, high = local.min(axis=0), local.max(axis=0)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
+    return Superquadric(np.maximum((high - low) / 2, 1e-9), np.array([0.1, 0.1]), T)
+
+
+def resting_on(sq: Superquadric, normal) -> tuple[Superquadric, float]:
+    """The superquadric turned about its centre so that its axis nearest the unit ``normal``
+    lies along it (it rests on a face or a side), and the angle (degrees) it was turned by.
+
+    Examples
+    --------
+    >>> T = np.eye(4); c, s = np.cos(0.2), np.sin(0.2); T[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]
+    >>> rested, tilt = resting_on(Superquadric([1, 2, 3], [0.5, 1.0], T), [0.0, 0.0, 1.0])
+    >>> round(tilt, 2), rested.T_world_object[:3, 2].round(6).tolist(), rested.size.tolist()
+    (11.46, [0.0, 0.0, 1.0], [1.0, 2.0, 3.0])
+    """
+    normal = _vector(normal, 3, "normal")
+    R = sq.T_world_object[:3, :3]
+    k = int(np.argmax(np.abs(normal @ R)))
+    tilt = math.degrees(math.acos(min(1.0, abs(float(normal @ R[:, k])))))
+    up = R[:, k] * np.sign(normal @ R[:, k])
+    # The rotation taking up to the normal (Rodrigues), applied to the whole frame.
+    axis, cosine = np.cross(up, normal), float(up @ normal)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    turn = np.eye(3) + K + K @ K / (1.0 + cosine)
+    T = sq.T_world_object.copy()
+    T[:3, :3] = turn @ R
+    return Superquadric(sq.size, sq.shape, T), tilt

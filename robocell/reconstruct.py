@@ -33,6 +33,9 @@ def register(commands: Commands) -> None:
     parser.add_argument("--gripper", metavar="GRIPPER.json",
                         help="the gripper's dimensions for --grasps (default: the built-in gripper)")
     parser.add_argument("--max-grasps", type=_positive, metavar="N", help="at most N grasps per bundle (default 10)")
+    parser.add_argument("--next-view", action="store_true",
+                        help="add the view that would most reduce the model's uncertainty: one of scan.json's "
+                             "'candidates', or a pose proposed at the views' distance")
 
 
 def _positive(text: str) -> int:
@@ -65,13 +68,29 @@ def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
     from core_cy.gripper import grasps_to_json
 
     start = time.perf_counter()
-    grasps = plan_grasps(result.superquadric, bundle.support_plane, gripper, residual=result.residual,
+    grasps = plan_grasps(result.parts, bundle.support_plane, gripper, residual=result.residual,
                          silhouette_iou=result.silhouette_iou, points=result.points, max_grasps=max_grasps)
     ms = (time.perf_counter() - start) * 1e3
     timings = line["timings_ms"]
     timings["grasp"] = round(ms, 3)
     timings["total"] = round(timings["total"] + ms, 3)
     return {**line, "grasps": grasps_to_json(grasps)}
+
+
+def _with_next_view(line: dict, result, bundle) -> dict:
+    """Add ``next_view`` (core_cy.next_view) to a result line, and its time to ``timings_ms``."""
+    from core_cy.next_view import choose_next_view
+
+    start = time.perf_counter()
+    choice = choose_next_view(result, [view.camera for view in bundle.views], bundle.candidates,
+                              support_plane=bundle.support_plane)
+    ms = (time.perf_counter() - start) * 1e3
+    timings = line["timings_ms"]
+    timings["next_view"] = round(ms, 3)
+    timings["total"] = round(timings["total"] + ms, 3)
+    return {**line, "next_view": {"candidate": choice.candidate, "T_world_cam": choice.T_world_cam.tolist(),
+                                  "expected_gain": round(choice.expected_gain, 4),
+                                  "uncertainty": round(choice.uncertainty, 4), "sure": choice.sure}}
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
@@ -101,6 +120,8 @@ def _reconstruct(args: argparse.Namespace) -> int:
             line = {"scan": scan, **result.to_dict(points=args.points)}
             if gripper is not None:
                 line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
+            if args.next_view:
+                line = _with_next_view(line, result, bundle)
         except (BundleError, CoreError) as exc:
             failures += 1
             line = {"scan": scan, "error": str(exc)}

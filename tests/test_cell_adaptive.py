@@ -10,7 +10,6 @@ view chosen, stops when the model is sure, and stops at the cap.
 from __future__ import annotations
 
 import asyncio
-import sys
 import threading
 import types
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ import pytest
 
 from core_cy.plan import workspace_violation
 from wire.messages import JobState, ReconstructRequest, ScanRequest
+import workers.reconstruct.worker as worker_module
 from workers.reconstruct.worker import reconstruct_request
 from workers.sim.scene import target_from_config
 
@@ -50,10 +50,8 @@ class StandIn:
 def rig(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("adaptive"), cell_id="adaptive")
     stand_in = StandIn(asked=[])
-    module = types.ModuleType("core_cy.next_view")
-    module.choose_next_view = stand_in.choose_next_view  # type: ignore[attr-defined]
-    before = sys.modules.get("core_cy.next_view")
-    sys.modules["core_cy.next_view"] = module
+    before = worker_module.choose_next_view
+    worker_module.choose_next_view = stand_in.choose_next_view  # the worker runs in this process
     gate = threading.Event()
     gate.set()
     held = threading.Event()
@@ -75,10 +73,7 @@ def rig(tmp_path_factory):
                 gate.set()
                 worker.close()
     finally:
-        if before is None:
-            del sys.modules["core_cy.next_view"]
-        else:
-            sys.modules["core_cy.next_view"] = before
+        worker_module.choose_next_view = before
 
 
 def adaptive(cell, **fields) -> ScanRequest:
@@ -156,3 +151,30 @@ def test_a_daemon_killed_during_a_grown_plan_carries_that_plan_on(rig):
     assert _views_taken(cell, status.job_id) == before  # no picture taken again
     assert len(cell.client.result(status.job_id).T_base_cam) == 4
     assert cell.tracebacks() == {}
+
+
+# --- with the core's own choice (core_cy.next_view), in the real reconstruction worker -----------
+
+@pytest.fixture(scope="module")
+def real_cell(tmp_path_factory):
+    """An ellipsoid longest along x, on the simulated table; the cell's own reconstruction worker."""
+    config = cell_config(tmp_path_factory.mktemp("adaptive-real"), cell_id="adaptive-real",
+                         sim={"shape": "ellipsoid", "size": [0.05, 0.025, 0.03], "position": [0.6, 0.0], "yaw_deg": 0})
+    with running_cell(config) as cell:
+        yield cell
+
+
+def test_with_the_core_an_adaptive_scan_takes_a_fourth_view_only_when_the_model_is_unsure(real_cell):
+    """Three views from one side, along the object's length, leave its depth unseen: the core is
+    unsure and a fourth view is taken. Three views all around it leave nothing unseen: none is."""
+    cell = real_cell
+    target = target_from_config(cell.config.sim)
+    one_side = {"standoff": 0.4, "elevations_deg": [20.0, 30.0, 40.0], "azimuths_deg": [177.0, 180.0, 183.0]}
+    unsure = cell.client.scan(ScanRequest(target=target, plan=one_side, views="adaptive", max_views=4), timeout=120)
+    messages = [e.message for e in cell.events(unsure.job_id)]
+    assert len(unsure.T_base_cam) == 4, messages
+    assert any("the model is unsure" in m and "taking view 3" in m for m in messages)
+    around = cell.client.scan(ScanRequest(target=target, views="adaptive", max_views=4), timeout=120)
+    messages = [e.message for e in cell.events(around.job_id)]
+    assert len(around.T_base_cam) == 3, messages
+    assert any("the model is sure after 3 views" in m for m in messages)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
-from core_cy.reconstruct import reconstruct
+from core_cy.reconstruct import Options, reconstruct
 from wire.bundle import load_bundle
 from workers.sim.grasp_set import grasp_set
 from workers.sim.judge import JudgeGripper, judge, parts_from_truth
@@ -17,12 +17,13 @@ from workers.sim.judge import JudgeGripper, judge, parts_from_truth
 JUDGE_GRIPPER = JudgeGripper.from_dict(DEFAULT_GRIPPER.to_dict())
 
 
-def scan(tmp_path, family: str, index: int):
-    """The reconstruction of scene ``{family}-{index:03d}`` of the seed-0 grasp set, its plane
-    and the true object's parts."""
+def scan(tmp_path, family: str, index: int, max_parts: int = 1):
+    """The reconstruction of scene ``{family}-{index:03d}`` of the seed-0 grasp set (one
+    superquadric unless told), its plane and the true object's parts."""
     spec = grasp_set(0, index + 1, 3, (family,))[index]
     bundle = load_bundle(spec.write(tmp_path))
-    result = reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
+    result = reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane,
+                         options=Options(max_parts=max_parts))
     return result, bundle.support_plane, parts_from_truth(spec.objects[0].truth())
 
 
@@ -37,8 +38,8 @@ def test_an_l_is_held_where_the_superquadric_alone_would_fail(tmp_path, index):
     # and the best grasp on the superquadric alone cuts the object or slips.
     result, plane, parts = scan(tmp_path, "l-boxes", index)
     evidence = {"residual": result.residual, "silhouette_iou": result.silhouette_iou}
-    alone = best_verdict(plan_grasps(result.superquadric, plane, **evidence), parts, plane)
-    assert not alone.holds
+    alone = plan_grasps(result.superquadric, plane, **evidence)
+    assert not alone or not best_verdict(alone, parts, plane).holds
     with_hull = best_verdict(plan_grasps(result.superquadric, plane, points=result.points, **evidence), parts, plane)
     assert with_hull.holds, with_hull.reason
 
@@ -55,3 +56,14 @@ def test_a_box_with_a_ball_on_it_is_held_below_the_ball(tmp_path):
     ball_top = max(p.T_world_part[2, 3] + p.size[2] for p in parts)
     palm = grasps[0].T_world_grasp @ [0, 0, DEFAULT_GRIPPER.palm, 1.0]
     assert grasps[0].approach == "top" and palm[2] > ball_top
+
+
+@pytest.mark.parametrize("index", [3, 9, 15])
+def test_an_l_is_held_when_planned_on_its_parts(tmp_path, index):
+    # The same L modelled in parts: the planner's contacts on one part, clear of the other.
+    result, plane, parts = scan(tmp_path, "l-boxes", index, max_parts=6)
+    assert len(result.parts) >= 2
+    grasps = plan_grasps(result.parts, plane, residual=result.residual, silhouette_iou=result.silhouette_iou,
+                         points=result.points)
+    verdict = best_verdict(grasps, parts, plane)
+    assert verdict.holds, verdict.reason

@@ -155,7 +155,7 @@ def test_the_outline_is_the_hull_of_the_whole_surface():
 
     truth, cameras, edges = _ideal_scan("rounded-box", 3)
     problem = _Problem(truth, _Views.pack(cameras, edges, truth.T_world_object[:3, 3]), np.zeros(4), 0.0, 1.0)
-    assert outline_points(problem.x0, problem.R0, problem.t0, problem.scale, _ETA, _OMEGA,
+    assert outline_points(problem.x0, problem.R0[0], problem.t0[0], problem.scale[0], _ETA, _OMEGA,
                           problem.views.projections, problem.views.centres, problem.grid, problem.uv,
                           problem.counts)
     for view, camera in enumerate(cameras):
@@ -188,7 +188,8 @@ def test_residuals_are_distances_to_the_outline_in_pixels():
     # A tiny loss scale turns the cost into the sum of |r| - c: read each residual on its own.
     residuals = []
     for row in planes:
-        cost = normal_equations(x, np.eye(3), sphere.T_world_object[:3, 3].copy(), 0.05, row[None].copy(),
+        cost = normal_equations(x, np.eye(3)[None].copy(), sphere.T_world_object[None, :3, 3].copy(), np.array([0.05]),
+                                row[None, None].copy(),
                                 1e-9, np.zeros(4), 0.0, 0.05, JtJ, Jtr, False)
         residuals.append(cost / 1e-9)
     # The pixel scale is taken at the sphere's centre (depth 1): the tangent points lie nearer,

@@ -32,13 +32,15 @@ from core_cy.segment import RED_HSV, Segmentation
 from .errors import BundleError
 from .messages import field_errors
 
-__all__ = ["ScanJson", "ViewSpec", "SegmentationSpec", "Bundle", "load_bundle", "core_segmentation",
+__all__ = ["ScanJson", "ViewSpec", "CandidateSpec", "MAX_CANDIDATES", "SegmentationSpec", "Bundle", "load_bundle", "core_segmentation",
            "MAX_SCAN_JSON_BYTES", "MAX_VIEWS", "MAX_BUNDLE_BYTES", "MAX_BUNDLE_PIXELS", "MAX_IMAGE_PIXELS"]
 
 #: scan.json is read only up to this size: 64 views at full precision take about 100 kB.
 MAX_SCAN_JSON_BYTES = 1_000_000
 #: Views of a bundle: the cell's own scans take at most 16; DTU's research sets 49 or 64.
 MAX_VIEWS = 64
+#: Candidate poses of the next view: a robot's reachable ring of views takes a few dozen.
+MAX_CANDIDATES = 64
 #: The images and masks read, together: they are held, encoded, until the reconstruction decodes them.
 MAX_BUNDLE_BYTES = 256_000_000
 #: Pixels of all the images and masks together: the reconstruction keeps about 5 bytes a pixel of
@@ -108,12 +110,21 @@ def core_segmentation(spec: dict | HsvSegmentation | ThresholdSegmentation | Non
     return Segmentation("threshold", value=spec.value, invert=spec.invert)
 
 
+class CandidateSpec(_Strict):
+    """A pose the next view could be taken from (``robocell reconstruct --next-view``)."""
+
+    K: Annotated[list[Row3], Field(min_length=3, max_length=3)]
+    dist: list[float] | None = None
+    T_world_cam: Annotated[list[Row4], Field(min_length=4, max_length=4)]
+
+
 class ScanJson(_Strict):
     """The content of scan.json."""
 
     views: Annotated[list[ViewSpec], Field(max_length=MAX_VIEWS)]
     segmentation: SegmentationSpec | None = None
     support_plane: Row4 | None = None
+    candidates: Annotated[list[CandidateSpec], Field(max_length=MAX_CANDIDATES)] | None = None
 
 
 class Bundle(BaseModel):
@@ -125,6 +136,7 @@ class Bundle(BaseModel):
     views: list[View]
     segmentation: Segmentation
     support_plane: list[float] | None
+    candidates: list[Camera] | None = None
 
 
 _FILE_KINDS = {stat.S_IFDIR: "a directory", stat.S_IFIFO: "a FIFO", stat.S_IFCHR: "a character device",
@@ -252,4 +264,18 @@ def load_bundle(directory: str | Path) -> Bundle:
     except CoreError as exc:
         raise BundleError(str(exc)) from exc
     return Bundle(path=directory, views=views, segmentation=segmentation,
-                  support_plane=spec.support_plane)
+                  support_plane=spec.support_plane, candidates=_candidates(spec.candidates))
+
+
+def _candidates(specs: list[CandidateSpec] | None) -> list[Camera] | None:
+    """The candidates' cameras; a malformed one is an error naming it."""
+    if specs is None:
+        return None
+    cameras = []
+    for index, spec in enumerate(specs):
+        try:
+            cameras.append(Camera(K=np.asarray(spec.K), T_world_cam=np.asarray(spec.T_world_cam),
+                                  dist=None if spec.dist is None else np.asarray(spec.dist)))
+        except CoreError as exc:
+            raise BundleError(f"candidate {index}: {exc}") from exc
+    return cameras

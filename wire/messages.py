@@ -457,6 +457,8 @@ class Reconstruction(BaseModel):
     centre: Point                           # the enclosing sphere the points started on
     radius: PositiveFloat
     grasps: list[Grasp] = []                # of the request's gripper, best first
+    #: The model as parts (DESIGN.md §1.11), the object their union; empty from an older worker.
+    parts: Annotated[list[Superquadric], Field(max_length=6)] = []
     next_view: NextViewAnswer | None = None  # when the request asked for one
 
 

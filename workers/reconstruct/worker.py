@@ -43,6 +43,7 @@ from core_cy.errors import CoreError
 from core_cy.grasp import plan_grasps
 from core_cy.gripper import Gripper
 from core_cy.images import check_calibrated_size, checked_size
+from core_cy.next_view import choose_next_view
 from core_cy.reconstruct import Options, View, reconstruct
 from wire.process import open_transport, run_until_stopped
 
@@ -82,7 +83,7 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
     if request.gripper is not None:
         began = time.perf_counter()
         try:
-            planned = plan_grasps(result.superquadric, request.support_plane, Gripper.from_dict(request.gripper),
+            planned = plan_grasps(result.parts, request.support_plane, Gripper.from_dict(request.gripper),
                                   residual=result.residual, silhouette_iou=result.silhouette_iou, points=result.points,
                                   max_grasps=request.max_grasps)
         except CoreError as exc:
@@ -99,7 +100,9 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         result=Reconstruction(superquadric=Superquadric.model_validate(summary["superquadric"]),
                               silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
                               timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
-                              radius=float(result.radius), grasps=grasps, next_view=next_view),
+                              radius=float(result.radius), grasps=grasps,
+                              parts=[Superquadric.model_validate(part) for part in summary["parts"]],
+                              next_view=next_view),
         silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
         points=Blob(encoding=POINTS_ENCODING, length=len(points)))
     return reply.model_dump_json(), b"".join(silhouettes) + points
@@ -108,8 +111,6 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
 def _next_view(request: ReconstructRequest, result, cameras: list[Camera]) -> NextViewAnswer | None:
     """The best of the request's candidate next views (``core_cy.next_view``), or None when the core
     can choose none (none of them is in the workspace, say): the scan then ends with what it has."""
-    from core_cy.next_view import choose_next_view  # the core's planner, loaded when a scan asks for it
-
     assert request.next_view is not None
     candidates = [Camera(K=c.K, T_world_cam=c.T_world_cam, view=len(cameras) + k)
                   for k, c in enumerate(request.next_view.candidates)]

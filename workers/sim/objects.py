@@ -22,6 +22,8 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "COMPOUNDS",
+    "COMPOUND_KINDS",
+    "EVERYDAY",
     "FAMILIES",
     "CompoundObject",
     "CupStack",
@@ -489,11 +491,115 @@ def _l_of_boxes(rng: np.random.Generator) -> list[tuple]:
 
 
 #: Compound objects: name -> a function drawing its parts (family, size, R, centre in its own frame).
+#: These four make the grasp benchmark's compound scenes (workers.sim.grasp_set), which stay as they are.
 COMPOUNDS = {"cups": _cup_stack, "mug": _mug, "box-and-ball": _box_and_ball, "l-boxes": _l_of_boxes}
+
+# A part lying along the object's x axis (its own z axis turned onto x), or along y: exact, no cos residue.
+_ALONG_X = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+_ALONG_Y = _LYING
+# Parts that touch are sunk this far into each other, so that their union is one body.
+_SINK = 0.002
+
+
+def _bottle(rng: np.random.Generator) -> list[tuple]:
+    """A round body, a domed shoulder (the upper half of a flattened ellipsoid) and a narrow neck."""
+    r, h = rng.uniform(0.025, 0.035), rng.uniform(0.035, 0.055)
+    shoulder = rng.uniform(0.4, 0.6) * r
+    neck_r, neck_h = rng.uniform(0.008, 0.013), rng.uniform(0.012, 0.022)
+    neck_base = 2 * h + shoulder * np.sqrt(1 - (neck_r / r) ** 2) - _SINK
+    return [("cylinder", (r, r, h), np.eye(3), (0.0, 0.0, h)),
+            ("ellipsoid", (r, r, shoulder), np.eye(3), (0.0, 0.0, 2 * h)),
+            ("cylinder", (neck_r, neck_r, neck_h), np.eye(3), (0.0, 0.0, neck_base + neck_h))]
+
+
+def _dumbbell(rng: np.random.Generator) -> list[tuple]:
+    """A bar lying along x between two round weights, all resting on the table."""
+    weight_r, weight_w = rng.uniform(0.022, 0.032), rng.uniform(0.01, 0.018)
+    bar_r, half_length = rng.uniform(0.007, 0.011), rng.uniform(0.045, 0.065)
+    end = half_length - weight_w
+    return [("cylinder", (bar_r, bar_r, half_length - _SINK), _ALONG_X, (0.0, 0.0, weight_r)),
+            ("cylinder", (weight_r, weight_r, weight_w), _ALONG_X, (-end, 0.0, weight_r)),
+            ("cylinder", (weight_r, weight_r, weight_w), _ALONG_X, (end, 0.0, weight_r))]
+
+
+def _t_of_bars(rng: np.random.Generator) -> list[tuple]:
+    """Two flat bars lying in a T: a stem along x, a cross bar along y across one of its ends."""
+    thick = rng.uniform(0.008, 0.015)
+    stem = (rng.uniform(0.04, 0.065), rng.uniform(0.01, 0.018), thick)
+    cross = (rng.uniform(0.01, 0.018), rng.uniform(0.035, 0.06), thick)
+    return [("box", stem, np.eye(3), (0.0, 0.0, thick)),
+            ("box", cross, np.eye(3), (stem[0] + cross[0] - _SINK, 0.0, thick))]
+
+
+def _offset_boxes(rng: np.random.Generator) -> list[tuple]:
+    """Two boxes of different heights side by side on the table, one shifted along the other's side."""
+    a = (rng.uniform(0.02, 0.04), rng.uniform(0.02, 0.04), rng.uniform(0.02, 0.045))
+    b = (rng.uniform(0.015, 0.035), rng.uniform(0.015, 0.035), rng.uniform(0.012, 0.035))
+    shift = rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 0.7) * min(a[1], b[1])
+    return [("box", a, np.eye(3), (0.0, 0.0, a[2])),
+            ("box", b, np.eye(3), (a[0] + b[0] - _SINK, shift, b[2]))]
+
+
+def _stacked_boxes(rng: np.random.Generator) -> list[tuple]:
+    """A smaller box standing on a larger one, off its centre."""
+    a = (rng.uniform(0.03, 0.05), rng.uniform(0.025, 0.045), rng.uniform(0.012, 0.03))
+    b = (rng.uniform(0.012, 0.7 * a[0]), rng.uniform(0.012, 0.7 * a[1]), rng.uniform(0.012, 0.03))
+    dx, dy = (rng.uniform(-1, 1) * (a[0] - b[0]), rng.uniform(-1, 1) * (a[1] - b[1]))
+    return [("box", a, np.eye(3), (0.0, 0.0, a[2])),
+            ("box", b, np.eye(3), (dx, dy, 2 * a[2] + b[2] - _SINK))]
+
+
+def _spray_bottle(rng: np.random.Generator) -> list[tuple]:
+    """A rounded body, a head on it and a nozzle sticking out of the head to one side (+x)."""
+    body = (rng.uniform(0.02, 0.03), rng.uniform(0.015, 0.025), rng.uniform(0.04, 0.06))
+    head = (rng.uniform(0.012, 0.018), rng.uniform(0.01, 0.014), rng.uniform(0.012, 0.02))
+    nozzle = (rng.uniform(0.01, 0.016), rng.uniform(0.004, 0.006), rng.uniform(0.004, 0.006))
+    head_z = 2 * body[2] + head[2] - _SINK
+    return [("rounded-box", body, np.eye(3), (0.0, 0.0, body[2])),
+            ("box", head, np.eye(3), (0.0, 0.0, head_z)),
+            ("box", nozzle, np.eye(3), (head[0] + nozzle[0] - _SINK, 0.0, head_z + head[2] - nozzle[2]))]
+
+
+def _table_lamp(rng: np.random.Generator) -> list[tuple]:
+    """A flat round base, a thin pole standing on it and a wide shade on top."""
+    base_r, base_h = rng.uniform(0.03, 0.045), rng.uniform(0.004, 0.007)
+    pole_r, pole_h = rng.uniform(0.004, 0.007), rng.uniform(0.025, 0.045)
+    shade_r, shade_h = rng.uniform(0.03, 0.045), rng.uniform(0.015, 0.025)
+    pole_z = 2 * base_h + pole_h - _SINK
+    return [("cylinder", (base_r, base_r, base_h), np.eye(3), (0.0, 0.0, base_h)),
+            ("cylinder", (pole_r, pole_r, pole_h), np.eye(3), (0.0, 0.0, pole_z)),
+            ((0.3, 1.0), (shade_r, shade_r, shade_h), np.eye(3), (0.0, 0.0, pole_z + pole_h + shade_h - _SINK))]
+
+
+def _box_and_can(rng: np.random.Generator) -> list[tuple]:
+    """A lying box with a can lying on its top, across it (along y), off its centre."""
+    a = (rng.uniform(0.035, 0.06), rng.uniform(0.03, 0.045), rng.uniform(0.012, 0.03))
+    can_r, can_h = rng.uniform(0.014, 0.022), rng.uniform(0.025, 0.04)
+    offset = rng.uniform(-0.5, 0.5) * (a[0] - can_r)
+    return [("box", a, np.eye(3), (0.0, 0.0, a[2])),
+            ("cylinder", (can_r, can_r, can_h), _ALONG_Y, (offset, 0.0, 2 * a[2] + can_r - _SINK))]
+
+
+def _hammer(rng: np.random.Generator) -> list[tuple]:
+    """A hammer lying on the table: a long handle along x, and a head across its end (along y)."""
+    grip, half_length = rng.uniform(0.008, 0.012), rng.uniform(0.06, 0.08)
+    head = (rng.uniform(0.012, 0.016), rng.uniform(0.03, 0.045), rng.uniform(0.012, 0.016))
+    return [("rounded-box", (half_length, grip, grip), np.eye(3), (0.0, 0.0, grip)),
+            ("box", head, np.eye(3), (half_length + head[0] - _SINK, 0.0, head[2]))]
+
+
+#: Everyday compound objects (issue 21's ten, with stacked and offset boxes): the compound benchmark's.
+EVERYDAY = {
+    "bottle": _bottle, "mug": _mug, "dumbbell": _dumbbell, "t-bars": _t_of_bars, "offset-boxes": _offset_boxes,
+    "spray-bottle": _spray_bottle, "lamp": _table_lamp, "box-and-can": _box_and_can, "l-boxes": _l_of_boxes,
+    "hammer": _hammer, "stacked-boxes": _stacked_boxes,
+}
+#: Every compound object :func:`compound` makes.
+COMPOUND_KINDS = {**COMPOUNDS, **EVERYDAY}
 
 
 def compound(name: str, position_xy: ArrayLike, yaw_deg: float = 0.0, seed: int = 0) -> CompoundObject:
-    """A compound object of :data:`COMPOUNDS` with sizes drawn from ``seed``, on the table at
+    """A compound object of :data:`COMPOUND_KINDS` with sizes drawn from ``seed``, on the table at
     ``position_xy``, turned ``yaw_deg`` about the vertical.
 
     Examples
@@ -502,7 +608,9 @@ def compound(name: str, position_xy: ArrayLike, yaw_deg: float = 0.0, seed: int 
     >>> len(mug.truth()["parts"]), round(float(mug.mesh()[0][:, 2].min()), 9)
     (4, 0.0)
     """
-    parts = COMPOUNDS[name](np.random.default_rng(seed))
+    if name not in COMPOUND_KINDS:
+        raise ValueError(f"no compound object {name!r}: one of {', '.join(COMPOUND_KINDS)}")
+    parts = COMPOUND_KINDS[name](np.random.default_rng(seed))
     R = rotation_z(yaw_deg)
     xy = np.append(np.asarray(position_xy, dtype=np.float64).reshape(2), 0.0)
     return CompoundObject(name, [_placed(family, size, R @ R_part, R @ np.asarray(centre) + xy)

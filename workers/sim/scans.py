@@ -24,7 +24,12 @@ __all__ = [
     "HSV_SEGMENTATION",
     "BROAD_FAMILIES",
     "ScanSpec",
+    "OneSidedScan",
     "broad_set",
+    "compound_set",
+    "fourth_view_candidates",
+    "one_sided_set",
+    "one_sided_views",
     "default_K",
     "fitting_distance",
     "look_at",
@@ -322,3 +327,114 @@ def broad_set(seed: int = 0, per_family: int = 6, view_counts: Sequence[int] = (
                 specs.append(make_spec(f"{family}-{i:02d}-{n}v", obj, scene_seed, n, elevation_deg=(20.0, 60.0),
                                        **look))
     return specs
+
+
+# --- Compound objects and one-sided scans (issues 21 and 22) ---------------------------------------
+
+def compound_set(seed: int = 0, per_kind: int = 2, n_views: int = 3) -> list[ScanSpec]:
+    """``per_kind`` scans of each everyday compound object (:data:`workers.sim.objects.EVERYDAY`).
+
+    Each object is drawn from ``seed``, turned at random within 8 cm of (0.6, 0), and
+    scanned with ``n_views`` views all around it at 35-55 degrees of elevation (as
+    :func:`standard_set`). ``truth.json`` lists its parts (DESIGN.md §3). Names are
+    ``{kind}-{i:02d}``.
+    """
+    from .objects import EVERYDAY, compound
+
+    specs = []
+    for kind_index, kind in enumerate(EVERYDAY):
+        for i in range(per_kind):
+            rng = np.random.default_rng([seed, 300 + kind_index, i])
+            rho, phi = 0.08 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            obj = compound(kind, (0.6 + rho * np.cos(phi), rho * np.sin(phi)), rng.uniform(0, 360),
+                           seed=1000 * seed + 20 * kind_index + i)
+            specs.append(make_spec(f"{kind}-{i:02d}", obj, seed=1000 * seed + 400 + 20 * kind_index + i,
+                                   n_views=n_views))
+    return specs
+
+
+def one_sided_views(
+    target: ArrayLike, azimuth_deg: float, distance: float, elevation_deg: Sequence[float] = (45.0, 35.0, 50.0),
+    span_deg: float = 60.0,
+) -> list[NDArray[np.float64]]:
+    """Camera poses of a robot reaching from one side: ``len(elevation_deg)`` views spread evenly
+    over ``span_deg`` of azimuth centred on ``azimuth_deg``, each at its elevation, ``distance``
+    from ``target`` and aimed at it.
+
+    Examples
+    --------
+    >>> poses = one_sided_views([0.6, 0.0, 0.05], 180.0, 0.5)
+    >>> [round(float(np.degrees(np.arctan2(T[1, 3], T[0, 3] - 0.6))) % 360) for T in poses]
+    [150, 180, 210]
+    """
+    target = np.asarray(target, dtype=np.float64).reshape(3)
+    n = len(elevation_deg)
+    azimuths = azimuth_deg + (np.linspace(-span_deg / 2, span_deg / 2, n) if n > 1 else np.zeros(1))
+    return [_around(target, az, el, distance) for az, el in zip(azimuths, elevation_deg)]
+
+
+def fourth_view_candidates(
+    target: ArrayLike, distance: float, elevation_deg: float = 40.0, azimuth_start_deg: float = 0.0, count: int = 12,
+) -> list[NDArray[np.float64]]:
+    """``count`` camera poses evenly around ``target`` (360/count degrees of azimuth apart, from
+    ``azimuth_start_deg``), at ``elevation_deg`` and ``distance``, aimed at it: where a fourth
+    view could be taken from."""
+    target = np.asarray(target, dtype=np.float64).reshape(3)
+    return [_around(target, azimuth_start_deg + k * 360.0 / count, elevation_deg, distance) for k in range(count)]
+
+
+def _around(target: NDArray[np.float64], azimuth_deg: float, elevation_deg: float, distance: float):
+    az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
+    offset = distance * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    return look_at(target + offset, target)
+
+
+@dataclass(frozen=True, eq=False)
+class OneSidedScan:
+    """An object seen from one side, and where a fourth view could come from.
+
+    ``spec`` holds 3 + 12 cameras: views 0-2 are the one-sided scan (:func:`one_sided_views`),
+    views 3-14 the candidate fourth views (:func:`fourth_view_candidates`), rendered together so
+    that each 4-view scan is the first three views and one candidate.
+    """
+
+    family: str
+    spec: ScanSpec
+    n_seen: int = 3
+
+
+def one_sided_set(seed: int = 0, per_family: int = 1, families: Sequence[str] | None = None,
+                  compounds: Sequence[str] = ("mug", "hammer", "l-boxes", "spray-bottle", "t-bars"),
+                  ) -> list[OneSidedScan]:
+    """One-sided scans of single superquadrics (:data:`BROAD_FAMILIES`) and of compound objects
+    turned so that their handle or second part (each kind's +x side) faces away from the cameras.
+
+    The robot reaches from a random azimuth; the three views span 60 degrees of it; twelve
+    candidates stand 30 degrees apart all around, at 40 degrees of elevation. Names are
+    ``{family}-{i:02d}-one-sided``.
+    """
+    from .objects import compound
+
+    chosen = list(BROAD_FAMILIES) if families is None else list(families)
+    scans = []
+    for index, family in enumerate([*chosen, *compounds]):
+        for i in range(per_family):
+            rng = np.random.default_rng([seed, 500 + index, i])
+            rho, phi = 0.06 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            xy = (0.6 + rho * np.cos(phi), rho * np.sin(phi))
+            side = rng.uniform(0, 360)
+            if family in BROAD_FAMILIES:
+                obj: SimObject = BROAD_FAMILIES[family](rng, xy, rng.uniform(0, 180))
+            else:
+                # The part on the object's +x side points away from the cameras' side, give or take 20 degrees.
+                obj = compound(family, xy, side + 180.0 + rng.uniform(-20, 20), seed=1000 * seed + 30 * index + i)
+            K = default_K()
+            target = object_target(obj)
+            distance = min(max(0.45, fitting_distance(obj, K, (640, 480))), 0.7)
+            cameras = [*one_sided_views(target, side, distance), *fourth_view_candidates(target, distance,
+                                                                                           azimuth_start_deg=side)]
+            look = dict(jpeg_quality=int(rng.integers(80, 96)), noise_sigma=float(rng.uniform(1.0, 3.0)))
+            spec = ScanSpec(f"{family}-{i:02d}-one-sided", (obj,), tuple(cameras), K, target,
+                            1000 * seed + 600 + 30 * index + i, **look)
+            scans.append(OneSidedScan(family, spec))
+    return scans

@@ -1,0 +1,343 @@
+"""A model in parts: a union of superquadrics where one leaves the silhouettes unexplained (DESIGN.md §1.11).
+
+The one-superquadric fit comes first. A part must pay for itself: it is kept only
+when, without it, the union's silhouette IoU would drop by at least
+``PART_GAIN`` in at least two views (in every view, with fewer). So where no
+two views miss that much of their silhouettes, no part can pay and the
+object stays one superquadric: that is decided from the IoUs the fit's
+quality check computes anyway, before anything else is done.
+
+Otherwise parts are proposed, each round from the union so far:
+
+- **split** a part by the plane through its centre across one of its axes
+  (Vezzani et al.'s superquadric-lib): the hull points that part explains best,
+  on either side, each give a part (their box in the part's frame, upright on a
+  table); in the first round the hull's upright box is split the same way, in
+  case the one superquadric sits in a bad minimum;
+- **add** a part where the silhouettes are unexplained: the hull points that
+  project outside the union's outline in two views or more, grouped into
+  neighbourhoods (as Liu et al.'s hierarchical EMS takes the points a part
+  cannot explain), each group giving one.
+
+Every proposal is refined against the silhouettes of the union (all parts
+together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
+a few steps; the best goes on to convergence; the parts that do not pay are
+dropped (the least useful first, the rest refined again). The union is kept
+if it has more parts than before and gains ``PART_GAIN`` of IoU over the model
+before it in two views (a union whose parts all pay but that gains nothing
+yet, a dumbbell's two weights without the bar, goes one round on before it is
+given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
+tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
+and a part that floats (what holds it up hidden behind it in every view) is
+taken down to the table where that explains the silhouettes as well.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .edges import edge_samples, silhouette_outline
+from .quality import hull_covers, projected_outline
+from .silhouette_fit import _SEARCH_ITERATIONS, _Fitter
+from .superquadric import Superquadric, inside_outside, resting_on, upright_box
+
+__all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
+
+MAX_PARTS = 6
+# What a part must explain to pay for its eleven parameters: this share of a view's
+# silhouette IoU, in two views (every view, with fewer).
+PART_GAIN = 0.02
+_VIEWS_TO_PAY = 2
+# Edge samples per view for the union: a part that owns a tenth of the outline has ten.
+_PART_SAMPLES = 96
+# Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
+_ITERATIONS = 30
+# A hull point projecting this far (px) outside the union's outline is unexplained in that view.
+_UNEXPLAINED_PX = 2.0
+_MIN_GROUP = 11  # points of an unexplained group to place a part on
+_GROUPS = 2  # the largest groups each make a proposal
+_START_SHAPE = np.array([0.5, 0.5])
+_FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
+# A part tilted more than this (degrees) from resting on a face is also tried resting on it.
+_MIN_TILT, _MAX_TILT = 1.0, 90.0
+# A part taken down to the table is kept where the silhouettes' cost grows by no more than this factor
+# (the noise of a few steps).
+_GROUNDED_COST = 1.1
+_GROUNDED_STEPS = 2
+
+
+@dataclass(frozen=True, eq=False)
+class PartsFit:
+    """Result of :func:`fit_parts`.
+
+    Attributes
+    ----------
+    parts : tuple of Superquadric
+        The model: the object is their union; one part for an object that is one superquadric.
+    silhouette_iou : list of float
+        The union's silhouette IoU in each view.
+    """
+
+    parts: tuple[Superquadric, ...]
+    silhouette_iou: list[float]
+
+
+def union_ious(parts, cameras, silhouettes, boxes) -> tuple[list[float], np.ndarray]:
+    """Each view's silhouette IoU of the union, and (P, V) of the union without each part."""
+    ious, without = [], np.zeros((len(parts), len(cameras)))
+    for v, (camera, silhouette, box) in enumerate(zip(cameras, silhouettes, boxes)):
+        object_pixels, covers, _ = hull_covers([projected_outline(part, camera) for part in parts], silhouette, box)
+        if object_pixels is None:
+            ious.append(0.0)
+            continue
+        ious.append(_iou(object_pixels, covers))
+        if len(parts) > 1:
+            for p in range(len(parts)):
+                without[p, v] = _iou(object_pixels, covers[:p] + covers[p + 1:])
+    return ious, without
+
+
+def _iou(object_pixels: np.ndarray, covers: list[np.ndarray]) -> float:
+    covered = np.logical_or.reduce(covers) if covers else np.zeros_like(object_pixels)
+    union = int(np.count_nonzero(object_pixels | covered))
+    return int(np.count_nonzero(object_pixels & covered)) / union if union else 0.0
+
+
+def _views_to_pay(views: int) -> int:
+    return min(_VIEWS_TO_PAY, views)
+
+
+def _could_pay(ious) -> bool:
+    """Whether a new part could pay: it can raise a view's IoU by its miss at most."""
+    return int(np.sum(1.0 - np.asarray(ious) >= PART_GAIN)) >= _views_to_pay(len(ious))
+
+
+def _pays(ious, without: np.ndarray) -> np.ndarray:
+    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
+    gains = np.asarray(ious)[None, :] - without
+    return np.sum(gains >= PART_GAIN, axis=1) + np.clip(gains.mean(axis=1), 0.0, 0.999)
+
+
+def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
+              support_plane=None, max_parts: int = MAX_PARTS) -> PartsFit:
+    """The union of superquadrics that explains the silhouettes, from the one-superquadric fit.
+
+    Parameters
+    ----------
+    single : Superquadric
+        The one-superquadric silhouette fit.
+    points : (N, 3) array_like
+        The carved hull's points.
+    cameras : sequence of Camera
+        Ideal pinhole cameras of the views.
+    silhouettes : sequence of (H, W) ndarray of uint8
+        The ideal-pinhole silhouettes.
+    boxes : sequence of (4,) tuple of int
+        Their bounding boxes.
+    ious : sequence of float, optional
+        ``single``'s silhouette IoU per view, if already known.
+    support_plane : (4,) array_like, optional
+        ``[nx, ny, nz, d]`` with a unit normal: the object stands where ``n . x + d >= 0``.
+    max_parts : int
+        At most this many parts (1 to ``MAX_PARTS``).
+
+    Returns
+    -------
+    PartsFit
+        ``(single,)`` when no part could pay for itself.
+    """
+    if ious is None:
+        ious, _ = union_ious((single,), cameras, silhouettes, boxes)
+    ious = list(ious)
+    if max_parts < 2 or not _could_pay(ious):
+        return PartsFit((single,), ious)
+    points = np.asarray(points, dtype=np.float64)
+    plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
+    edges = [edge_samples(silhouette_outline(silhouette), silhouette, None, count=_PART_SAMPLES)
+             for silhouette in silhouettes]
+    fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
+    current: tuple[Superquadric, ...] = (single,)
+    # A union of every part paying that does not yet explain more than ``current`` (a dumbbell's
+    # two weights without the bar between them) goes one round on before it is given up.
+    trial: tuple[Superquadric, ...] | None = None
+    bounded = 0
+    while bounded < MAX_PARTS:
+        bounded += 1
+        base = current if trial is None else trial
+        if len(base) >= min(max_parts, MAX_PARTS) or not _could_pay(ious):
+            break
+        proposals = _splits(base, points, plane) + _additions(base, points, cameras, silhouettes, boxes, plane)
+        if len(base) == 1 and plane is not None:
+            # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
+            # also split the box of the whole hull, standing on the table.
+            proposals += _splits((upright_box(points, plane[:3]),), points, plane)
+        if not proposals:
+            break
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1)).parts
+        candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
+        # More parts must explain more: as much as one part must pay, in as many views.
+        gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
+        if len(candidate) > len(current) and gained >= _views_to_pay(len(cameras)):
+            current, ious, trial = candidate, candidate_ious, None
+        elif trial is None and len(candidate) > len(base):
+            trial = candidate
+        else:
+            break
+    if len(current) > 1 and plane is not None:
+        current, ious = _rested(current, fitter, plane, ious, cameras, silhouettes, boxes)
+    return PartsFit(current, ious)
+
+
+def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouettes, boxes):
+    """The union with each part that stands tilted tried upright (it rests on a face), kept where
+    that fits the silhouettes better; and each upright part that floats (what holds it up hidden
+    behind it in every view) taken down to the table (through the parts it stands on, whose volume
+    it then shares), kept where that explains them about as well."""
+    best = fitter.descent(parts)
+    for k, part in enumerate(parts):
+        upright, tilt = resting_on(part, plane[:3])
+        if _MIN_TILT < tilt:
+            other = fitter.descent(parts[:k] + (upright,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
+            if other.cost < best.cost:
+                other.run(_ITERATIONS)
+                best, parts = other, other.problem.parts(other.x)
+        grounded = _grounded(upright, plane)
+        if grounded is not None:
+            other = fitter.descent(parts[:k] + (grounded,) + parts[k + 1:]).run(_GROUNDED_STEPS)
+            if other.cost <= _GROUNDED_COST * best.cost:
+                best, parts = other, other.problem.parts(other.x)
+    if best.iterations == 0:
+        return parts, ious
+    return parts, union_ious(parts, cameras, silhouettes, boxes)[0]
+
+
+def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
+    """The part, resting on a face or a side, stretched down to the plane with its top kept;
+    None if no axis of it is upright or it already reaches the plane."""
+    R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+    normal = plane[:3]
+    k = int(np.argmax(np.abs(normal @ R)))
+    if abs(float(normal @ R[:, k])) < np.cos(np.radians(_MIN_TILT)):
+        return None
+    height = float(normal @ centre + plane[3])
+    top, bottom = height + part.size[k], height - part.size[k]
+    if bottom < _FLOOR * part.size[k]:
+        return None
+    T = part.T_world_object.copy()
+    T[:3, 3] = centre - (height - top / 2) * normal
+    size = part.size.copy()
+    size[k] = top / 2
+    return Superquadric(size, part.shape, T)
+
+
+def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[Superquadric, ...], list[float]]:
+    """The parts less those that do not pay (the least useful dropped first, the rest refined)."""
+    parts = tuple(parts)
+    while True:
+        ious, without = union_ious(parts, cameras, silhouettes, boxes)
+        if len(parts) == 1:
+            return parts, ious
+        pays = _pays(ious, without)
+        weakest = int(np.argmin(pays))
+        if pays[weakest] >= _views_to_pay(len(cameras)):
+            return parts, ious
+        rest = parts[:weakest] + parts[weakest + 1:]
+        parts = fitter.result(fitter.descent(rest).run(_ITERATIONS)).parts
+
+
+def _ratios(parts, points: np.ndarray) -> np.ndarray:
+    """(P, N) how far out each point lies along its ray from each part's centre (1 on the surface)."""
+    return np.stack([np.maximum(inside_outside(points, part), 1e-300) ** (part.shape[0] / 2) for part in parts])
+
+
+def _box_start(points: np.ndarray, R: np.ndarray, floor: np.ndarray) -> Superquadric:
+    """The superquadric filling the box of ``points`` in the frame R (columns: axes)."""
+    local = points @ R
+    low, high = local.min(axis=0), local.max(axis=0)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, R @ ((low + high) / 2)
+    return Superquadric(np.maximum((high - low) / 2, floor), _START_SHAPE, T)
+
+
+def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+    """Each part split in two by the plane through its centre across each of its axes (on a
+    table, each half's start upright: a part rests on a face)."""
+    if len(points) < 2 * _MIN_GROUP:
+        return []
+    owner = np.argmin(_ratios(parts, points), axis=0)
+    proposals = []
+    for k, part in enumerate(parts):
+        mine = points[owner == k]
+        R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+        side = (mine - centre) @ R
+        for axis in range(3):
+            halves = [mine[side[:, axis] >= 0], mine[side[:, axis] < 0]]
+            if min(len(half) for half in halves) < _MIN_GROUP:
+                continue
+            floor = _FLOOR * part.size
+            frame = R if plane is None else _upright(R, plane[:3])
+            proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, frame, floor) for half in halves))
+    return proposals
+
+
+def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) -> list[tuple[Superquadric, ...]]:
+    """The union and one more part on each of the largest groups of unexplained hull points."""
+    if len(points) < _MIN_GROUP:
+        return []
+    outside = np.zeros(len(points), np.intp)
+    for camera, silhouette, box in zip(cameras, silhouettes, boxes):
+        object_pixels, covers, (x0, y0) = hull_covers([projected_outline(part, camera) for part in parts],
+                                                       silhouette, box)
+        if object_pixels is None:
+            continue
+        covered = np.logical_or.reduce(covers).astype(np.uint8)
+        # Distance (px) of every pixel of the box from the union's outline, outside it.
+        distance = cv2.distanceTransform(1 - covered, cv2.DIST_L2, 3)
+        uv, depth = camera.project(points)
+        column = np.round(uv[:, 0] - x0).astype(np.intp)
+        row = np.round(uv[:, 1] - y0).astype(np.intp)
+        inside = (depth > 0) & (column >= 0) & (row >= 0) & (column < covered.shape[1]) & (row < covered.shape[0])
+        far = np.ones(len(points), bool)
+        far[inside] = distance[row[inside], column[inside]] > _UNEXPLAINED_PX
+        outside += far
+    unexplained = points[outside >= _views_to_pay(len(cameras))]
+    if len(unexplained) < _MIN_GROUP:
+        return []
+    # Neighbourhoods: points within a few of their typical spacing of each other.
+    gaps = np.linalg.norm(unexplained[:, None] - unexplained[None], axis=2)
+    np.fill_diagonal(gaps, np.inf)
+    reach = 2.5 * float(np.median(gaps.min(axis=1)))
+    count, label = connected_components(csr_matrix(gaps <= reach), directed=False)
+    sizes = np.bincount(label, minlength=count)
+    floor = _FLOOR * np.mean([part.size for part in parts], axis=0).min() * np.ones(3)
+    proposals = []
+    for group in np.argsort(sizes)[::-1][:_GROUPS]:
+        if sizes[group] < _MIN_GROUP:
+            break
+        members = unexplained[label == group]
+        _, vectors = np.linalg.eigh(np.cov((members - members.mean(axis=0)).T))
+        R = vectors if np.linalg.det(vectors) > 0 else vectors * [-1, 1, 1]
+        if plane is None:
+            proposals.append(tuple(parts) + (_box_start(members, R, floor),))
+            continue
+        # On a table a part rests on a face: its frame upright (a strong start, not a rule), and,
+        # since what lies below it may hide behind the parts in front, also reaching down to the table.
+        R = _upright(R, plane[:3])
+        proposals.append(tuple(parts) + (_box_start(members, R, floor),))
+        height = members @ plane[:3] + plane[3]
+        proposals.append(tuple(parts) + (_box_start(np.vstack([members, members - height[:, None] * plane[:3]]),
+                                                    R, floor),))
+    return proposals
+
+
+def _upright(R: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The frame R turned so that its axis nearest ``normal`` is ``normal`` (as its z axis)."""
+    k = int(np.argmax(np.abs(normal @ R)))
+    first = R[:, (k + 1) % 3] - (R[:, (k + 1) % 3] @ normal) * normal
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(normal, first), normal], axis=1)

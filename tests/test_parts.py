@@ -1,0 +1,224 @@
+"""Models in parts (DESIGN.md §1.11, §1.12): unions of known superquadrics seen by ideal cameras
+(rendered by workers/sim, not by the code under test), fitted back and scored against the truth."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from core_cy._silhouette_fit_cy import normal_equations
+from core_cy.camera import Camera
+from core_cy.edges import edge_samples, silhouette_outline
+from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
+from core_cy.reconstruct import Options, View, reconstruct
+from core_cy.silhouette_fit import _Problem, _Views
+from core_cy.superquadric import Superquadric, inside_outside
+from workers.sim.judge import JudgeGripper, judge, parts_from_truth
+from workers.sim.objects import CompoundObject, SuperquadricObject
+from workers.sim.render import render
+from workers.sim.scans import default_K, plan_views
+
+TABLE = [0.0, 0.0, 1.0, 0.0]
+JUDGE_GRIPPER = JudgeGripper.from_dict(DEFAULT_GRIPPER.to_dict())
+
+
+def _placed(family: str, size, centre, yaw_deg: float = 0.0) -> SuperquadricObject:
+    shape = {"box": (0.1, 0.1), "cylinder": (0.1, 1.0), "ellipsoid": (1.0, 1.0), "rounded-box": (0.4, 0.4)}[family]
+    T = np.eye(4)
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    T[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    T[:3, 3] = centre
+    return SuperquadricObject(size, shape, T)
+
+
+COMPOUNDS = {
+    # A cylinder standing on a lying box, off its middle.
+    "can on a box": lambda: CompoundObject("can on a box", [
+        _placed("box", (0.06, 0.03, 0.015), (0.6, 0.0, 0.015), 20.0),
+        _placed("cylinder", (0.02, 0.02, 0.03), (0.6 + 0.03 * np.cos(np.radians(20)),
+                                                 0.03 * np.sin(np.radians(20)), 0.058))]),
+    # An L: a lying bar and an upright block on its end.
+    "l of boxes": lambda: CompoundObject("l of boxes", [
+        _placed("box", (0.06, 0.02, 0.015), (0.6, 0.0, 0.015), -30.0),
+        _placed("box", (0.018, 0.02, 0.04), (0.6 + 0.042 * np.cos(np.radians(-30)),
+                                              0.042 * np.sin(np.radians(-30)), 0.068), -30.0)]),
+}
+
+SINGLES = {
+    "box": lambda: SuperquadricObject.on_table("box", [0.05, 0.03, 0.025], (0.6, 0.0), 25.0),
+    "cylinder": lambda: SuperquadricObject.on_table("cylinder", [0.03, 0.03, 0.06], (0.6, 0.0), 25.0),
+    "ellipsoid": lambda: SuperquadricObject.on_table("ellipsoid", [0.045, 0.035, 0.03], (0.6, 0.0), 25.0),
+    "rounded box": lambda: SuperquadricObject.on_table("rounded-box", [0.04, 0.035, 0.03], (0.6, 0.0), 25.0),
+    "lying cylinder": lambda: SuperquadricObject.on_table("cylinder", [0.025, 0.025, 0.07], (0.6, 0.0), 25.0,
+                                                          lying=True),
+}
+
+
+def _truth_parts(obj) -> list[Superquadric]:
+    truth = obj.truth()
+    return [Superquadric.from_dict(part) for part in truth.get("parts", [truth])]
+
+
+def _cameras(obj, views: int, azimuths=None) -> list[Camera]:
+    """Ideal cameras at 45 degrees looking at the object's middle, 0.5 m away; evenly around it
+    unless ``azimuths`` (degrees) are given."""
+    vertices = obj.mesh()[0]
+    target = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    K = default_K()
+    if azimuths is None:
+        poses = plan_views(target, views, distance=(0.5, 0.5), elevation_deg=(45.0, 45.0), azimuth_start_deg=10.0)
+    else:
+        poses = [plan_views(target, 1, distance=(0.5, 0.5), elevation_deg=(45.0, 45.0),
+                            azimuth_start_deg=float(a))[0] for a in azimuths]
+    return [Camera(K=K, T_world_cam=pose, view=i) for i, pose in enumerate(poses)]
+
+
+def _reconstruct(obj, cameras, **options):
+    views = [View(camera, mask=render(obj, camera.T_world_cam, camera.K, noise_sigma=0.0)[1]) for camera in cameras]
+    return reconstruct(views, support_plane=TABLE, options=Options(**options))
+
+
+def _union_iou(fitted, true, n: int = 200_000, seed: int = 0) -> float:
+    """Monte Carlo volumetric IoU of two unions of superquadrics."""
+    centres = np.array([p.T_world_object[:3, 3] for p in (*fitted, *true)])
+    reach = max(np.linalg.norm(p.size) for p in (*fitted, *true))
+    low, high = centres.min(axis=0) - reach, centres.max(axis=0) + reach
+    points = np.random.default_rng(seed).uniform(low, high, size=(n, 3))
+
+    def inside(parts):
+        return np.logical_or.reduce([inside_outside(points, p) <= 1.0 for p in parts])
+
+    a, b = inside(fitted), inside(true)
+    return float(np.count_nonzero(a & b) / np.count_nonzero(a | b))
+
+
+@functools.lru_cache(maxsize=8)
+def _compound_fit(name: str, views: int):
+    obj = COMPOUNDS[name]()
+    return obj, _reconstruct(obj, _cameras(obj, views))
+
+
+@pytest.mark.parametrize("name", COMPOUNDS)
+def test_a_union_of_two_superquadrics_is_recovered_as_two_parts(name):
+    obj, result = _compound_fit(name, 3)
+    truth = _truth_parts(obj)
+    assert len(result.parts) == 2
+    assert _union_iou(result.parts, truth) > 0.97
+    # One superquadric could not: the parts are what explains the silhouettes.
+    assert _union_iou([result.superquadric], truth) < 0.9
+    assert min(result.silhouette_iou) > 0.95
+    line = result.to_dict()
+    assert len(line["parts"]) == 2 and set(line["parts"][0]) == {"size", "shape", "T_world_object"}
+
+
+@pytest.mark.parametrize("name", SINGLES)
+def test_a_single_superquadric_is_never_split(name):
+    obj = SINGLES[name]()
+    result = _reconstruct(obj, _cameras(obj, 3))
+    assert len(result.parts) == 1
+    assert _union_iou(result.parts, _truth_parts(obj)) > 0.97
+
+
+@pytest.mark.parametrize("name", ["cylinder", "can on a box"])
+def test_a_fourth_view_does_not_lower_the_iou(name):
+    # Three views from one side (60 degrees of azimuth), then a fourth from each of four other sides.
+    obj = SINGLES[name]() if name in SINGLES else COMPOUNDS[name]()
+    truth = _truth_parts(obj)
+    one_side = [10.0, 40.0, 70.0]
+    three = _union_iou(_reconstruct(obj, _cameras(obj, 3, one_side)).parts, truth)
+    for fourth in (130.0, 190.0, 250.0, 310.0):
+        four = _union_iou(_reconstruct(obj, _cameras(obj, 4, one_side + [fourth])).parts, truth)
+        assert four >= three - 0.02, f"a fourth view at {fourth} degrees: IoU {four:.3f} after {three:.3f}"
+
+
+def test_a_thin_box_standing_on_its_edge_is_fitted_upright():
+    # 10 x 6 cm and 1.2 cm thin, standing on a long edge.
+    T = np.eye(4)
+    c, s = np.cos(np.radians(35)), np.sin(np.radians(35))
+    T[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]])
+    T[:3, 3] = (0.6, 0.0, 0.03)
+    obj = SuperquadricObject([0.05, 0.03, 0.006], (0.1, 0.1), T)
+    result = _reconstruct(obj, _cameras(obj, 3))
+    fit = result.superquadric
+    # The fitted axis nearest the table's normal is the truth's height axis (its size 3 cm), upright.
+    R = fit.T_world_object[:3, :3]
+    up = int(np.argmax(np.abs(R[2])))
+    assert np.degrees(np.arccos(min(1.0, abs(R[2, up])))) < 5.0
+    assert fit.size[up] == pytest.approx(0.03, rel=0.1)
+    assert _union_iou(result.parts, _truth_parts(obj)) > 0.9
+
+
+def test_the_planner_refuses_a_grasp_whose_finger_cuts_the_second_part():
+    # A box with a post standing close beside it: grasps of the box alone that close across its
+    # length send a finger through the post; planned on the union, none does.
+    box = Superquadric([0.02, 0.03, 0.02], [0.1, 0.1], _pose((0.6, 0.0, 0.02)))
+    post = Superquadric([0.012, 0.012, 0.05], [0.1, 1.0], _pose((0.6, 0.048, 0.05)))
+    true = parts_from_truth({"parts": [box.to_dict(), post.to_dict()]})
+    alone = plan_grasps(box, TABLE, max_grasps=50)
+    cut = [g for g in alone if _finger_hits(g, post)]
+    assert cut, "the box alone has grasps that the post is in the way of"
+    on_union = plan_grasps([box, post], TABLE, max_grasps=50)
+    assert on_union
+    assert not [g for g in on_union if _finger_hits(g, post)]
+    verdict = judge(on_union[0].T_world_grasp, true, JUDGE_GRIPPER, TABLE, mu=DEFAULT_GRIPPER.friction)
+    assert verdict.holds, verdict.reason
+
+
+def _pose(centre) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = centre
+    return T
+
+
+def _finger_hits(grasp, part: Superquadric) -> bool:
+    """Whether a finger, from full opening until its pad meets the grasped width, passes
+    through the part: a dense grid of the swept volumes tested against its inside-outside function."""
+    g = DEFAULT_GRIPPER
+    x = np.linspace(-g.finger_width / 2, g.finger_width / 2, 5)
+    y = np.linspace(grasp.width / 2 + 0.001, g.max_opening / 2 + g.finger_thickness, 12)
+    z = np.linspace(g.palm, g.tip, 10)
+    grid = np.stack(np.meshgrid(x, y, z, indexing="ij"), -1).reshape(-1, 3)
+    grid = np.concatenate([grid, grid * [1, -1, 1]])
+    world = grid @ grasp.T_world_grasp[:3, :3].T + grasp.T_world_grasp[:3, 3]
+    return bool(np.any(inside_outside(world, part) < 1.0))
+
+
+def test_union_normal_equations_match_central_differences():
+    obj = COMPOUNDS["can on a box"]()
+    cameras = _cameras(obj, 3)
+    edges = [edge_samples(silhouette_outline(m), m, None, count=64)
+             for m in (render(obj, c.T_world_cam, c.K, noise_sigma=0.0)[1] for c in cameras)]
+    truth = _truth_parts(obj)
+    views = _Views.pack(cameras, edges, truth[0].T_world_object[:3, 3])
+    plane = np.array(TABLE)
+    problem = _Problem(tuple(truth), views, plane, 500.0, 1.0)
+    x = problem.x0 + np.random.default_rng(3).normal(size=22) * 0.01
+    JtJ, Jtr = np.empty((22, 22)), np.empty(22)
+    problem.evaluate(x, JtJ, Jtr)
+    problem.keep(True)
+    args = (problem.R0, problem.t0, problem.scale, problem.planes, 1.0, plane, 500.0, 0.0)
+    owner = np.empty(views.count, np.intp)
+    normal_equations(x, *args, JtJ, Jtr, True, owner)
+    assert set(owner.tolist()) == {0, 1}  # each part answers for some of the samples
+    numeric = np.empty(22)
+    for k in range(22):
+        step = np.zeros(22)
+        step[k] = 1e-6
+        numeric[k] = (normal_equations(x + step, *args, JtJ.copy(), Jtr.copy(), False)
+                      - normal_equations(x - step, *args, JtJ.copy(), Jtr.copy(), False)) / 2e-6
+    np.testing.assert_allclose(Jtr, numeric, rtol=1e-4, atol=1e-5 * np.abs(numeric).max())
+    assert np.all(np.abs(JtJ[:11, 11:]) == 0)  # a residual is one part's
+
+
+def test_a_view_of_something_else_gives_the_best_model_and_its_disagreement():
+    # The third view shows another object: at most six parts, and the view's IoU says so.
+    obj = COMPOUNDS["l of boxes"]()
+    other = SINGLES["ellipsoid"]()
+    cameras = _cameras(obj, 3)
+    masks = [render(obj, c.T_world_cam, c.K, noise_sigma=0.0)[1] for c in cameras[:2]]
+    masks.append(render(other, cameras[2].T_world_cam, cameras[2].K, noise_sigma=0.0)[1])
+    result = reconstruct([View(c, mask=m) for c, m in zip(cameras, masks)], support_plane=TABLE)
+    assert 1 <= len(result.parts) <= 6
+    assert len(result.silhouette_iou) == 3 and all(0.0 <= iou <= 1.0 for iou in result.silhouette_iou)
