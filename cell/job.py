@@ -1,63 +1,67 @@
-"""A job as an explicit state machine, after rclpy's action server (``ServerGoalHandle``).
+"""A job: its lifecycle as a table, after rclpy's action server (``ServerGoalHandle``), and its plan.
 
-Every state, and every legal move between states, is written down once, in
-:data:`TRANSITIONS`; a move the table does not allow raises
-:class:`IllegalTransition` at once instead of corrupting the job. Cancelling
-is a transition too: a waiting job is cancelled at once; a working job goes to
-``cancelling``, its step is interrupted, and it ends ``cancelled``::
+A job's life is a small table, :data:`TRANSITIONS`; a move it does not allow
+raises :class:`IllegalTransition` at once instead of corrupting the job::
 
-    queued ──▶ moving ⇄ capturing ──▶ reconstructing ──▶ (picking) ──▶ succeeded
-      │            (working states)            │
-      │                   ├──────────────────▶ failed
-      │                   ╰──▶ cancelling ──▶ cancelled
-      ╰──────────────────────────────────────▶ cancelled | failed
+    queued ──▶ running ──────────────▶ succeeded
+      │           ├──────────────────▶ failed
+      │           ╰──▶ cancelling ──▶ cancelled | failed
+      ╰──────────────────────────────▶ cancelled | failed
 
-A working state may follow any working state: what a job does next is its
-steps' business (``cell.steps``), not the table's. A restarted daemon puts a
-job whose pictures were not all taken back to ``queued`` (its views are taken
-again), and carries a ``cancelling`` job to ``cancelled``.
+What a running job does (moving to view 2, reconstructing, picking) is not a
+state of the table but its :class:`~wire.messages.Progress`: the step of its
+plan that runs. The plan is a list of steps (``cell.steps``) that a step may
+extend; what the job has done is its :class:`Checkpoint`, from which a
+restarted daemon carries it on.
 
-:class:`Job` holds a job's state and what its steps gather; it does no I/O.
-The daemon stores, publishes and records each :class:`~wire.messages.JobEvent`
-that :meth:`Job.transition` returns.
+:class:`Job` holds what the steps gather and does no I/O; every change of a
+job goes through its handle (``cell.handle``).
 """
 
 from __future__ import annotations
 
 import asyncio
-import time
+import json
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from wire.errors import CellError
-from wire.messages import JobEvent, JobState, ScanRequest, ScanResult
+from wire.messages import Lifecycle, Progress, ScanRequest, ScanResult
 
-__all__ = ["TRANSITIONS", "WORKING", "IllegalTransition", "Job", "Picture"]
+if TYPE_CHECKING:
+    from .steps import Step
 
-S = JobState
-#: States in which a step runs.
-WORKING = frozenset({S.MOVING, S.CAPTURING, S.RECONSTRUCTING, S.PICKING})
-_ENDS = frozenset({S.SUCCEEDED, S.FAILED})
+__all__ = ["TRANSITIONS", "IllegalTransition", "Job", "Picture", "Checkpoint"]
 
-#: Every legal move: from a state, the states it may go to.
-TRANSITIONS: dict[JobState, frozenset[JobState]] = {
-    S.QUEUED: WORKING | {S.FAILED, S.CANCELLED},
-    **{state: WORKING | _ENDS | {S.CANCELLING, S.QUEUED} for state in WORKING},
-    S.CANCELLING: frozenset({S.CANCELLED}),
-    S.SUCCEEDED: frozenset(),
-    S.FAILED: frozenset(),
-    S.CANCELLED: frozenset(),
+L = Lifecycle
+
+#: Every legal move: from a state of a job's life, the states it may go to.
+TRANSITIONS: dict[Lifecycle, frozenset[Lifecycle]] = {
+    L.QUEUED: frozenset({L.RUNNING, L.FAILED, L.CANCELLED}),
+    L.RUNNING: frozenset({L.CANCELLING, L.SUCCEEDED, L.FAILED}),
+    L.CANCELLING: frozenset({L.CANCELLED, L.FAILED}),
+    L.SUCCEEDED: frozenset(),
+    L.FAILED: frozenset(),
+    L.CANCELLED: frozenset(),
 }
 
 
 class IllegalTransition(CellError):
-    """A job was asked to move where the state machine does not allow: a bug, or a request
-    that comes too late (cancelling a job that has ended)."""
+    """A job was asked to move where its table does not allow: a bug, or a request that comes too
+    late (cancelling a job that has ended)."""
 
-    def __init__(self, job_id: str, state: JobState, to: JobState) -> None:
+    def __init__(self, job_id: str, state: Lifecycle, to: Lifecycle) -> None:
         super().__init__(f"job {job_id} is {state.value}: it cannot become {to.value}")
         self.state, self.to = state, to
+
+
+def check_transition(job_id: str, state: Lifecycle, to: Lifecycle) -> None:
+    """Raise :class:`IllegalTransition` unless :data:`TRANSITIONS` allows ``state`` → ``to``."""
+    if to not in TRANSITIONS[state]:
+        raise IllegalTransition(job_id, state, to)
 
 
 @dataclass
@@ -68,21 +72,44 @@ class Picture:
     T_base_flange: np.ndarray
     T_base_cam: np.ndarray
 
+    def poses(self) -> str:
+        """Where it was taken from, as the store keeps it (JSON)."""
+        return json.dumps({"T_base_flange": self.T_base_flange.tolist(), "T_base_cam": self.T_base_cam.tolist()})
+
+    @classmethod
+    def kept(cls, jpeg: bytes, poses: str) -> Picture:
+        """The picture the store kept; ``ValueError`` if its poses cannot be read."""
+        try:
+            where = json.loads(poses)
+            return cls(jpeg, np.asarray(where["T_base_flange"], dtype=np.float64),
+                       np.asarray(where["T_base_cam"], dtype=np.float64))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"a kept picture's poses cannot be read: {exc}") from None
+
+
+class Checkpoint(BaseModel):
+    """What a job has done, on disk: its plan so far (each step as ``Step.spec()``), and how many
+    of its steps are done. Its pictures are kept beside it (``cell.pictures``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    plan: list[dict[str, Any]] = Field(min_length=1)
+    done: int = Field(ge=0)
+    #: The step that began last (``done`` while none runs): a restart knows what was under way.
+    began: int | None = None
+
 
 @dataclass
 class Job:
-    """One job: its state, and what its steps gathered on the way.
-
-    ``poses`` are the flange poses of its views, planned at submit (or when a restarted daemon
-    takes the job up again).
-    """
+    """One job: its lifecycle, its plan, and what its steps gathered on the way."""
 
     job_id: str
     request: ScanRequest
-    poses: list[np.ndarray]
-    state: JobState = JobState.QUEUED
-    view: int | None = None
-    started: float = field(default_factory=time.time)
+    plan: list[Step]
+    lifecycle: Lifecycle = Lifecycle.QUEUED
+    progress: Progress | None = None
+    #: Steps of the plan done (the next to run is ``plan[done]``).
+    done: int = 0
+    started: float = 0.0
     captures: list[Picture] = field(default_factory=list)
     #: Where the flange stands, as the robot last reported it.
     flange: np.ndarray | None = None
@@ -95,44 +122,8 @@ class Job:
     pick_poses: dict[str, np.ndarray] = field(default_factory=dict)
     #: Why the job's recording cannot be written, if it cannot.
     recording_error: str | None = None
-    #: Done once the recording's file was tried (``recording_error`` then says how it went).
-    recording_checked: asyncio.Future[None] | None = None
     #: The task that runs the job's steps, once it runs.
     task: asyncio.Task | None = None
 
-    @property
-    def finished(self) -> bool:
-        return self.state.finished
-
-    def can(self, to: JobState) -> bool:
-        return to in TRANSITIONS[self.state]
-
-    def transition(self, to: JobState, message: str, *, view: int | None = None, now: float,
-                   result: ScanResult | None = None) -> JobEvent:
-        """Move to ``to``; the event that says so.
-
-        Raises
-        ------
-        IllegalTransition
-            If :data:`TRANSITIONS` does not allow it.
-        """
-        if to not in TRANSITIONS[self.state]:
-            raise IllegalTransition(self.job_id, self.state, to)
-        self.state, self.view = to, view
-        return JobEvent(job_id=self.job_id, state=to, view=view, message=message, time=now, result=result)
-
-    def note(self, message: str, *, now: float) -> JobEvent:
-        """An event that changes no state: a retry, say."""
-        return JobEvent(job_id=self.job_id, state=self.state, view=self.view, message=message, time=now)
-
-    def request_cancel(self, *, now: float) -> JobEvent:
-        """Cancel: a job that waits is cancelled at once, a working one starts cancelling.
-
-        Raises
-        ------
-        IllegalTransition
-            If the job has ended, or is cancelling already.
-        """
-        if self.state is JobState.QUEUED:
-            return self.transition(JobState.CANCELLED, "cancelled by request", now=now)
-        return self.transition(JobState.CANCELLING, "cancelling by request", view=self.view, now=now)
+    def checkpoint(self, *, began: int | None = None) -> Checkpoint:
+        return Checkpoint(plan=[step.spec() for step in self.plan], done=self.done, began=began)

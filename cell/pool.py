@@ -2,7 +2,7 @@
 
 Every worker announces itself (liveliness token), its health and its load
 (heartbeat: capacity, requests in flight and their tickets); the contract is
-in ``cell/keys.py``. :class:`ReconstructorPool` follows them and runs one
+in ``wire/keys.py``. :class:`ReconstructorPool` follows them and runs one
 *attempt* at a reconstruction at a time for its caller::
 
     pool = ReconstructorPool(transport, heartbeat_s=5.0)
@@ -54,7 +54,7 @@ from typing import Any
 from wire import keys
 from wire.errors import CellError, LinkDown, NoResponder, RemoteError, TransportError, TransportTimeout
 from wire.messages import ReconstructorStatus, WorkerLoad, parse
-from wire.transport import Reply, Transport
+from wire.transport import Reply, BaseTransport
 
 __all__ = ["ReconstructorPool", "AttemptFailed", "NoReconstructor"]
 
@@ -126,7 +126,7 @@ class ReconstructorPool:
     subscribes, :meth:`close` undoes it.
     """
 
-    def __init__(self, transport: Transport, *, heartbeat_s: float, clock=time.monotonic) -> None:
+    def __init__(self, transport: BaseTransport, *, heartbeat_s: float, clock=time.monotonic) -> None:
         self._transport = transport
         self.heartbeat_s = heartbeat_s
         self._clock = clock

@@ -6,7 +6,7 @@ import asyncio
 import logging
 
 from wire import keys
-from wire.transport import Transport
+from wire.transport import BaseTransport
 
 __all__ = ["Presence", "Absent"]
 
@@ -20,7 +20,7 @@ class Absent(Exception):
 class Presence:
     """Follows ``robocell/<cell>/alive/*``; :meth:`wait_for` a part before asking it."""
 
-    def __init__(self, transport: Transport, cell: str) -> None:
+    def __init__(self, transport: BaseTransport, cell: str) -> None:
         self._transport, self._cell = transport, cell
         self._alive: set[str] = set()
         self._changed = asyncio.Condition()

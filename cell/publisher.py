@@ -13,7 +13,7 @@ import queue
 import threading
 
 from wire.errors import TransportError
-from wire.transport import Transport
+from wire.transport import BaseTransport
 
 __all__ = ["Publisher"]
 
@@ -23,7 +23,7 @@ log = logging.getLogger(__name__)
 class Publisher:
     """Puts ``(key, payload)`` on ``transport`` from its own thread, in the order given."""
 
-    def __init__(self, transport: Transport) -> None:
+    def __init__(self, transport: BaseTransport) -> None:
         self._transport = transport
         self._outbox: queue.SimpleQueue[tuple[str, str] | None] = queue.SimpleQueue()
         self._thread = threading.Thread(target=self._run, name="publisher", daemon=True)

@@ -61,15 +61,12 @@ class Recorder:
     ----------
     n_points : int
         Points on the sphere the reconstruction starts from (drawn before carving).
-    sim : dict or None
-        The ``[sim]`` section, to draw the true object beside the fit; None on a real cell.
     recordings_per_process : int
         Recordings a recorder process makes before a new one takes over.
     """
 
-    def __init__(self, *, n_points: int, sim: dict | None,
-                 recordings_per_process: int = RECORDINGS_PER_PROCESS) -> None:
-        self._arguments = (n_points, sim)
+    def __init__(self, *, n_points: int, recordings_per_process: int = RECORDINGS_PER_PROCESS) -> None:
+        self._arguments = (n_points,)
         self._per_process = recordings_per_process
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._feeder = threading.Thread(target=self._feed, name="recorder-feeder", daemon=True)
@@ -180,7 +177,7 @@ class _Child:
                 log.error("the recorder process is gone (%s): jobs are no longer recorded", exc)
 
 
-def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -> None:
+def _main(connection: Connection, n_points: int, level: int) -> None:
     """The recorder process: apply messages until told to stop, or until the daemon is gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C is for the daemon, which stops this process
     logging.basicConfig(level=level or logging.INFO, format=_LOG_FORMAT)
@@ -189,7 +186,7 @@ def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -
     from .recording import JobRecording
 
     recordings: dict[str, JobRecording] = {}
-    drawing = _Drawing(n_points, sim)
+    drawing = _Drawing(n_points)
     try:
         while True:
             try:
@@ -230,10 +227,8 @@ def _main(connection: Connection, n_points: int, sim: dict | None, level: int) -
 class _Drawing:
     """What a reconstruction looks like in a recording (in the recorder process)."""
 
-    def __init__(self, n_points: int, sim: dict | None) -> None:
+    def __init__(self, n_points: int) -> None:
         self.n_points = n_points
-        self.sim = sim
-        self._truth: list | None = None
 
     def reconstruction(self, recording, reply_json: str, payload: bytes) -> None:
         import cv2
@@ -259,14 +254,3 @@ class _Drawing:
         recording.log_superquadric("fit", Superquadric.from_dict(result.superquadric.model_dump()))
         timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result.timings_ms.items())
         recording.log_text(f"reconstruction on {answer.worker}: {timings}")
-        if self.sim is not None:
-            for vertices, triangles in self._truth_meshes():
-                recording.log_mesh("truth", vertices, triangles)
-
-    def _truth_meshes(self) -> list:
-        if self._truth is None:
-            from wire.config import SimConfig
-            from workers.sim.scene import scene_from_config
-
-            self._truth = [obj.mesh() for obj in scene_from_config(SimConfig.model_validate(self.sim))]
-        return self._truth

@@ -30,9 +30,11 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
+from core_cy.meshes import vertex_normals
+from wire import keys
 from core_cy.superquadric import Superquadric, mesh
 
-__all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command"]
+__all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command", "shared_parts"]
 
 _log = logging.getLogger(__name__)
 
@@ -41,17 +43,6 @@ _OBJECT_CLASSES = rr.AnnotationContext([(0, "background", (0, 0, 0, 0)), (1, "ob
 _FLANGE_AXIS_LENGTH = 0.1  # metres
 # Rerun's level names; "WARNING" is Python's spelling of its "WARN".
 _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
-
-
-def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    # Without normals the viewer draws a mesh flat, as a uniform blob.
-    corners = vertices[triangles]
-    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # area-weighted
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.where(length > 0, length, 1.0)
 
 
 def _transform(T) -> rr.Transform3D:
@@ -90,7 +81,7 @@ class JobRecording:
     ['TextLog']
     """
 
-    def __init__(self, path: Path, job_id: str, *, application_id: str = "robocell") -> None:
+    def __init__(self, path: Path, job_id: str, *, application_id: str = keys.RECORDING_APPLICATION_ID) -> None:
         self.path = Path(path)
         self.job_id = job_id
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -174,7 +165,7 @@ class JobRecording:
             raise ValueError(f"need vertices (V, 3) and triangles (F, 3), got {vertices.shape} "
                              f"and {triangles.shape}")
         self._log(f"world/{name}", rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles,
-                                              vertex_normals=_vertex_normals(vertices, triangles),
+                                              vertex_normals=vertex_normals(vertices, triangles),
                                               albedo_factor=colour))
 
     def log_grasps(self, grasps, widths, chosen: int | None, gripper: dict) -> None:
@@ -268,15 +259,23 @@ def _rerun_executable() -> str:
     return found
 
 
+def shared_parts(path: Path) -> list[Path]:
+    """The other files of the recording at ``path`` (``<job id>.<part>.rrd``, made by other
+    processes with the same recording id: the simulator's truth, say), which a viewer shows with it."""
+    path = Path(path)
+    return sorted(path.parent.glob(f"{path.stem}.*.rrd"))
+
+
 def replay_command(path: Path, *, web: bool = False, bind: str = "127.0.0.1", web_port: int = 9090,
                    grpc_port: int = 9876) -> list[str]:
-    """The argv that opens a recording in the native viewer, or serves it to a browser.
+    """The argv that opens a recording (with its :func:`shared_parts`) in the native viewer, or serves
+    it to a browser.
 
     The viewer's servers listen on ``bind``, loopback by default (rerun's own default is
     0.0.0.0). With ``web`` the recording is served over gRPC on ``grpc_port`` and the web
     viewer on ``web_port``, and no browser is opened.
     """
-    argv = [_rerun_executable(), str(path), "--bind", bind]
+    argv = [_rerun_executable(), str(path), *map(str, shared_parts(path)), "--bind", bind]
     if web:
         argv += ["--serve-web", "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
     return argv

@@ -1,29 +1,23 @@
 """The cell daemon's job store: every scan job, its events and its result in one SQLite file.
 
-Each method is one short transaction. A store belongs to the thread that opened
-it (an SQLite connection does): the daemon keeps its own in a thread of its
-own, and calls it there, in order. What must survive a crash is synced to disk before the
-method returns (WAL journal, ``synchronous=FULL``): a job once :meth:`JobStore.add` returns (or, added
-with ``durable=False``, once :meth:`JobStore.sync` has),
-its start of reconstruction (with its pictures kept, a restart resumes there), a failure or a
-cancel. A step of a job and a success (``durable=False``) are written without waiting for
-the disk, which costs 2.5-4 ms a commit on this machine: the next durable commit syncs them
-with its own; after a power cut (not a ``kill -9``, which loses nothing written) a restarted
-daemon may find the job a step behind, and takes it up from there (a success lost that way
-is reconstructed again from the pictures kept: nothing a restart cannot redo waits for the disk).
+Each method is one short transaction (a millisecond at most: the daemon calls
+them on its event loop), committed without waiting for the disk (WAL journal,
+``synchronous=NORMAL``): a ``kill -9`` loses nothing committed. :meth:`JobStore.sync`
+puts every commit so far on disk (an ``fsync`` of the journal, which needs no
+connection, so that the daemon runs it in a thread while its loop goes on);
+the daemon's ``cell.handle`` says which changes wait for it. After a power cut
+a restarted daemon may find a job a step behind what it had not synced, and
+carries it on from there. Every change of a job is one call of :meth:`JobStore.change`.
 
-The daemon writes a view's step (moving, capturing) and a success later still: when the cell next waits for
-something slow (a snapshot, a reconstruction), when it has been quiet 0.2 s, or before
-anything reads the store through it (``cell.executor``). A ``kill -9`` may therefore find a
-job a step behind too; a program reading this file while the daemon runs may see a job's
-last step late by as much.
+A job's checkpoint (``cell.job.Checkpoint``: its plan so far, the steps done)
+is kept with it, replaced by each change that carries one, and so are the
+pictures it has taken (:meth:`JobStore.keep_picture`) until it ends: a
+restarted daemon carries it on from them, and the job's recording keeps them.
 
 Job ids look like ``20261122-000042``: the UTC day the job was submitted, then
 the job counter (the row number; jobs are never deleted). They are unique within a
 store because the counter is, and sort in submission order as long as the clock does not
-step back over midnight. The daemon numbers its jobs itself, from :meth:`JobStore.last_seq`
-on (it is the store's only writer: ``cell.lock``), so that a job starts before it is stored.
-"""
+step back over midnight. """
 
 from __future__ import annotations
 
@@ -39,15 +33,18 @@ from typing import Any, TypeVar
 from pydantic import ValidationError
 
 from wire.errors import StoreError
-from wire.messages import JobEvent, JobState, JobStatus, ScanRequest, ScanResult
+from wire.messages import ACTIVITIES, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest, ScanResult
 
-__all__ = ["JobStore", "SCHEMA_VERSION", "job_id_for", "queued_status", "queued_event"]
+__all__ = ["JobStore", "SCHEMA_VERSION", "job_id_for", "queued_status", "queued_event", "lifecycle_of"]
 
 #: Kept in ``PRAGMA user_version``; a file of an older version is upgraded, a newer one refused.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 _T = TypeVar("_T")
 # What each version adds to the one before it.
-_UPGRADES = {2: ("ALTER TABLE jobs ADD COLUMN error_kind TEXT",)}
+_UPGRADES = {2: ("ALTER TABLE jobs ADD COLUMN error_kind TEXT",),
+             3: ("ALTER TABLE jobs ADD COLUMN progress TEXT", "ALTER TABLE jobs ADD COLUMN checkpoint TEXT",
+                 "CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,"
+                 " jpeg BLOB NOT NULL, poses TEXT NOT NULL, PRIMARY KEY (job_id, view))")}
 
 # One statement each: sqlite3 runs one at a time inside our transaction (executescript would commit).
 _SCHEMA = (
@@ -58,15 +55,20 @@ _SCHEMA = (
         state TEXT NOT NULL, view INTEGER, n_views INTEGER NOT NULL, error TEXT,
         created REAL NOT NULL, updated REAL NOT NULL, recording TEXT,
         request TEXT NOT NULL,                      -- ScanRequest JSON
-        error_kind TEXT)""",
+        error_kind TEXT,
+        progress TEXT,                              -- Progress JSON, while it runs
+        checkpoint TEXT)                            -- cell.job.Checkpoint JSON""",
     "CREATE INDEX jobs_state ON jobs (state)",
     """CREATE TABLE events (seq INTEGER PRIMARY KEY, job_id TEXT NOT NULL REFERENCES jobs (job_id),
         event TEXT NOT NULL)                        -- JobEvent JSON""",
     "CREATE INDEX events_job ON events (job_id)",
     """CREATE TABLE results (job_id TEXT PRIMARY KEY REFERENCES jobs (job_id),
         result TEXT NOT NULL)                       -- ScanResult JSON""",
+    """CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,
+        jpeg BLOB NOT NULL, poses TEXT NOT NULL,    -- JSON: where the flange and the camera stood
+        PRIMARY KEY (job_id, view))""",
 )
-_COLUMNS = "job_id, state, view, n_views, error, created, updated, recording, request, error_kind"
+_COLUMNS = "job_id, state, view, n_views, error, created, updated, recording, request, error_kind, progress"
 
 
 class JobStore:
@@ -96,7 +98,7 @@ class JobStore:
                     raise StoreError(f"job store {self.path} is damaged ({'; '.join(damage[:3])}): move it aside "
                                      f"(a new one is made) or restore it from a backup")
                 self._db.execute("PRAGMA journal_mode = WAL")      # readers don't block the writer
-                self._db.execute("PRAGMA synchronous = FULL")      # fsync every commit
+                self._db.execute("PRAGMA synchronous = NORMAL")    # on disk at sync(), see the module's text
                 self._db.execute("PRAGMA foreign_keys = ON")
                 with self._write() as db:
                     version = db.execute("PRAGMA user_version").fetchone()[0]
@@ -127,27 +129,25 @@ class JobStore:
 
     # --- writing ----------------------------------------------------------------------------
 
-    def add(self, request: ScanRequest, *, n_views: int, now: float, seq: int | None = None,
-            durable: bool = True) -> tuple[JobStatus, bool]:
+    def add(self, request: ScanRequest, *, n_views: int, now: float,
+            checkpoint: str | None = None) -> tuple[JobStatus, bool]:
         """Queue a new job, with its first event ("queued"); returns ``(status, True)``.
 
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
-        ``seq``: the job's number (see :func:`job_id_for`), given by a caller that numbers the jobs
-        itself (the daemon: its jobs start before the store has them); by default the next
-        after :meth:`last_seq`. Not ``durable``: on disk only after :meth:`sync` (or the next
-        durable commit).
+        ``checkpoint``: the job's plan, as
+        JSON (see :meth:`checkpoint`). On disk once :meth:`sync` returns.
 
         Raises
         ------
         ValueError
             ``n_views`` is below 1.
         StoreError
-            ``seq`` is taken already (or the database fails).
+            The database fails.
         """
         if n_views < 1:
             raise ValueError(f"n_views must be at least 1, got {n_views}")
-        with self._write(durable=durable) as db:
+        with self._write() as db:
             # BEGIN IMMEDIATE holds the write lock, so look-up and insert cannot
             # interleave with another writer; the UNIQUE index is the backstop.
             if request.request_id is not None:
@@ -155,25 +155,26 @@ class JobStore:
                                  (request.request_id,)).fetchone()
                 if row is not None:
                     return _status(row), False
-            if seq is None:
-                seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
+            seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
             status = queued_status(job_id_for(seq, now), request, n_views=n_views, now=now)
             db.execute(
-                "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request, checkpoint)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (seq, status.job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
-                 request.model_dump_json()),
+                 request.model_dump_json(), checkpoint),
             )
             self._insert_event(db, queued_event(status))
             return status, True
 
-    def last_seq(self) -> int:
-        """The highest job number so far (0: no job yet)."""
-        return self._read("SELECT COALESCE(MAX(seq), 0) FROM jobs", [], lambda row: int(row[0]))[0]
-
     def sync(self) -> None:
-        """Put every commit so far on disk, as a durable commit does its own: the WAL file
-        synced (a checkpoint syncs the database file before it empties the WAL)."""
+        """Put every commit so far on disk: the journal synced (a checkpoint syncs the database file
+        before it empties the journal). Needs no connection: any thread may call it.
+
+        Raises
+        ------
+        StoreError
+            The journal cannot be synced (the disk failed, say).
+        """
         try:
             wal = os.open(f"{self.path}-wal", os.O_RDONLY)
         except FileNotFoundError:  # checkpointed and removed: the database file has it all
@@ -187,75 +188,67 @@ class JobStore:
         finally:
             os.close(wal)
 
-    def update(self, job_id: str, state: JobState, *, view: int | None = None, error: str | None = None,
-               error_kind: str | None = None, recording: str | None = None, now: float,
-               event: JobEvent | None = None, durable: bool = True) -> JobStatus:
-        """Move a job to ``state``; ``view`` and the error are replaced, ``recording`` kept unless given.
-
-        ``event``, if given, is added to the job's history in the same transaction. Not
-        ``durable``: the commit does not wait for the disk (see the module's text).
-
-        Raises
-        ------
-        KeyError
-            There is no job ``job_id``.
-        ValueError
-            The job is finished (succeeded, failed or cancelled): that is final.
-        """
-        state = JobState(state)
-        with self._write(durable=durable) as db:
-            self._check_open(db, job_id, state)
-            db.execute(
-                "UPDATE jobs SET state = ?, view = ?, error = ?, error_kind = ?, recording = COALESCE(?, recording),"
-                " updated = ? WHERE job_id = ?",
-                (state.value, view, error, error_kind, recording, now, job_id),
-            )
-            if event is not None:
-                self._insert_event(db, event)
-            return self._get(db, job_id)
-
-    def set_recording(self, job_id: str, recording: str) -> None:
-        """Name the job's Rerun recording (not waited for on disk)."""
-        with self._write(durable=False) as db:
-            db.execute("UPDATE jobs SET recording = ? WHERE job_id = ?", (recording, job_id))
-
-    def add_event(self, event: JobEvent, *, durable: bool = True) -> None:
-        """Append a progress event to its job's history (without its ``result``: that is stored once).
+    def change(self, event: JobEvent, *, error_kind: str | None = None, checkpoint: str | None = None,
+               n_views: int | None = None, recording: str | None = None) -> JobStatus:
+        """A change of a job, as its ``event`` says: its state and progress, the event in its
+        history, its result (stored once, not in the history) if the event carries one; all of it or
+        none. A failure's message is the job's ``error``, of kind ``error_kind``. ``checkpoint``
+        (JSON) and ``n_views`` replace the job's when given, ``recording`` names its recording.
 
         Raises
         ------
         KeyError
             There is no job ``event.job_id``.
+        ValueError
+            The job is finished (succeeded, failed or cancelled): that is final.
         """
-        with self._write(durable=durable) as db:
+        job_id, state = event.job_id, JobState(event.state)
+        failed = state is JobState.FAILED
+        result = event.result
+        with self._write() as db:
+            self._check_open(db, job_id, state)
+            if result is not None:
+                db.execute("INSERT INTO results (job_id, result) VALUES (?, ?)", (job_id, result.model_dump_json()))
+                recording = recording or result.recording
+            db.execute(
+                "UPDATE jobs SET state = ?, view = ?, error = ?, error_kind = ?, progress = ?,"
+                " checkpoint = COALESCE(?, checkpoint), n_views = COALESCE(?, n_views),"
+                " recording = COALESCE(?, recording), updated = ? WHERE job_id = ?",
+                (state.value, event.view, event.message if failed else None, error_kind if failed else None,
+                 event.progress.model_dump_json() if event.progress is not None else None, checkpoint, n_views,
+                 recording, event.time, job_id),
+            )
             self._insert_event(db, event)
+            if state.finished:
+                db.execute("DELETE FROM pictures WHERE job_id = ?", (job_id,))
+            return self._get(db, job_id)
 
-    def save_result(self, result: ScanResult, *, now: float, event: JobEvent | None = None,
-                    durable: bool = True) -> JobStatus:
-        """Store the result of job ``result.job_id`` and mark it succeeded, both or neither.
-
-        ``event``, if given, is added to the job's history in the same transaction;
-        ``durable`` as for :meth:`update`.
+    def keep_picture(self, job_id: str, view: int, jpeg: bytes, poses: str) -> None:
+        """Keep the picture of the job's ``view`` (replacing one kept before), with ``poses``
+        (JSON).
 
         Raises
         ------
         KeyError
-            There is no such job.
-        ValueError
-            The job is already finished.
+            There is no job ``job_id``.
         """
-        with self._write(durable=durable) as db:
-            self._check_open(db, result.job_id, JobState.SUCCEEDED)
-            db.execute("INSERT INTO results (job_id, result) VALUES (?, ?)",
-                       (result.job_id, result.model_dump_json()))
-            db.execute(
-                "UPDATE jobs SET state = ?, view = NULL, error = NULL, recording = COALESCE(?, recording),"
-                " updated = ? WHERE job_id = ?",
-                (JobState.SUCCEEDED.value, result.recording, now, result.job_id),
-            )
-            if event is not None:
-                self._insert_event(db, event)
-            return self._get(db, result.job_id)
+        with self._write() as db:
+            if db.execute("SELECT 1 FROM jobs WHERE job_id = ?", (job_id,)).fetchone() is None:
+                raise KeyError(f"no job {job_id!r}")
+            db.execute("INSERT OR REPLACE INTO pictures (job_id, view, jpeg, poses) VALUES (?, ?, ?, ?)",
+                       (job_id, view, jpeg, poses))
+
+    def pictures(self, job_id: str) -> builtins.list[tuple[bytes, str]]:
+        """The pictures kept of the job, (JPEG, poses JSON), in the order of their views 0, 1, ...:
+        as many as there are from view 0 on without a gap."""
+        rows = self._read("SELECT view, jpeg, poses FROM pictures WHERE job_id = ? ORDER BY view", [job_id],
+                          lambda row: row)
+        kept = []
+        for expected, (view, jpeg, poses) in enumerate(rows):
+            if view != expected:
+                break
+            kept.append((bytes(jpeg), poses))
+        return kept
 
     # --- reading ----------------------------------------------------------------------------
 
@@ -268,6 +261,11 @@ class JobStore:
         """The job's result, or None if it has none (yet)."""
         rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id],
                           lambda row: ScanResult.model_validate_json(row[0]))
+        return rows[0] if rows else None
+
+    def checkpoint(self, job_id: str) -> str | None:
+        """The job's checkpoint (JSON, ``cell.job.Checkpoint``), or None if it has none."""
+        rows = self._read("SELECT checkpoint FROM jobs WHERE job_id = ?", [job_id], lambda row: row[0])
         return rows[0] if rows else None
 
     def events(self, job_id: str) -> builtins.list[JobEvent]:
@@ -328,12 +326,10 @@ class JobStore:
             return [convert(row) for row in self._db.execute(sql, params)]
 
     @contextlib.contextmanager
-    def _write(self, *, durable: bool = True) -> Iterator[sqlite3.Connection]:
-        """One write transaction: committed if the block returns, rolled back if it raises; a
-        durable one is on disk when the block's caller goes on."""
+    def _write(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction: committed if the block returns, rolled back if it raises."""
         with self._errors():
             db = self._db
-            db.execute(f"PRAGMA synchronous = {'FULL' if durable else 'NORMAL'}")
             db.execute("BEGIN IMMEDIATE")  # take the write lock now, not half-way through
             try:
                 yield db
@@ -380,10 +376,17 @@ def queued_event(status: JobStatus) -> JobEvent:
 
 
 def _status(row: tuple) -> JobStatus:
-    job_id, state, view, n_views, error, created, updated, recording, request, error_kind = row
-    return JobStatus(job_id=job_id, state=JobState(state), view=view, n_views=n_views, error=error,
-                     error_kind=error_kind, created=created, updated=updated, recording=recording,
-                     request=ScanRequest.model_validate_json(request))
+    job_id, state, view, n_views, error, created, updated, recording, request, error_kind, progress = row
+    state = JobState(state)
+    return JobStatus(job_id=job_id, state=state, lifecycle=lifecycle_of(state), view=view, n_views=n_views,
+                     error=error, error_kind=error_kind, created=created, updated=updated, recording=recording,
+                     request=ScanRequest.model_validate_json(request),
+                     progress=Progress.model_validate_json(progress) if progress else None)
+
+
+def lifecycle_of(state: JobState) -> Lifecycle:
+    """The lifecycle of a job whose schema-1 ``state`` is ``state``."""
+    return Lifecycle.RUNNING if state in ACTIVITIES else Lifecycle(state.value)
 
 
 def _in_states(states: set[JobState] | None) -> tuple[str, builtins.list[str]]:

@@ -13,16 +13,18 @@ import contextlib
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import zenoh
+from rerun.chunk import RrdReader
 
 from wire import keys
 from wire.client import AsyncCellClient
 from wire.errors import MoveRefused, RemoteError
 from wire.messages import JobState, MoveRequest, ScanRequest
-from cell.recording import recording_summary
+from cell.recording import recording_summary, replay_command
 from workers.sim.scene import target_from_config, truth_from_config
 from wire.transport import Transport, session_config
 from core_cy.scoring import volumetric_iou
@@ -129,8 +131,16 @@ def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
     assert summary["/world/points/sphere"] == ["Points3D"]
     assert summary["/world/points/carved"] == ["Points3D"]
     assert summary["/world/fit"] == ["Mesh3D"]
-    assert summary["/world/truth"] == ["Mesh3D"]
+    assert "/world/truth" not in summary  # the daemon does not know the simulator's truth
     assert summary["/log"] == ["TextLog"]
+    # The simulator logs its truth into the same recording itself (Rerun's shared recordings).
+    truth = Path(result.recording).with_suffix(".truth.rrd")
+    wait_for_footer(truth)
+    assert recording_summary(truth)["/world/truth"] == ["Mesh3D"]
+    ids = {(entry.application_id, entry.recording_id)
+           for path in (result.recording, truth) for entry in RrdReader(str(path)).recordings()}
+    assert ids == {("robocell", result.job_id)}
+    assert [str(p) for p in replay_command(Path(result.recording))[1:3]] == [result.recording, str(truth)]
 
 
 def test_plain_zenoh_client_with_only_the_documented_keys(cell):
@@ -188,7 +198,7 @@ async def _ask(router: str, key: str, payload: str | bytes | None = None, parame
     (json.dumps({"target": [0.6, 0.0]}), "target"),
     (json.dumps({"target": [0.6, 0.0, "high"]}), "target.2"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "colour": "red"}), "colour"),
-    (json.dumps({"target": [0.6, 0.0, 0.05], "schema_version": 2}), "schema_version"),
+    (json.dumps({"target": [0.6, 0.0, 0.05], "schema_version": 3}), "schema_version"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "plan": {"standoff": -1}}), "plan.standoff"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "plan": {"azimuths_deg": [0, float("nan"), 240]}}),
      "invalid ScanRequest: plan.azimuths_deg.1: Input should be a finite number"),

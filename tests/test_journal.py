@@ -1,18 +1,15 @@
-"""A job's journal and the recorder process behind it (cell.journal, cell.recorder): what a job
-records reaches its file, in order, and nothing is made before the job's first slow wait."""
+"""The recorder process (cell.recorder): what a job records reaches its file, in order, and a
+recorder process makes a bounded number of recordings."""
 
 from __future__ import annotations
 
-import asyncio
 import multiprocessing
 from pathlib import Path
 
 from rerun.chunk import RrdReader
 
-from cell.journal import Journal
 from cell.recorder import Recorder
-from cell.recording import recording_summary
-from tests.cell_fixtures import wait_for_footer, wait_until
+from tests.cell_fixtures import wait_until
 
 
 def _texts(path: Path) -> list[tuple[float, str]]:
@@ -26,47 +23,11 @@ def _texts(path: Path) -> list[tuple[float, str]]:
     return sorted(rows)
 
 
-def test_a_recording_is_made_at_the_first_hand_over_and_keeps_what_waited(tmp_path):
-    first, second = tmp_path / "j1.rrd", tmp_path / "j2.rrd"
-
-    async def scenario() -> bool:
-        recorder = Recorder(n_points=100, sim=None)
-        recorder.start()
-        try:
-            ticks = iter([0.5, 1.5, 2.5])
-            waiting = Journal(recorder, "j1", first, started=0.0, clock=lambda: next(ticks))
-            waiting.record("log_text", "queued", "INFO")
-            handed = Journal(recorder, "j2", second, started=0.0, clock=lambda: 0.25)
-            handed.hand_over()
-            await asyncio.sleep(0)  # the hand-over reaches the recorder's queue
-            # Once the recorder has made the second, it would have made the first, had that been asked.
-            await asyncio.to_thread(wait_until, lambda: second.exists() and second.stat().st_size > 0,
-                                    timeout=30, interval=0.05, what="the recording handed over")
-            made_early = first.exists()
-            waiting.record("log_text", "moving to view 0", "INFO")
-            waiting.hand_over()
-            waiting.record("log_text", "succeeded", "INFO")
-            waiting.close()
-            waiting.hand_over()
-            handed.close()
-            handed.hand_over()
-            await asyncio.sleep(0)  # the hand-overs reach the recorder's queue
-        finally:
-            await asyncio.to_thread(recorder.stop)
-        return made_early
-
-    made_early = asyncio.run(scenario())
-    assert not made_early, "a recording was made before anything of it was handed over"
-    wait_for_footer(first, timeout=10)
-    assert recording_summary(first)["/log"] == ["TextLog"]
-    assert _texts(first) == [(0.5, "queued"), (1.5, "moving to view 0"), (2.5, "succeeded")]
-
-
 def test_a_new_recorder_process_takes_over_and_the_old_one_ends_with_its_last_recording(tmp_path):
     """Rerun never frees a recording's threads: a recorder process makes a bounded number of
     recordings. One open across the change stays whole in the old process."""
     paths = {job: tmp_path / f"{job}.rrd" for job in ("j1", "j2", "j3", "j4", "j5")}
-    recorder = Recorder(n_points=100, sim=None, recordings_per_process=2)
+    recorder = Recorder(n_points=100, recordings_per_process=2)
     recorder.start()
     try:
         for job in ("j1", "j2", "j3"):  # j3 is the first of a second process; j1 and j2 stay in the first

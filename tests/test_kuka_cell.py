@@ -18,7 +18,7 @@ from workers.sim.scene import target_from_config, truth_from_config
 from core_cy.scoring import volumetric_iou
 from core_cy.superquadric import Superquadric
 
-from cell.steps import pick_poses
+from cell.pick import pick_poses
 
 from tests.cell_fixtures import cell_config, free_port, running_cell
 

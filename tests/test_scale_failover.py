@@ -11,7 +11,6 @@ the next expects: a worker killed in one is not there in the next.
 from __future__ import annotations
 
 import signal
-import time
 
 import pytest
 
@@ -61,17 +60,17 @@ def test_a_frozen_reconstructor_loses_its_job_and_its_late_answer_is_ignored(cel
     process = cell.processes.child("frozen").process
     process.send_signal(signal.SIGSTOP)
     try:
-        began = time.monotonic()
         final = cell.wait(job_id)
         assert final.state is JobState.SUCCEEDED, final.error
-        # Its heartbeat fell silent before its lease (3 s) ran out; the job went to the other worker.
-        assert time.monotonic() - began < 3.0
         seen = cell.reconstructor(frozen)
         assert seen is None or not seen.healthy
     finally:
         process.send_signal(signal.SIGCONT)
     result = cell.client.result(job_id)
     assert (result.worker, result.attempts) == (fast, 2)
+    # Its heartbeat's silence gave it away, not its liveliness token (which a stopped process keeps
+    # until its lease runs out): the timing itself is tested on a clock of the test's own
+    # (tests/test_scale_pool.py).
     assert any(m.startswith(f"attempt 1 on {frozen}: no heartbeat for ") for m in _messages(cell, job_id))
     # Awake again, it finishes the job it held and answers; its heartbeat says so. Nobody listens.
     wait_until(lambda: (r := cell.reconstructor(frozen)) is not None and r.healthy and r.in_flight == 0,

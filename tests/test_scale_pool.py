@@ -1,10 +1,12 @@
-"""The reconstruction pool's decisions, over real Zenoh on loopback, in one process.
+"""The reconstruction pool's decisions, in one process, on an in-memory network and a clock of the
+test's own (``wire.fake_transport``, ``tests.virtual_time``): time-outs and heartbeats are timed
+exactly, whatever the machine's load.
 
-A router session, reconstruction workers (``workers.reconstruct.ReconstructWorker``,
-each its own session, their work a coroutine the test holds or lets go) and
-one or two pools (``cell.pool.ReconstructorPool``, as two cell daemons use
-them). What the workers do is beside the point here, so their answers are
-empty replies; the cell tests run the real core.
+Reconstruction workers (``workers.reconstruct.ReconstructWorker``, each its own session, their work
+a coroutine the test holds or lets go) and one or two pools (``cell.pool.ReconstructorPool``, as two
+cell daemons use them). What the workers do is beside the point here, so their answers are empty
+replies; the cell tests run the real core. What only a real router shows (a hung worker's token
+lives on in Zenoh's threads) is tested over real Zenoh on loopback, at the end.
 """
 
 from __future__ import annotations
@@ -19,10 +21,12 @@ import pytest
 from wire import keys
 from wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad
 from cell.pool import AttemptFailed, NoReconstructor, ReconstructorPool
-from wire.transport import Transport
+from wire.fake_transport import MemoryNetwork
+from wire.transport import BaseTransport, Transport
 from workers.reconstruct.worker import ReconstructWorker
 
 from tests.cell_fixtures import LoopThread, free_port
+from tests.virtual_time import run_virtual
 
 HEARTBEAT_S = 1.0
 LIMIT_S = 30.0      # no test may take longer: a hang fails instead
@@ -39,11 +43,11 @@ class Worker:
         self.answered: list[str] = []
         self.gate = asyncio.Semaphore(0)
         self.held = False
-        self.transport: Transport | None = None
+        self.transport: BaseTransport | None = None
         self.worker: ReconstructWorker | None = None
 
-    async def start(self, endpoint: str) -> "Worker":
-        self.transport = await Transport.open(endpoint, connect_timeout_s=10.0)
+    async def start(self, network: MemoryNetwork) -> "Worker":
+        self.transport = network.session()
         self.worker = ReconstructWorker(self.transport, self.worker_id, self.capacity, self.run)
         await self.worker.start()
         return self
@@ -84,24 +88,22 @@ def _attachment(ticket: str) -> str:
 
 
 class Net:
-    """A router, and pools on sessions of their own (one per "cell")."""
+    """An in-memory router, and pools on sessions of their own (one per "cell")."""
 
-    def __init__(self, endpoint: str) -> None:
-        self.endpoint = endpoint
+    def __init__(self) -> None:
+        self.network = MemoryNetwork()
         self.pools: list[ReconstructorPool] = []
-        self._transports: list[Transport] = []
         self._workers: list[Worker] = []
 
     async def pool(self, heartbeat_s: float = HEARTBEAT_S) -> ReconstructorPool:
-        transport = await Transport.open(self.endpoint, connect_timeout_s=10.0)
-        self._transports.append(transport)
-        pool = ReconstructorPool(transport, heartbeat_s=heartbeat_s)
+        pool = ReconstructorPool(self.network.session(), heartbeat_s=heartbeat_s,
+                                 clock=asyncio.get_running_loop().time)
         pool.start()
         self.pools.append(pool)
         return pool
 
     async def worker(self, *args, **kwargs) -> Worker:
-        worker = await Worker(*args, **kwargs).start(self.endpoint)
+        worker = await Worker(*args, **kwargs).start(self.network)
         self._workers.append(worker)
         return worker
 
@@ -111,32 +113,29 @@ class Net:
             await worker.close()
         for pool in self.pools:
             await pool.close()
-        for transport in self._transports:
-            await transport.close()
 
 
 @contextlib.asynccontextmanager
 async def network():
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = await Transport.open(endpoint, mode="router")
-    net = Net(endpoint)
+    net = Net()
     try:
         yield net
     finally:
-        try:
-            await net.close()
-        finally:
-            await router.close()
+        await net.close()
 
 
 def run(coroutine):
-    asyncio.run(asyncio.wait_for(coroutine, LIMIT_S))
+    run_virtual(coroutine, limit_s=LIMIT_S)
+
+
+def now() -> float:
+    return asyncio.get_running_loop().time()
 
 
 async def until(predicate, what: str, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
+    deadline = now() + timeout
     while not predicate():
-        if time.monotonic() > deadline:
+        if now() > deadline:
             raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
         await asyncio.sleep(0.01)
 
@@ -219,60 +218,47 @@ def test_a_worker_that_leaves_fails_its_attempt_at_once():
             await sees(pool, leaving)
             attempt = send(pool, "t1")
             await until(lambda: leaving.tickets, "the request at the worker")
-            began = time.monotonic()
+            began = now()
             await leaving.close()  # its session, and so its liveliness token, goes
             with pytest.raises(AttemptFailed) as failed:
                 await attempt
             assert failed.value.worker == "leaving"
             assert "gone" in failed.value.reason or "nobody answers" in failed.value.reason
-            assert time.monotonic() - began < HEARTBEAT_S
+            assert now() - began < HEARTBEAT_S  # at once: its heartbeat's silence is not waited for
             assert pool.snapshot() == []
 
     run(check())
 
 
 def test_a_worker_whose_loop_hangs_is_passed_over_and_its_late_answer_ignored():
-    """Its Zenoh session (and liveliness) lives on in Zenoh's threads; only the heartbeat stops."""
+    """Its token stays (see the real-router test below); only its heartbeat stops."""
     async def check():
         async with network() as net:
             pool = await net.pool()
-            hung_loop = LoopThread()
-            unblock = threading.Event()
-            try:
-                async def block(request_json: str, payload: bytes) -> tuple[str, bytes]:
-                    request = ReconstructRequest.model_validate_json(request_json)
-                    unblock.wait(LIMIT_S)     # blocks the worker's whole event loop
-                    return ReconstructReply(job_id=request.job_id, worker="hung", ticket=request.ticket,
-                                            error=STAND_IN).model_dump_json(), b""
-
-                transport = hung_loop.run(Transport.open(net.endpoint, connect_timeout_s=10.0))
-                worker = ReconstructWorker(transport, "hung", 1, block)
-                hung_loop.run(worker.start())
-                healthy = await net.worker("healthy")
-                healthy.hold()
-                await until(lambda: len(pool.snapshot()) == 2 and all(r.heartbeat_age_s is not None
-                                                                      for r in pool.snapshot()), "both workers")
-                attempt = send(pool, "t1", avoid={"healthy"})
-                began = time.monotonic()
-                with pytest.raises(AttemptFailed) as failed:
-                    await attempt
-                waited = time.monotonic() - began
-                assert failed.value.worker == "hung" and failed.value.reason.startswith("no heartbeat for")
-                assert waited < HEARTBEAT_S + 1.5   # silent since its last heartbeat, a little before
-                assert {r.worker: r.healthy for r in pool.snapshot()} == {"hung": False, "healthy": True}
-                retry = send(pool, "t2", avoid={"hung"})
-                await until(lambda: healthy.tickets, "the retry at the healthy worker")
-                unblock.set()                      # the hung worker wakes and answers t1: nobody listens
-                await until(lambda: {r.worker: r.healthy for r in pool.snapshot()}.get("hung"),
-                            "the woken worker's heartbeat")
-                healthy.release()
-                assert (await retry)[0] == "healthy"
-            finally:
-                unblock.set()
-                with contextlib.suppress(Exception):
-                    hung_loop.run(worker.close(), timeout=10)
-                    hung_loop.run(transport.close(), timeout=10)
-                hung_loop.close()
+            hung, healthy = await net.worker("hung"), await net.worker("healthy")
+            hung.hold()
+            healthy.hold()
+            await sees(pool, hung, healthy)
+            attempt = send(pool, "t1", avoid={"healthy"})
+            await until(lambda: hung.tickets, "the request at the worker to hang")
+            net.network.freeze(hung.transport)
+            began = now()
+            with pytest.raises(AttemptFailed) as failed:
+                await attempt
+            waited = now() - began
+            assert failed.value.worker == "hung" and failed.value.reason.startswith("no heartbeat for")
+            # Silent since its last heartbeat, which came at most a period before it hung.
+            assert HEARTBEAT_S - keys.HEARTBEAT_PERIOD_S <= waited <= HEARTBEAT_S + 0.25 + 0.01
+            assert {r.worker: r.healthy for r in pool.snapshot()} == {"hung": False, "healthy": True}
+            retry = send(pool, "t2", avoid={"hung"})
+            await until(lambda: healthy.tickets, "the retry at the healthy worker")
+            hung.release()
+            net.network.thaw(hung.transport)   # it wakes and answers t1: nobody listens
+            await until(lambda: hung.answered == ["t1"], "the woken worker's late answer")
+            await until(lambda: {r.worker: r.healthy for r in pool.snapshot()}.get("hung"),
+                        "the woken worker's heartbeat")
+            healthy.release()
+            assert (await retry)[0] == "healthy"
 
     run(check())
 
@@ -294,10 +280,10 @@ def test_without_workers_a_caller_waits_then_gives_up_and_a_newcomer_takes_waiti
     async def check():
         async with network() as net:
             pool = await net.pool()
-            began = time.monotonic()
+            began = now()
             with pytest.raises(NoReconstructor, match=r"no reconstruction worker is running \(waited 0.5 s\)"):
                 await send(pool, "t1", wait_s=0.5)
-            assert 0.5 <= time.monotonic() - began < 1.5
+            assert now() - began == pytest.approx(0.5)
             waiting = send(pool, "t2", wait_s=10.0)
             await asyncio.sleep(0.2)
             newcomer = await net.worker("newcomer")
@@ -312,7 +298,7 @@ def test_the_heartbeat_carries_capacity_load_and_tickets():
         async with network() as net:
             worker = await net.worker("w", 2)
             worker.hold()
-            listener = await Transport.open(net.endpoint)
+            listener = net.network.session()
             try:
                 beats = listener.subscribe(keys.reconstructor_heartbeat("w"))
                 pool = await net.pool()
@@ -351,10 +337,109 @@ def test_callers_waiting_for_a_slot_give_up_when_every_worker_is_gone():
             await only.close()
             with pytest.raises(AttemptFailed):
                 await first
-            began = time.monotonic()
+            began = now()
             with pytest.raises(NoReconstructor, match=r"no reconstruction worker is running \(waited 0.5 s\)"):
                 await second
-            assert 0.4 <= time.monotonic() - began < 1.5
+            assert now() - began == pytest.approx(0.5)
             assert pool.waiting == 0
 
     run(check())
+
+
+class RealNet:
+    """A Zenoh router on loopback, and pools and stand-in workers on sessions of their own."""
+
+    def __init__(self, endpoint: str) -> None:
+        self.endpoint = endpoint
+        self._transports: list[Transport] = []
+        self._workers: list[ReconstructWorker] = []
+        self._gates: list[Worker] = []
+
+    async def pool(self) -> ReconstructorPool:
+        transport = await Transport.open(self.endpoint, connect_timeout_s=10.0)
+        self._transports.append(transport)
+        pool = ReconstructorPool(transport, heartbeat_s=HEARTBEAT_S)
+        pool.start()
+        return pool
+
+    async def worker(self, worker_id: str) -> Worker:
+        worker = Worker(worker_id)
+        worker.transport = transport = await Transport.open(self.endpoint, connect_timeout_s=10.0)
+        self._transports.append(transport)
+        worker.worker = ReconstructWorker(transport, worker_id, 1, worker.run)
+        await worker.worker.start()
+        self._gates.append(worker)
+        return worker
+
+    async def close(self) -> None:
+        for gate in self._gates:
+            gate.release()
+            await gate.worker.close()
+        for transport in reversed(self._transports):
+            await transport.close()
+
+
+@contextlib.asynccontextmanager
+async def real_network():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = await Transport.open(endpoint, mode="router")
+    net = RealNet(endpoint)
+    try:
+        yield net
+    finally:
+        try:
+            await net.close()
+        finally:
+            await router.close()
+
+
+async def until_real(predicate, what: str, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        await asyncio.sleep(0.01)
+
+
+def test_over_a_real_router_a_hung_worker_keeps_its_token_and_is_passed_over_for_its_silence():
+    """Its Zenoh session (and liveliness) lives on in Zenoh's threads; only the heartbeat stops."""
+    async def check():
+        async with real_network() as net:
+            pool = await net.pool()
+            hung_loop = LoopThread()
+            unblock = threading.Event()
+            try:
+                async def block(request_json: str, payload: bytes) -> tuple[str, bytes]:
+                    request = ReconstructRequest.model_validate_json(request_json)
+                    unblock.wait(LIMIT_S)     # blocks the worker's whole event loop
+                    return ReconstructReply(job_id=request.job_id, worker="hung", ticket=request.ticket,
+                                            error=STAND_IN).model_dump_json(), b""
+
+                transport = hung_loop.run(Transport.open(net.endpoint, connect_timeout_s=10.0))
+                worker = ReconstructWorker(transport, "hung", 1, block)
+                hung_loop.run(worker.start())
+                healthy = await net.worker("healthy")
+                healthy.hold()
+                await until_real(lambda: len(pool.snapshot()) == 2 and all(r.heartbeat_age_s is not None
+                                                                      for r in pool.snapshot()), "both workers")
+                attempt = send(pool, "t1", avoid={"healthy"})
+                with pytest.raises(AttemptFailed) as failed:
+                    await attempt
+                assert failed.value.worker == "hung" and failed.value.reason.startswith("no heartbeat for")
+                assert [r.worker for r in pool.snapshot()] == ["healthy", "hung"]  # its token lives on
+                assert {r.worker: r.healthy for r in pool.snapshot()} == {"hung": False, "healthy": True}
+                retry = send(pool, "t2", avoid={"hung"})
+                await until_real(lambda: healthy.tickets, "the retry at the healthy worker")
+                unblock.set()                      # the hung worker wakes and answers t1: nobody listens
+                await until_real(lambda: {r.worker: r.healthy for r in pool.snapshot()}.get("hung"),
+                            "the woken worker's heartbeat")
+                healthy.release()
+                assert (await retry)[0] == "healthy"
+            finally:
+                unblock.set()
+                with contextlib.suppress(Exception):
+                    hung_loop.run(worker.close(), timeout=10)
+                    hung_loop.run(transport.close(), timeout=10)
+                hung_loop.close()
+
+    asyncio.run(asyncio.wait_for(check(), LIMIT_S))

@@ -7,12 +7,17 @@ camera over VAPIX, or the simulated one that ``robocell sim camera`` serves) or
 ``sim`` (the camera worker renders the ``[sim]`` scene itself, from the robot's
 pose). A tag left out takes the first choice, so a file written before the
 unions existed reads as it did. A new backend adds its model here and to its
-union; the shared configuration (``wire.config``) never imports a worker.
+union, and names the function that makes it in :data:`BACKENDS`; the shared
+configuration (``wire.config``) never imports a worker, and a worker imports a
+backend (a simulator, say) only when the configuration names it
+(:func:`load_backend`).
 """
 
 from __future__ import annotations
 
+import importlib
 import os
+from collections.abc import Callable
 from typing import Annotated, Any, Literal, Union
 from urllib.parse import urlsplit
 
@@ -24,8 +29,33 @@ from .messages import Point, Pose
 
 __all__ = [
     "Section", "Workspace", "SimRobotConfig", "KukaKvpConfig", "KukaOpcConfig", "KukaRobotConfig", "RobotConfig",
-    "AxisCameraConfig", "SimCameraConfig", "CameraConfig", "SIM_OPC_SERVER",
+    "AxisCameraConfig", "SimCameraConfig", "CameraConfig", "SIM_OPC_SERVER", "BACKENDS", "load_backend",
 ]
+
+#: What makes each backend, by part and name: ``module:function``, the function taking the cell's
+#: configuration (and, for a camera, the worker's transport). Imported only when named.
+BACKENDS: dict[tuple[str, str], str] = {
+    ("robot", "sim"): "workers.sim.backends:make_robot",
+    ("robot", "kuka"): "workers.robot.kuka.factory:make_robot",
+    ("camera", "sim"): "workers.sim.backends:make_camera",
+    ("camera", "axis"): "workers.camera.axis_factory:make_camera",
+}
+
+
+def load_backend(part: str, name: str) -> Callable[..., Any]:
+    """The function that makes ``part``'s backend ``name`` (see :data:`BACKENDS`), imported now.
+
+    Raises
+    ------
+    ConfigError
+        If there is no such backend.
+    """
+    where = BACKENDS.get((part, name))
+    if where is None:
+        known = ", ".join(n for p, n in BACKENDS if p == part)
+        raise ConfigError(f"[{part}] backend = {name!r}: no such backend (known: {known})")
+    module, _, function = where.partition(":")
+    return getattr(importlib.import_module(module), function)
 
 #: The OPC server name the simulated gateway answers to.
 SIM_OPC_SERVER = "robocell.KukaSim"

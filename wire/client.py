@@ -1,6 +1,6 @@
 """Clients of a cell: :class:`AsyncCellClient` for asyncio programs, :class:`CellClient` for scripts.
 
-Both speak only the documented Zenoh keys (``cell/keys.py``); a program in any
+Both speak only the documented Zenoh keys (``wire/keys.py``); a program in any
 language can do the same. From a script::
 
     with CellClient("tcp/127.0.0.1:7447", "cell1") as client:

@@ -53,6 +53,9 @@ __all__ = [
     "HEARTBEAT_CHANGE_GAP_S",
 ]
 
+#: The Rerun application id of every job's recording; its recording id is the job's id, so that
+#: what several processes log of one job is one recording (Rerun's shared recordings).
+RECORDING_APPLICATION_ID = "robocell"
 ROOT = "robocell"
 POOL = f"{ROOT}/_pool"
 #: What a cell id must match: one key chunk, never starting with "_" (the pool's keys do).

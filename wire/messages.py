@@ -15,10 +15,11 @@ from typing import Annotated, Any, Literal, TypeVar
 
 from core_cy.rigid import rigid_error
 from pydantic import (AfterValidator, BeforeValidator, BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt,
-                      StrictStr, ValidationError, model_validator)
+                      StrictStr, ValidationError, field_validator, model_validator)
 
 __all__ = [
-    "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState",
+    "SCHEMA_VERSION", "Message", "Pose", "Point", "ViewPlan", "ScanRequest", "JobState", "Lifecycle", "Progress", "ACTIVITIES",
+    "wire_state", "NextViewCandidate", "NextViewQuery", "NextViewAnswer",
     "JobStatus", "JobEvent", "Superquadric", "Grasp", "PickRequest", "PickOutcome", "ScanResult", "ErrorReply",
     "MoveRequest", "MoveReply",
     "RobotState", "GripRequest", "GripReply", "CaptureRequest", "CaptureInfo", "CameraModel", "ReconstructView",
@@ -28,7 +29,9 @@ __all__ = [
     "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES", "DiskUsage",
 ]
 
-SCHEMA_VERSION: Literal[1] = 1
+#: The version this robocell writes. Version 2 added a job's ``lifecycle`` and ``progress`` (see
+#: README, "Job states"); a message of version 1 is read as before.
+SCHEMA_VERSION: Literal[2] = 2
 #: The most views a scan may ask for, as poses or as a plan.
 MAX_VIEWS = 16
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
@@ -55,7 +58,7 @@ Point = Annotated[list[StrictFloat], Field(min_length=3, max_length=3), AfterVal
 
 def _integer(value: Any) -> Any:
     if type(value) is not int:  # JSON's true and 1.0 would pass as 1
-        raise ValueError(f"must be the integer {SCHEMA_VERSION}, got {value!r}")
+        raise ValueError(f"must be the integer 1 or {SCHEMA_VERSION}, got {value!r}")
     return value
 
 
@@ -64,7 +67,7 @@ class Message(BaseModel):
     ``1.0`` is not a version)."""
 
     model_config = ConfigDict(extra="forbid")
-    schema_version: Annotated[Literal[1], BeforeValidator(_integer)] = SCHEMA_VERSION
+    schema_version: Annotated[Literal[1, 2], BeforeValidator(_integer)] = SCHEMA_VERSION
 
 
 def field_errors(exc: ValidationError, *, whole: str = "message", at_most: int = 10) -> str:
@@ -188,6 +191,10 @@ class ScanRequest(Message):
     #: How the reconstruction finds the object, as scan.json's ``segmentation``; None: the cell's
     #: ``[scan]`` configuration, whose default is ``auto``.
     segmentation: dict | None = None
+    #: ``"adaptive"``: after the planned views, one more view at a time where the model is least
+    #: sure, until it is sure or it has ``max_views`` views (needs ``target``: the views look at it).
+    views: Literal["planned", "adaptive"] = "planned"
+    max_views: Annotated[StrictInt, Field(ge=2, le=MAX_VIEWS)] = 6
 
     @model_validator(mode="after")
     def _one_kind_of_views(self) -> "ScanRequest":
@@ -199,6 +206,8 @@ class ScanRequest(Message):
             raise ValueError("give exactly one of flange_poses and target")
         if self.plan is not None and self.target is None:
             raise ValueError("plan goes with target")
+        if self.views == "adaptive" and self.target is None:
+            raise ValueError("views: adaptive goes with target (the next views look at it)")
         return self
 
 
@@ -222,9 +231,57 @@ class JobState(str, enum.Enum):
         return self in (JobState.SUCCEEDED, JobState.FAILED, JobState.CANCELLED)
 
 
+class Lifecycle(str, enum.Enum):
+    """Where a job is in its life (``cell/job.py`` has the legal moves); what it is doing while
+    it runs is its :class:`Progress`."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    CANCELLING = "cancelling"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+    @property
+    def finished(self) -> bool:
+        return self in (Lifecycle.SUCCEEDED, Lifecycle.FAILED, Lifecycle.CANCELLED)
+
+
+#: What a running job may be doing, as the ``state`` clients of schema version 1 read.
+ACTIVITIES = (JobState.MOVING, JobState.CAPTURING, JobState.RECONSTRUCTING, JobState.PICKING)
+
+
+class Progress(BaseModel):
+    """What a job is doing: the step of its plan it runs, and what that step does now."""
+
+    model_config = ConfigDict(extra="forbid")
+    activity: JobState                      # moving, capturing, reconstructing or picking
+    doing: str                              # "moving to view 2", "approaching"
+    view: int | None = None                 # the view being moved to or captured, from 0
+    step: Annotated[int, Field(ge=0)]       # the step's place in the plan, from 0
+    steps: Annotated[int, Field(ge=1)]      # the steps of the plan so far (it may grow)
+
+    @field_validator("activity")
+    @classmethod
+    def _an_activity(cls, value: JobState) -> JobState:
+        if value not in ACTIVITIES:
+            raise ValueError(f"must be one of {', '.join(a.value for a in ACTIVITIES)}, got {value.value}")
+        return value
+
+
+def wire_state(lifecycle: Lifecycle, progress: Progress | None) -> JobState:
+    """The ``state`` of schema version 1: the lifecycle, or while running the activity."""
+    if lifecycle is Lifecycle.RUNNING:
+        return progress.activity if progress is not None else JobState.MOVING
+    return JobState(lifecycle.value)
+
+
 class JobStatus(Message):
     job_id: str
+    #: Kept for clients of schema version 1: ``lifecycle``, or while it runs ``progress.activity``.
     state: JobState
+    lifecycle: Lifecycle = Lifecycle.QUEUED
+    progress: Progress | None = None
     view: int | None = None          # the view being moved to or captured, from 0
     n_views: int
     error: str | None = None         # why it failed: "<step>: <reason>"
@@ -293,14 +350,19 @@ class ScanResult(Message):
     durations_s: dict[str, float] = {}
     recording: str | None = None             # the job's Rerun .rrd; None: see recording_error
     recording_error: str | None = None       # why the job has no recording, if it has none
-    #: The reconstruction worker that made this result, and on which attempt (see ``cell/keys.py``).
+    #: The reconstruction worker that made this result, and on which attempt (see ``wire/keys.py``).
     worker: str | None = None
     attempts: Annotated[int, Field(ge=1)] = 1
+    #: An adaptive scan's last word on how unsure its model is (``core_cy.next_view``); None otherwise.
+    uncertainty: float | None = None
 
 
 class JobEvent(Message):
     job_id: str
+    #: As in :class:`JobStatus`: ``lifecycle``, or while it runs ``progress.activity``.
     state: JobState
+    lifecycle: Lifecycle = Lifecycle.QUEUED
+    progress: Progress | None = None
     view: int | None = None
     message: str
     time: float
@@ -425,9 +487,37 @@ class ReconstructRequest(Message):
     #: The gripper to plan grasps for (DESIGN.md §3's GRIPPER.json), and how many; None: no grasps.
     gripper: dict[str, float] | None = None
     max_grasps: Annotated[int, Field(ge=1, le=50)] = 10
+    #: Asks for the best next view among candidates, in the result's ``next_view``.
+    next_view: NextViewQuery | None = None
     #: This attempt's id, ``<cell>/<job_id>/<attempt>``: unique on the network, listed in the
     #: worker's heartbeat while it works on it, and echoed in its reply.
     ticket: Annotated[str, Field(max_length=300)] | None = None
+
+
+class NextViewCandidate(BaseModel):
+    """A pose the camera could take next (reachable, inside the workspace), and its camera."""
+
+    model_config = ConfigDict(extra="forbid")
+    K: Annotated[list[Annotated[list[float], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)]
+    T_world_cam: Pose
+
+
+class NextViewQuery(BaseModel):
+    """Asks the reconstruction for the best next view among ``candidates``."""
+
+    model_config = ConfigDict(extra="forbid")
+    candidates: Annotated[list[NextViewCandidate], Field(min_length=1, max_length=64)]
+
+
+class NextViewAnswer(BaseModel):
+    """The next view the model would gain most from (``core_cy.next_view.NextView``)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    candidate: int | None                   # the index among the query's candidates; None: none helps
+    T_world_cam: Pose
+    expected_gain: float
+    uncertainty: float
+    sure: bool                              # the model is sure: no view needed
 
 
 class Reconstruction(BaseModel):
@@ -443,6 +533,7 @@ class Reconstruction(BaseModel):
     grasps: list[Grasp] = []                # of the request's gripper, best first
     #: The model as parts (DESIGN.md §1.11), the object their union; empty from an older worker.
     parts: Annotated[list[Superquadric], Field(max_length=6)] = []
+    next_view: NextViewAnswer | None = None  # when the request asked for one
 
 
 class ReconstructReply(Message):

@@ -1,5 +1,9 @@
 """An asyncio face for one Zenoh session: queries, queryables, publications, liveliness.
 
+:class:`BaseTransport` is what the daemon, the pool and the workers use (after httpx's
+``AsyncBaseTransport``); :class:`Transport` is Zenoh's, and ``wire.fake_transport`` an
+in-memory one for tests (after httpx's ``MockTransport``).
+
 Zenoh calls back on its own threads; everything here hands those calls over
 to the event loop (``call_soon_threadsafe``), so the rest of robocell is plain
 asyncio. Zenoh errors are translated into ``wire.errors.TransportError`` here
@@ -9,6 +13,7 @@ its kind, and the querier raises the same class (``wire.errors.from_reply``).
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import json
 import re
@@ -22,7 +27,8 @@ import zenoh
 from .errors import CellError, LinkDown, NoResponder, TransportError, TransportTimeout, from_reply, wire_kind
 from .messages import ErrorReply
 
-__all__ = ["Transport", "Request", "Response", "RequestError", "Reply", "session_config"]
+__all__ = ["BaseTransport", "Transport", "Request", "Response", "RequestError", "Reply", "Subscription",
+           "session_config", "error_reply", "remote_error"]
 
 log = logging.getLogger(__name__)
 JSON = "application/json"
@@ -141,7 +147,76 @@ class Subscription:
         self._undeclare = lambda: None
 
 
-class Transport:
+class BaseTransport(abc.ABC):
+    """Queries, queryables, publications and liveliness, used from one asyncio event loop.
+
+    The link to the router: :attr:`link_up`, :meth:`wait_link`, :attr:`link_losses` (how many
+    times it went down so far). A query whose link drops before its answer raises
+    :class:`~wire.errors.LinkDown`. A handler's error goes back as an ``ErrorReply`` with its
+    kind (:func:`error_reply`), and the querier raises the same class (:func:`remote_error`).
+    """
+
+    endpoint: str
+    link_losses: int
+
+    @property
+    @abc.abstractmethod
+    def link_up(self) -> bool:
+        """Whether the link to the router is up."""
+
+    @abc.abstractmethod
+    async def wait_link(self, timeout: float) -> None:
+        """Return once the link is up; ``LinkDown`` if it is not within ``timeout`` seconds."""
+
+    @abc.abstractmethod
+    async def close(self) -> None:
+        """Withdraw everything declared, and end the session."""
+
+    async def __aenter__(self) -> "BaseTransport":
+        return self
+
+    async def __aexit__(self, *exc_info) -> None:
+        await self.close()
+
+    @abc.abstractmethod
+    async def query(self, key: str, payload: bytes | str | None = None, *, timeout: float,
+                    attachment: bytes | str | None = None, encoding: str = JSON,
+                    parameters: str = "") -> Reply:
+        """The first successful reply; ``LinkDown``, ``NoResponder``, ``TransportTimeout``, or the
+        responder's own error (see :class:`Transport`)."""
+
+    @abc.abstractmethod
+    def start_query(self, key: str, payload: bytes | str | None = None, *, timeout: float,
+                    attachment: bytes | str | None = None, encoding: str = JSON) -> asyncio.Future[Reply]:
+        """:meth:`query`, sent before this returns: the future of its reply."""
+
+    @abc.abstractmethod
+    def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
+        """Answer queries on ``key`` (none with wildcards) with ``handler``, on the event loop."""
+
+    @abc.abstractmethod
+    def put(self, key: str, payload: bytes | str, *, encoding: str = JSON,
+            attachment: bytes | str | None = None) -> None:
+        """Publish ``payload`` on ``key``."""
+
+    @abc.abstractmethod
+    def subscribe(self, key: str) -> Subscription:
+        """Publications on ``key`` as :class:`Reply` objects."""
+
+    @abc.abstractmethod
+    def declare_token(self, key: str) -> Any:
+        """Announce this process under ``key`` (the token's ``undeclare()`` withdraws it)."""
+
+    @abc.abstractmethod
+    def watch_liveliness(self, key_expr: str) -> Subscription:
+        """``(key, alive)`` for every token matching ``key_expr``: those that exist now, then changes."""
+
+    @abc.abstractmethod
+    async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
+        """Keys of the liveliness tokens matching ``key_expr`` now."""
+
+
+class Transport(BaseTransport):
     """One Zenoh session, used from one asyncio event loop.
 
     A client session follows its link to the router: :attr:`link_up`, :meth:`wait_link`, and
@@ -350,7 +425,7 @@ class Transport:
         error = replies[0][1]
         if error.payload == _ZENOH_TIMEOUT:
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s")
-        raise _remote_error(error.payload)
+        raise remote_error(error.payload)
 
     def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
         """Answer queries on ``key`` with ``handler``, on the event loop, concurrently.
@@ -384,14 +459,8 @@ class Transport:
         try:
             try:
                 response = await handler(request)
-            except RequestError as exc:
-                error = ErrorReply(error=str(exc))
-            except CellError as exc:
-                kind, details = wire_kind(exc)
-                error = ErrorReply(error=str(exc), kind=kind, details=details)
             except Exception as exc:
-                log.exception("handler for %s failed", request.key)
-                error = ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}", kind="InternalError")
+                error = error_reply(request, exc)
             else:
                 kwargs: dict[str, Any] = {"encoding": zenoh.Encoding(response.encoding)}
                 if response.attachment is not None:
@@ -487,7 +556,19 @@ def _settle(done: asyncio.Future[None]) -> None:
         done.set_result(None)
 
 
-def _remote_error(payload: bytes) -> CellError:
+def error_reply(request: Request, exc: Exception) -> ErrorReply:
+    """What a handler's error says to the querier: a ``RequestError``'s message, a ``CellError``'s
+    message, kind and details; anything else is an internal error, and is logged."""
+    if isinstance(exc, RequestError):
+        return ErrorReply(error=str(exc))
+    if isinstance(exc, CellError):
+        kind, details = wire_kind(exc)
+        return ErrorReply(error=str(exc), kind=kind, details=details)
+    log.error("handler for %s failed", request.key, exc_info=exc)
+    return ErrorReply(error=f"internal error: {type(exc).__name__}: {exc}", kind="InternalError")
+
+
+def remote_error(payload: bytes) -> CellError:
     try:
         reply = ErrorReply.model_validate_json(payload)
     except ValueError:

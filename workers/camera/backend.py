@@ -4,7 +4,7 @@ gives a :class:`Snapshot`, the picture with its real size and encoding.
 The Axis camera (``workers.camera.axis``) and the simulated camera
 (``workers.sim.camera``) implement it, so the worker cannot tell which one it
 drives. A new camera is a new backend beside them, with its configuration model
-in ``wire.backends``, and a line in :func:`workers.camera.worker.make_camera`.
+in ``wire.backends``, and a line in its ``BACKENDS``.
 """
 
 from __future__ import annotations

@@ -11,53 +11,32 @@ import asyncio
 import logging
 import time
 
-import numpy as np
-
 from wire import keys
-from wire.backends import AxisCameraConfig
+from wire.backends import load_backend
 from wire.config import CellConfig
-from wire.errors import TransportError
-from wire.messages import CaptureInfo, RobotState, parse
+from wire.messages import CaptureInfo
 from wire.process import open_transport, run_until_stopped
-from wire.transport import Request, Response, Transport
+from wire.transport import BaseTransport, Request, Response
 
 from .backend import Camera
 
 __all__ = ["make_camera", "serve_camera", "main"]
 
 log = logging.getLogger(__name__)
-_ROBOT_STATE_TIMEOUT_S = 2.0
 
 
-def make_camera(config: CellConfig, transport: Transport) -> Camera:
-    """The camera of the ``[camera]`` section, not yet opened.
+def make_camera(config: CellConfig, transport: BaseTransport) -> Camera:
+    """The camera the ``[camera]`` section names (``wire.backends.BACKENDS``), not yet opened.
 
     Raises
     ------
     ConfigError
         If a setting cannot be used (a CA bundle that cannot be read, a user without a password).
     """
-    camera = config.camera
-    if isinstance(camera, AxisCameraConfig):
-        from .axis import AxisCamera
-
-        return AxisCamera.from_config(camera)
-    from workers.sim.camera import SceneCamera, SimCamera
-    from workers.sim.scene import scene_from_config
-
-    async def pose() -> np.ndarray | None:
-        try:
-            reply = await transport.query(keys.robot_state(config.cell_id), timeout=_ROBOT_STATE_TIMEOUT_S)
-        except TransportError:
-            return None
-        return np.asarray(parse(RobotState, reply.payload).T_base_flange) @ config.hand_eye
-
-    scene = SceneCamera(scene_from_config(config.sim), K=camera.K, image_size=camera.resolution, dist=camera.dist,
-                        seed=config.sim.seed, jpeg_quality=camera.jpeg_quality)
-    return SimCamera(scene, pose)
+    return load_backend("camera", config.camera.backend)(config, transport)
 
 
-def serve_camera(transport: Transport, config: CellConfig, camera: Camera) -> None:
+def serve_camera(transport: BaseTransport, config: CellConfig, camera: Camera) -> None:
     lock = asyncio.Lock()  # one camera: one snapshot at a time
 
     async def on_capture(request: Request) -> Response:

@@ -10,7 +10,7 @@ naming the field.
 
 The worker tells every cell what it can take: its capacity (the pool's size)
 and its load (requests in flight, with their tickets), in a heartbeat and on
-its info key; see ``cell/keys.py`` for the pool's contract.
+its info key; see ``wire/keys.py`` for the pool's contract.
 """
 
 from __future__ import annotations
@@ -35,14 +35,15 @@ from wire import keys
 from wire.bundle import core_segmentation
 from wire.config import CellConfig
 from wire.errors import TransportError
-from wire.messages import (POINTS_ENCODING, Blob, Grasp, Reconstruction, ReconstructReply, ReconstructRequest,
-                           Superquadric, WorkerLoad, parse)
+from wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer, Reconstruction, ReconstructReply,
+                           ReconstructRequest, Superquadric, WorkerLoad, parse)
 from wire.transport import Request, RequestError, Response, Transport
 from core_cy.camera import Camera
 from core_cy.errors import CoreError
 from core_cy.grasp import plan_grasps
 from core_cy.gripper import Gripper
 from core_cy.images import check_calibrated_size, checked_size
+from core_cy.next_view import choose_next_view
 from core_cy.reconstruct import Options, View, reconstruct
 from wire.process import open_transport, run_until_stopped
 
@@ -91,6 +92,7 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         grasps = [Grasp(T_world_grasp=g.T_world_grasp.tolist(), width=g.width, score=g.score, approach=g.approach)
                   for g in planned]
         summary["timings_ms"]["grasp"] = round(1000 * (time.perf_counter() - began), 3)
+    next_view = _next_view(request, result, [view.camera for view in views]) if request.next_view else None
     silhouettes = [cv2.imencode(".png", s)[1].tobytes() for s in result.silhouettes]
     points = np.ascontiguousarray(result.points, dtype="<f4").tobytes()
     reply = ReconstructReply(
@@ -99,10 +101,27 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
                               silhouette_iou=summary["silhouette_iou"], residual=summary["residual"],
                               timings_ms=summary["timings_ms"], centre=np.asarray(result.centre).tolist(),
                               radius=float(result.radius), grasps=grasps,
-                              parts=[Superquadric.model_validate(part) for part in summary["parts"]]),
+                              parts=[Superquadric.model_validate(part) for part in summary["parts"]],
+                              next_view=next_view),
         silhouettes=[Blob(encoding="image/png", length=len(png)) for png in silhouettes],
         points=Blob(encoding=POINTS_ENCODING, length=len(points)))
     return reply.model_dump_json(), b"".join(silhouettes) + points
+
+
+def _next_view(request: ReconstructRequest, result, cameras: list[Camera]) -> NextViewAnswer | None:
+    """The best of the request's candidate next views (``core_cy.next_view``), or None when the core
+    can choose none (none of them is in the workspace, say): the scan then ends with what it has."""
+    assert request.next_view is not None
+    candidates = [Camera(K=c.K, T_world_cam=c.T_world_cam, view=len(cameras) + k)
+                  for k, c in enumerate(request.next_view.candidates)]
+    try:
+        chosen = choose_next_view(result, cameras, candidates, support_plane=request.support_plane)
+    except CoreError as exc:
+        log.warning("job %s: no next view: %s", request.job_id, exc)
+        return None
+    return NextViewAnswer(candidate=chosen.candidate, T_world_cam=np.asarray(chosen.T_world_cam).tolist(),
+                          expected_gain=float(chosen.expected_gain), uncertainty=float(chosen.uncertainty),
+                          sure=bool(chosen.sure))
 
 
 #: What a worker runs for each request, in a pool process: (ReconstructRequest JSON, payload,
@@ -115,7 +134,7 @@ Run = Callable[[str, bytes], Awaitable[tuple[str, bytes]]]
 
 
 class ReconstructWorker:
-    """One worker's face on the pool keys (``cell/keys.py``): the work, its load, its token.
+    """One worker's face on the pool keys (``wire/keys.py``): the work, its load, its token.
 
     ``run`` does one reconstruction; ``capacity`` is how many the worker does at
     a time (more wait in its queue, and count in ``in_flight``). The heartbeat

@@ -3,7 +3,7 @@
 The KUKA bridges (``workers.robot.kuka``) and the simulated robot
 (``workers.sim.robot``) implement it, so the worker cannot tell which one it
 drives. A new robot is a new backend beside them, with its configuration model
-in ``wire.backends``, and a line in :func:`workers.robot.worker.make_backend`.
+in ``wire.backends``, and a line in its ``BACKENDS``.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from wire import keys
-from wire.backends import KukaRobotConfig
+from wire.backends import load_backend
 from wire.config import CellConfig
 from wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
 from wire.process import open_transport, run_until_stopped
@@ -28,16 +28,8 @@ log = logging.getLogger(__name__)
 
 
 def make_backend(config: CellConfig) -> RobotBackend:
-    """The backend of the ``[robot]`` section, not yet opened; the simulated robot's gripper judges
-    its grasps against the ``[sim]`` scene."""
-    robot = config.robot
-    if isinstance(robot, KukaRobotConfig):
-        from .kuka.backend import KukaBackend
-
-        return KukaBackend.from_config(robot.kuka, robot.workspace)
-    from workers.sim.robot import SceneGripper, SimRobot
-
-    return SimRobot(robot, gripper=SceneGripper.from_config(config))
+    """The backend the ``[robot]`` section names (``wire.backends.BACKENDS``), not yet opened."""
+    return load_backend("robot", config.robot.backend)(config)
 
 
 def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend) -> None:

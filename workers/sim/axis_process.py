@@ -24,6 +24,7 @@ from wire.transport import session_config
 from .scene import scene_from_config
 
 from .axis import SimCameraServer
+from .truth_log import TruthLog
 
 __all__ = ["main", "robot_camera_pose"]
 
@@ -62,8 +63,11 @@ def main(config: CellConfig) -> int:
     except zenoh.ZError as exc:
         raise TransportError(f"cannot reach the Zenoh router at {config.zenoh.router}: {exc}") from None
     try:
+        scene = scene_from_config(config.sim)
+        truth = TruthLog(config.run_dir, scene)  # into each job's recording, as the simulator knows it
+        session.declare_subscriber(keys.events(config.cell_id), lambda sample: truth.heard(sample.payload.to_bytes()))
         server = SimCameraServer(
-            scene_from_config(config.sim), K=np.asarray(camera.K), image_size=tuple(camera.resolution),
+            scene, K=np.asarray(camera.K), image_size=tuple(camera.resolution),
             dist=camera.dist, pose_provider=lambda: robot_camera_pose(session, config), host=host, port=port,
             username=username, password=password, auth=camera.auth if username else None, seed=config.sim.seed)
         try:

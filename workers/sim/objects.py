@@ -16,6 +16,8 @@ from __future__ import annotations
 from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
+
+from core_cy.meshes import vertex_normals  # noqa: F401  (the one; renderers import it from here too)
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -73,17 +75,6 @@ def rotation_z(yaw_deg: float) -> NDArray[np.float64]:
     """(3, 3) rotation about the world z axis by ``yaw_deg`` degrees."""
     c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def vertex_normals(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> NDArray[np.float64]:
-    """Area-weighted unit vertex normals, (V, 3), of an outward-oriented mesh."""
-    v = vertices[faces]
-    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])  # length = 2 * area
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    norm = np.linalg.norm(vn, axis=1, keepdims=True)
-    return vn / np.where(norm > 0, norm, 1.0)
 
 
 def _cube_grid(n: int = 32) -> Mesh:

@@ -14,6 +14,8 @@ from typing import Any, Sequence
 
 import cv2
 import numpy as np
+
+from core_cy.plan import look_at  # the one look_at: camera-to-world, OpenCV axes
 from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
@@ -51,39 +53,6 @@ def default_K(image_size: tuple[int, int] = (640, 480), f: float = 600.0) -> NDA
     """(3, 3) pinhole matrix, focal length ``f`` px, principal point at the image centre."""
     w, h = image_size
     return np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
-
-
-def look_at(camera_position: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> NDArray[np.float64]:
-    """Camera-to-world pose (4, 4) of a camera at ``camera_position`` looking at ``target``.
-
-    OpenCV axes: z forward (towards the target), y down (against ``up``),
-    x = y cross z to the right.
-
-    Raises
-    ------
-    ValueError
-        If the camera sits on the target or looks along ``up``.
-
-    Examples
-    --------
-    >>> T = look_at([0.0, 0.0, 1.0], [0.0, 0.5, 0.0])
-    >>> bool(np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)))
-    True
-    """
-    c = np.asarray(camera_position, dtype=np.float64).reshape(3)
-    z = np.asarray(target, dtype=np.float64).reshape(3) - c
-    if np.linalg.norm(z) < 1e-12:
-        raise ValueError("camera_position and target coincide")
-    z /= np.linalg.norm(z)
-    u = np.asarray(up, dtype=np.float64).reshape(3)
-    y = -(u - (u @ z) * z)
-    if np.linalg.norm(y) < 1e-9 * max(np.linalg.norm(u), 1e-300):
-        raise ValueError("the viewing direction is parallel to up")
-    y /= np.linalg.norm(y)
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
-    T[:3, 3] = c
-    return T
 
 
 def _rot(axis: int, angle: float) -> NDArray[np.float64]:

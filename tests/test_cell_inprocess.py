@@ -1,0 +1,249 @@
+"""The daemon in the test's own process, on an in-memory network (``wire.fake_transport``), with
+stand-in workers: what a real router cannot be made to do on cue (a store that refuses a success,
+a plan that would grow without end, a worker frozen mid-job) in a second or so each.
+
+The daemon is the real one (store, recorder, publisher, pool); the workers answer at once: the robot
+goes where it is told, the camera gives a small grey JPEG, the reconstruction a small superquadric
+on the target (a stand-in's answer, not a reconstruction), and, when asked, a next view it is never
+sure of.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+
+import cv2
+import numpy as np
+import pytest
+
+import cell.daemon
+from cell.daemon import CellDaemon
+from cell.store import JobStore
+from wire import keys
+from wire.client import AsyncCellClient
+from wire.errors import StoreError
+from wire.fake_transport import MemoryNetwork
+from wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
+                           MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
+                           RobotState, ScanRequest, Superquadric)
+from wire.transport import Request, Response
+from workers.reconstruct.worker import ReconstructWorker
+from workers.sim.scene import target_from_config
+
+from tests.cell_fixtures import cell_config
+
+LIMIT_S = 60.0
+
+
+def _jpeg(config) -> bytes:
+    width, height = config.camera.resolution
+    return cv2.imencode(".jpg", np.full((height, width, 3), 128, np.uint8))[1].tobytes()
+
+
+class Workers:
+    """A robot, a camera and reconstruction workers on ``network``, answering at once."""
+
+    def __init__(self, network: MemoryNetwork, config) -> None:
+        self.network, self.config = network, config
+        self.robot = network.session()
+        self.pose = np.eye(4)
+        self.reconstructors: dict[str, ReconstructWorker] = {}
+        self.answered: list[str] = []
+        jpeg, cell_id = _jpeg(config), config.cell_id
+
+        async def move(request: Request) -> Response:
+            self.pose = np.asarray(MoveRequest.model_validate_json(request.payload).T_base_flange)
+            return Response(MoveReply(T_base_flange=self.pose.tolist(), duration_s=0.0).model_dump_json())
+
+        async def state(request: Request) -> Response:
+            return Response(RobotState(T_base_flange=self.pose.tolist(), moving=False, time=0.0).model_dump_json())
+
+        async def capture(request: Request) -> Response:
+            width, height = config.camera.resolution
+            info = CaptureInfo(width=width, height=height, source="stand-in", time=0.0, duration_s=0.0)
+            return Response(jpeg, encoding="image/jpeg", attachment=info.model_dump_json())
+
+        self.robot.serve(keys.robot_move(cell_id), move)
+        self.robot.serve(keys.robot_state(cell_id), state)
+        self.robot.serve(keys.camera_capture(cell_id), capture)
+        self.robot.declare_token(keys.alive(cell_id, "robot"))
+        self.robot.declare_token(keys.alive(cell_id, "camera"))
+
+    async def reconstructor(self, worker_id: str) -> ReconstructWorker:
+        target = target_from_config(self.config.sim)
+
+        async def run(request_json: str, payload: bytes) -> tuple[str, bytes]:
+            request = ReconstructRequest.model_validate_json(request_json)
+            self.answered.append(worker_id)
+            T = np.eye(4)
+            T[:3, 3] = target
+            unsure = None
+            if request.next_view is not None:
+                unsure = NextViewAnswer(candidate=0, T_world_cam=request.next_view.candidates[0].T_world_cam,
+                                        expected_gain=0.1, uncertainty=0.5, sure=False)
+            result = Reconstruction(
+                superquadric=Superquadric(size=[0.02, 0.02, 0.03], shape=[1.0, 1.0], T_world_object=T.tolist()),
+                silhouette_iou=[0.9] * len(request.views), residual=0.001, timings_ms={"total": 1.0},
+                centre=list(target), radius=0.05, next_view=unsure)
+            return ReconstructReply(job_id=request.job_id, result=result, worker=worker_id, ticket=request.ticket,
+                                    points=Blob(encoding=POINTS_ENCODING, length=0)).model_dump_json(), b""
+
+        worker = ReconstructWorker(self.network.session(), worker_id, 1, run, period_s=0.1)
+        await worker.start()
+        self.reconstructors[worker_id] = worker
+        return worker
+
+    async def close(self) -> None:
+        for worker in self.reconstructors.values():
+            await worker.close()
+            await worker.transport.close()
+        await self.robot.close()
+
+
+@contextlib.asynccontextmanager
+async def daemon(network: MemoryNetwork, config) -> AsyncIterator[AsyncCellClient]:
+    stop = asyncio.Event()
+    session = network.session()
+    running = asyncio.create_task(CellDaemon(config, session).run(stop))
+    client = AsyncCellClient(network.session(), config.cell_id, timeout=10.0)
+    try:
+        async with asyncio.timeout(30):
+            while not await client._transport.alive(keys.alive(config.cell_id, "daemon")):
+                assert not running.done(), running.exception()
+                await asyncio.sleep(0.01)
+        yield client
+    finally:
+        stop.set()
+        await asyncio.wait_for(running, 30)
+        await session.close()  # as the daemon's service does: its token and queryables go
+        await client._transport.close()
+
+
+def _config(tmp_path, **fields):
+    return cell_config(tmp_path, cell_id="inprocess", timeouts={"heartbeat_s": 0.5, "outage_s": 2.0}, **fields)
+
+
+def _run(coroutine) -> None:
+    asyncio.run(asyncio.wait_for(coroutine, LIMIT_S))
+
+
+def test_a_plan_that_would_grow_past_its_cap_ends_with_what_it_has_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(cell.daemon, "MAX_PLAN_STEPS", 6)  # 3 views and a reconstruction, then one more view
+    config = _config(tmp_path)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("never-sure")
+        try:
+            async with daemon(network, config) as client:
+                request = ScanRequest(target=target_from_config(config.sim), views="adaptive", max_views=16)
+                result = await client.scan(request, timeout=30)
+                assert len(result.T_base_cam) == 4 and result.uncertainty == 0.5
+                messages = [e.message for e in await _events(config, result.job_id)]
+                assert "reconstructing asked for 2 more steps, past the plan's cap of 6: the job ends with what " \
+                       "it has" in messages
+        finally:
+            await workers.close()
+
+    _run(scenario())
+
+
+async def _events(config, job_id: str) -> list[JobEvent]:
+    with JobStore(config.run_dir / "jobs.sqlite") as store:
+        return store.events(job_id)
+
+
+def test_a_success_the_store_refuses_is_told_to_nobody_and_the_restart_carries_the_job_on(tmp_path, monkeypatch):
+    config = _config(tmp_path)
+    change = JobStore.change
+
+    def full_disk_at_the_success(store, event, **fields):
+        if event.lifecycle is Lifecycle.SUCCEEDED:
+            raise StoreError(f"job store {store.path}: database or disk is full")
+        return change(store, event, **fields)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("w")
+        try:
+            monkeypatch.setattr(JobStore, "change", full_disk_at_the_success)
+            async with daemon(network, config) as client:
+                client.listen()
+                status = await client.submit(ScanRequest(target=target_from_config(config.sim)))
+                heard: list[JobEvent] = []
+                async with asyncio.timeout(20):
+                    async for event in client.events(status.job_id):
+                        heard.append(event)
+                        if event.state is JobState.RECONSTRUCTING:
+                            break
+                    while workers.answered != ["w"]:
+                        await asyncio.sleep(0.01)
+                await asyncio.sleep(0.5)  # the success the store refused: nothing more is told
+                assert (await client.status(status.job_id)).state is JobState.RECONSTRUCTING
+            assert not any(e.lifecycle.finished for e in heard)
+            monkeypatch.setattr(JobStore, "change", change)  # the disk has room again
+            async with daemon(network, config) as client:
+                final = await client.wait(status.job_id, timeout=20)
+                assert final.state is JobState.SUCCEEDED
+                assert len((await client.result(status.job_id)).T_base_cam) == 3
+            states = [e.state for e in await _events(config, status.job_id)]
+            assert states.count(JobState.SUCCEEDED) == 1 and states.count(JobState.CAPTURING) == 3
+            assert workers.answered == ["w", "w"]  # reconstructed again from the pictures kept, none taken again
+        finally:
+            await workers.close()
+
+    _run(scenario())
+
+
+def test_a_worker_frozen_mid_job_loses_it_to_another_and_the_job_succeeds(tmp_path):
+    config = _config(tmp_path, reconstruct={"max_attempts": 2})
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        frozen = await workers.reconstructor("frozen")
+        network.freeze(frozen.transport)  # its heartbeats stop; its token stays
+        async with daemon(network, config) as client:
+            await asyncio.sleep(0.05)
+            other = await workers.reconstructor("other")
+            result = await client.scan(ScanRequest(target=target_from_config(config.sim)), timeout=30)
+            messages = [e.message for e in await _events(config, result.job_id)]
+        network.thaw(frozen.transport)
+        await workers.close()
+        assert other is not None
+        assert result.worker == "other"
+        if result.attempts == 2:  # it went to the frozen one first
+            assert any(m.startswith("attempt 1 on frozen: no heartbeat") for m in messages), messages
+
+    _run(scenario())
+
+
+@pytest.mark.parametrize("end", ["cancelled"])
+def test_a_cancel_reaches_the_store_before_anyone_hears_of_it(tmp_path, end):
+    """Whoever hears of an end and asks the store finds it there."""
+    config = _config(tmp_path)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        try:
+            async with daemon(network, config) as client:  # no reconstruction worker: the job waits for one
+                client.listen()
+                status = await client.submit(ScanRequest(target=target_from_config(config.sim)))
+                async with asyncio.timeout(20):
+                    async for event in client.events(status.job_id):
+                        if event.state is JobState.RECONSTRUCTING:
+                            await client.cancel(status.job_id)
+                        if event.lifecycle.finished:
+                            assert event.state.value == end
+                            with JobStore(config.run_dir / "jobs.sqlite") as store:
+                                assert store.get(status.job_id).state.value == end
+                            break
+        finally:
+            await workers.close()
+
+    _run(scenario())
