@@ -16,13 +16,13 @@ The steps ask the cell's workers through a :class:`Cell`, which the daemon is.
 from __future__ import annotations
 
 import abc
+import asyncio
 import time
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
 from core_cy.plan import camera_poses
-from core_cy.views import implausibility
 from wire import keys
 from wire.config import CellConfig
 from wire.errors import CellError, LinkDown
@@ -33,6 +33,7 @@ from wire.transport import Reply
 
 from .job import Job, Picture
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
+from .verify import Verdict, verify_answer
 
 __all__ = ["Step", "StepFailed", "Cell", "View", "Reconstruct", "parse_reply"]
 
@@ -197,20 +198,28 @@ class Reconstruct(Step):
             answer = parse_reply(ReconstructReply, reply.attachment, "the reconstruction worker")
             if answer.result is None:  # the core's verdict on these pictures: no use retrying
                 raise StepFailed(answer.error or "no result", kind=answer.error_kind)
+            if answer.worker != worker or answer.ticket != request.ticket:
+                verdict = Verdict(False, f"it answered as {answer.worker!r} to ticket {answer.ticket!r}")
+            else:  # no worker is trusted with the robot: its model must agree with the daemon's own pictures
+                verdict = await asyncio.to_thread(verify_answer, answer.result, request, job.captures, config)
+            if not verdict.ok:
+                cell.pool.refuse(worker, verdict.reason)
+                tried.add(worker)
+                failures.append(f"attempt {attempt} on {worker}: refused: {verdict.reason}")
+                if attempt < attempts:
+                    await cell.note(job, f"{failures[-1]}; trying again")
+                attempt += 1
+                continue
+            cell.pool.confirm(worker)
             fit = answer.result.superquadric
-            implausible = implausibility(fit.T_world_object, fit.size, [c.T_base_cam for c in job.captures],
-                                         config.camera.K, config.camera.resolution,
-                                         (config.robot.workspace.min, config.robot.workspace.max))
-            if implausible:
-                raise StepFailed(f"the answer of {answer.worker or worker} is refused: {implausible}",
-                                 kind="ImplausibleResult")
+            grasps = [answer.result.grasps[i] for i in verdict.grasps]
             job.reconstruction = (reply.attachment or b"", reply.payload, cell.clock() - job.started)
             nxt = answer.result.next_view
             job.result = ScanResult(
-                job_id=job.job_id, superquadric=fit, grasps=answer.result.grasps,
+                job_id=job.job_id, superquadric=fit, grasps=grasps,
                 silhouette_iou=answer.result.silhouette_iou, residual=answer.result.residual,
                 timings_ms=answer.result.timings_ms, T_base_cam=[c.T_base_cam.tolist() for c in job.captures],
-                durations_s=job.durations_s, worker=answer.worker or worker, attempts=attempt,
+                durations_s=job.durations_s, worker=worker, attempts=attempt,
                 uncertainty=nxt.uncertainty if nxt is not None else None)
             return await self._next(job, cell, candidates, nxt)
         raise StepFailed(f"gave up after {attempts} attempts: {'; '.join(failures)}")

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from core_cy.auto_segment import auto_silhouettes
 from core_cy.camera import Camera, undistort_mask
 from core_cy.errors import CoreError
 from core_cy.gripper import Gripper
@@ -137,7 +138,7 @@ def _segmented(jpeg: bytes, segmentation: Segmentation, view: int) -> np.ndarray
 
 
 def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
-                        cameras: Sequence[Camera]) -> list[np.ndarray]:
+                        cameras: Sequence[Camera], support_plane: Sequence[float] | None = None) -> list[np.ndarray]:
     """Each picture decoded at 1/:data:`REDUCTION` of its size, segmented, and undistorted to the
     ideal pinhole ``cameras`` (:func:`reduced_camera`) where they have a distortion.
 
@@ -146,9 +147,12 @@ def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
     CoreError
         Naming the view whose picture cannot be decoded or holds no object.
     """
+    if segmentation.method == "auto":  # the cell's default; it sees all the views at once
+        images = [_decoded_reduced(jpeg, view) for view, jpeg in enumerate(jpegs)]
+        found = [silhouette for silhouette, _ in auto_silhouettes(images, cameras, support_plane=support_plane)]
     silhouettes = []
     for view, (jpeg, camera) in enumerate(zip(jpegs, cameras)):
-        silhouette = _segmented(jpeg, segmentation, view)
+        silhouette = found[view] if segmentation.method == "auto" else _segmented(jpeg, segmentation, view)
         silhouettes.append(silhouette if camera.dist is None else undistort_mask(silhouette, camera))
     return silhouettes
 
@@ -292,7 +296,7 @@ def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], camera
         return Verdict(False, f"{len(jpegs)} pictures but {len(cameras)} cameras")
     try:
         parts = [_core(part) for part in (getattr(result, "parts", None) or [result.superquadric])]
-        silhouettes = reduced_silhouettes(jpegs, segmentation, cameras)
+        silhouettes = reduced_silhouettes(jpegs, segmentation, cameras, support_plane)
     except (CoreError, ValueError) as exc:
         return Verdict(False, f"the answer cannot be checked: {exc}")
     verdict = check_model(parts, cameras, silhouettes, min_iou)

@@ -37,9 +37,26 @@ from tests.cell_fixtures import cell_config
 LIMIT_S = 60.0
 
 
-def _jpeg(config) -> bytes:
+#: The stand-in reconstruction's model: an ellipsoid of these half-axes (metres) on the target.
+STAND_IN_SIZE = (0.02, 0.02, 0.03)
+
+
+def _jpeg(config, T_base_flange: np.ndarray) -> bytes:
+    """What the camera sees from ``T_base_flange``: the stand-in's ellipsoid, red on grey, drawn here
+    apart from the daemon's check (sampled surface, pinhole projection, convex outline)."""
     width, height = config.camera.resolution
-    return cv2.imencode(".jpg", np.full((height, width, 3), 128, np.uint8))[1].tobytes()
+    image = np.full((height, width, 3), 128, np.uint8)
+    eta, omega = np.meshgrid(np.linspace(-np.pi / 2, np.pi / 2, 40), np.linspace(-np.pi, np.pi, 80))
+    a, b, c = STAND_IN_SIZE
+    surface = np.stack([a * np.cos(eta) * np.cos(omega), b * np.cos(eta) * np.sin(omega), c * np.sin(eta)], -1)
+    points = surface.reshape(-1, 3) + np.asarray(target_from_config(config.sim))
+    T_world_cam = T_base_flange @ np.asarray(config.T_flange_cam)
+    in_camera = (points - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]
+    if (in_camera[:, 2] > 0).all():
+        uv = in_camera @ np.asarray(config.camera.K).T
+        outline = cv2.convexHull(np.round(uv[:, :2] / uv[:, 2:] * 16).astype(np.int32))
+        cv2.fillConvexPoly(image, outline, (30, 30, 210), shift=4)
+    return cv2.imencode(".jpg", image)[1].tobytes()
 
 
 class Workers:
@@ -51,10 +68,12 @@ class Workers:
         self.pose = np.eye(4)
         self.reconstructors: dict[str, ReconstructWorker] = {}
         self.answered: list[str] = []
-        jpeg, cell_id = _jpeg(config), config.cell_id
+        self.moves: list[np.ndarray] = []
+        cell_id = config.cell_id
 
         async def move(request: Request) -> Response:
             self.pose = np.asarray(MoveRequest.model_validate_json(request.payload).T_base_flange)
+            self.moves.append(self.pose)
             return Response(MoveReply(T_base_flange=self.pose.tolist(), duration_s=0.0).model_dump_json())
 
         async def state(request: Request) -> Response:
@@ -63,7 +82,7 @@ class Workers:
         async def capture(request: Request) -> Response:
             width, height = config.camera.resolution
             info = CaptureInfo(width=width, height=height, source="stand-in", time=0.0, duration_s=0.0)
-            return Response(jpeg, encoding="image/jpeg", attachment=info.model_dump_json())
+            return Response(_jpeg(config, self.pose), encoding="image/jpeg", attachment=info.model_dump_json())
 
         self.robot.serve(keys.robot_move(cell_id), move)
         self.robot.serve(keys.robot_state(cell_id), state)
@@ -71,7 +90,8 @@ class Workers:
         self.robot.declare_token(keys.alive(cell_id, "robot"))
         self.robot.declare_token(keys.alive(cell_id, "camera"))
 
-    async def reconstructor(self, worker_id: str) -> ReconstructWorker:
+    async def reconstructor(self, worker_id: str, scale: float = 1.0) -> ReconstructWorker:
+        """A stand-in reconstruction worker; ``scale`` > 1: a fake one, whose model is that much too big."""
         target = target_from_config(self.config.sim)
 
         async def run(request_json: str, payload: bytes) -> tuple[str, bytes]:
@@ -84,7 +104,7 @@ class Workers:
                 unsure = NextViewAnswer(candidate=0, T_world_cam=request.next_view.candidates[0].T_world_cam,
                                         expected_gain=0.1, uncertainty=0.5, sure=False)
             result = Reconstruction(
-                superquadric=Superquadric(size=[0.02, 0.02, 0.03], shape=[1.0, 1.0], T_world_object=T.tolist()),
+                superquadric=Superquadric(size=[scale * a for a in STAND_IN_SIZE], shape=[1.0, 1.0], T_world_object=T.tolist()),
                 silhouette_iou=[0.9] * len(request.views), residual=0.001, timings_ms={"total": 1.0},
                 centre=list(target), radius=0.05, next_view=unsure)
             return ReconstructReply(job_id=request.job_id, result=result, worker=worker_id, ticket=request.ticket,
@@ -245,5 +265,34 @@ def test_a_cancel_reaches_the_store_before_anyone_hears_of_it(tmp_path, end):
                             break
         finally:
             await workers.close()
+
+    _run(scenario())
+
+
+def test_a_fake_workers_oversized_model_is_refused_and_the_job_succeeds_on_the_real_one(tmp_path):
+    """No worker is trusted with the robot: a model 9 times too big disagrees with the daemon's own
+    pictures, is never stored nor used, and the job goes to another worker."""
+    config = _config(tmp_path, reconstruct={"max_attempts": 2})
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("fake", scale=9.0)
+        async with daemon(network, config) as client:
+            submitted = asyncio.create_task(client.scan(ScanRequest(target=target_from_config(config.sim)),
+                                                        timeout=30))
+            for _ in range(3000):  # the real one comes once the fake has answered: the fake goes first
+                if "fake" in workers.answered or submitted.done():
+                    break
+                await asyncio.sleep(0.01)
+            await workers.reconstructor("real")
+            result = await submitted
+            messages = [e.message for e in await _events(config, result.job_id)]
+        await workers.close()
+        assert workers.answered[0] == "fake"
+        assert result.worker == "real" and result.attempts == 2
+        assert result.superquadric.size == pytest.approx(STAND_IN_SIZE)
+        assert any(m.startswith("attempt 1 on fake: refused: ") for m in messages), messages
+        assert len(workers.moves) == len(result.T_base_cam)  # to the views, and nowhere the fake's model led
 
     _run(scenario())
