@@ -34,7 +34,7 @@ from core_cy.views import candidate_views
 from wire import keys
 from wire.config import CellConfig
 from wire.errors import CellError, ConfigError, StoreError
-from wire.messages import JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest
+from wire.messages import REQUEST_LIMITS, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest
 from wire.transport import BaseTransport
 
 from .asking import Asker
@@ -133,12 +133,13 @@ class CellDaemon(RequestHandlers):
         transport, cell = self._transport, self.cell
         self._spawn(self._presence.follow())
         self.pool.start()
-        transport.serve(keys.submit(cell), self._on_submit)
-        transport.serve(keys.jobs(cell), self._on_list)
-        transport.serve(keys.status(cell), self._on_status)
+        # Each request's size is checked before it is read: a 50 MB submit is refused unparsed.
+        transport.serve(keys.submit(cell), self._on_submit, limit=REQUEST_LIMITS["submit"])
+        transport.serve(keys.jobs(cell), self._on_list, limit=REQUEST_LIMITS["query"])
+        transport.serve(keys.status(cell), self._on_status, limit=REQUEST_LIMITS["query"])
         # Not "jobs/**": that matches "jobs" too, and a list query would get a second, wrong answer.
-        transport.serve(keys.job(cell, "*"), self._on_job_query)
-        transport.serve(f"{keys.job(cell, '*')}/*", self._on_job_query)
+        transport.serve(keys.job(cell, "*"), self._on_job_query, limit=REQUEST_LIMITS["query"])
+        transport.serve(f"{keys.job(cell, '*')}/*", self._on_job_query, limit=REQUEST_LIMITS["cancel"])
         transport.declare_token(keys.alive(cell, "daemon"))
         log.info("cell %s ready: run directory %s", cell, self.run_dir.resolve())
         try:

@@ -12,7 +12,8 @@ import numpy as np
 from core_cy.plan import workspace_violation
 from wire.config import CellConfig
 from wire.errors import StoreError
-from wire.messages import CellStatus, FailedJob, JobState, JobStatus, ScanRequest, parse
+from wire.messages import (REQUEST_LIMITS, CellStatus, FailedJob, JobState, JobStatus, ScanRequest,
+                           parse_request)
 from wire.transport import Request, RequestError, Response
 
 from .handle import JobHandle
@@ -52,7 +53,7 @@ class RequestHandlers:
 
     async def _on_submit(self, request: Request) -> Response:
         try:
-            scan = parse(ScanRequest, request.payload)
+            scan = parse_request(ScanRequest, request.payload, REQUEST_LIMITS["submit"])
             poses = self._flange_poses(scan)
         except ValueError as exc:
             raise RequestError(str(exc)) from None

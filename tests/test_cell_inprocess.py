@@ -19,11 +19,12 @@ import numpy as np
 import pytest
 
 import cell.daemon
+import cell.requests
 from cell.daemon import CellDaemon
 from cell.store import JobStore
 from wire import keys
 from wire.client import AsyncCellClient
-from wire.errors import StoreError
+from wire.errors import CellError, StoreError
 from wire.fake_transport import MemoryNetwork
 from wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
                            MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
@@ -294,5 +295,33 @@ def test_a_fake_workers_oversized_model_is_refused_and_the_job_succeeds_on_the_r
         assert result.superquadric.size == pytest.approx(STAND_IN_SIZE)
         assert any(m.startswith("attempt 1 on fake: refused: ") for m in messages), messages
         assert len(workers.moves) == len(result.T_base_cam)  # to the views, and nowhere the fake's model led
+
+    _run(scenario())
+
+
+def test_a_50_mb_submit_is_refused_unread_and_the_daemon_keeps_serving(tmp_path, monkeypatch):
+    config = _config(tmp_path)
+    parsed: list[int] = []
+    real_parse = cell.requests.parse_request
+
+    def counting(model, payload, limit):
+        parsed.append(len(payload))
+        return real_parse(model, payload, limit)
+
+    monkeypatch.setattr(cell.requests, "parse_request", counting)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("real")
+        async with daemon(network, config) as client:
+            huge = b'{"target": [' + b" " * (50 * 1024 * 1024) + b"0, 0, 0]}"
+            with pytest.raises(CellError) as refused:
+                await client._transport.query(keys.submit(config.cell_id), huge, timeout=10)
+            result = await client.scan(ScanRequest(target=target_from_config(config.sim)), timeout=30)
+        await workers.close()
+        assert str(refused.value) == f"the request is {len(huge)} bytes: at most 65536 are taken"
+        assert len(huge) not in parsed  # refused before any parse
+        assert result.worker == "real"
 
     _run(scenario())

@@ -12,7 +12,7 @@ import pytest
 
 from robocell.demo import free_port
 from tests.pki import router_tls_settings, tls_settings, write_pki
-from wire.errors import TransportError
+from wire.errors import CellError, TransportError
 from wire.transport import Response, Transport
 
 
@@ -265,3 +265,44 @@ def test_a_forged_success_event_does_not_end_scan():
                 await daemon.transport.close()
 
     run(check())
+
+
+def test_a_queryable_with_a_limit_answers_a_50_mb_payload_with_an_error_unread_and_keeps_serving():
+    """``serve(limit=...)`` on a real router: the handler never sees the oversized payload."""
+    seen: list[int] = []
+
+    async def check(endpoint):
+        server = await Transport.open(endpoint)
+        client = await Transport.open(endpoint)
+        try:
+            async def echo(request):
+                seen.append(len(request.payload or b""))
+                return Response(b"ok")
+
+            server.serve("robocell/cell1/submit", echo, limit=64 * 1024)
+            for _ in range(50):  # the queryable's declaration reaches the router asynchronously
+                try:
+                    await client.query("robocell/cell1/submit", b"{}", timeout=2)
+                    break
+                except TransportError:
+                    await asyncio.sleep(0.1)
+            huge = b" " * (50 * 1024 * 1024)
+            with pytest.raises(CellError) as refused:
+                await client.query("robocell/cell1/submit", huge, timeout=20)
+            after = await client.query("robocell/cell1/submit", b"{}", timeout=5)
+            return str(refused.value), after.payload
+        finally:
+            await client.close()
+            await server.close()
+
+    async def plain(check):
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        router = await Transport.open(endpoint, mode="router")
+        try:
+            return await check(endpoint)
+        finally:
+            await router.close()
+
+    refused, after = _run(plain(check))
+    assert refused == f"the request is {50 * 1024 * 1024} bytes: at most 65536 are taken"
+    assert after == b"ok" and seen == [2, 2]

@@ -24,7 +24,8 @@ from typing import Any
 import zenoh
 
 from .errors import LinkDown, NoResponder, TransportTimeout
-from .transport import JSON, BaseTransport, Handler, Reply, Request, Subscription, error_reply, remote_error
+from .transport import (JSON, BaseTransport, Handler, Reply, Request, Subscription, error_reply, oversized,
+                        remote_error)
 
 __all__ = ["MemoryNetwork", "MemoryTransport"]
 
@@ -42,6 +43,7 @@ class _Queryable:
     owner: MemoryTransport
     key: str
     handler: Handler
+    limit: int | None = None
     answering: set[asyncio.Future[Any]] = field(default_factory=set)
 
 
@@ -106,6 +108,8 @@ class MemoryNetwork:
         thawed = self._frozen.get(queryable.owner)
         if thawed is not None:
             await thawed.wait()
+        if queryable.limit is not None and (refused := oversized(len(request.payload or b""), queryable.limit)):
+            raise remote_error(refused.model_dump_json().encode())
         try:
             response = await queryable.handler(request)
         except Exception as exc:
@@ -214,8 +218,8 @@ class MemoryTransport(BaseTransport):
             raise LinkDown(f"the link to the router at {self.endpoint} went down before the answer on {key}")
         raise TransportTimeout(f"no answer on {key} within {timeout:g} s")
 
-    def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
-        self.network._queryables.append(_Queryable(self, key, handler))
+    def serve(self, key: str, handler: Handler, *, complete: bool = True, limit: int | None = None) -> None:
+        self.network._queryables.append(_Queryable(self, key, handler, limit))
 
     # --- publications and liveliness ---------------------------------------------------------
 

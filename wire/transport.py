@@ -191,8 +191,10 @@ class BaseTransport(abc.ABC):
         """:meth:`query`, sent before this returns: the future of its reply."""
 
     @abc.abstractmethod
-    def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
-        """Answer queries on ``key`` (none with wildcards) with ``handler``, on the event loop."""
+    def serve(self, key: str, handler: Handler, *, complete: bool = True, limit: int | None = None) -> None:
+        """Answer queries on ``key`` (none with wildcards) with ``handler``, on the event loop; a
+        payload longer than ``limit`` bytes is answered with an error (:func:`oversized`) before it
+        is copied or reaches the handler."""
 
     @abc.abstractmethod
     def put(self, key: str, payload: bytes | str, *, encoding: str = JSON,
@@ -427,8 +429,9 @@ class Transport(BaseTransport):
             raise TransportTimeout(f"no answer on {key} within {timeout:g} s")
         raise remote_error(error.payload)
 
-    def serve(self, key: str, handler: Handler, *, complete: bool = True) -> None:
-        """Answer queries on ``key`` with ``handler``, on the event loop, concurrently.
+    def serve(self, key: str, handler: Handler, *, complete: bool = True, limit: int | None = None) -> None:
+        """Answer queries on ``key`` with ``handler``, on the event loop, concurrently; a payload
+        past ``limit`` bytes gets an error reply at once, unread (:func:`oversized`).
 
         Only a query on a key without wildcards is answered (``*``, ``**`` and ``$*`` would
         reach handlers it was not meant for); others are dropped unanswered. A ``RequestError``
@@ -444,6 +447,15 @@ class Transport(BaseTransport):
                 # A query such as robocell/cell1/** reaches every queryable under it: none of
                 # them may act on a request that was not addressed to it.
                 query.drop()
+                return
+            if limit is not None and query.payload is not None \
+                    and (refused := oversized(len(query.payload), limit)) is not None:
+                try:  # answered here, in Zenoh's thread: the payload is never copied nor parsed
+                    query.reply_err(refused.model_dump_json(), encoding=zenoh.Encoding(JSON))
+                except zenoh.ZError as exc:
+                    log.warning("could not answer on %s: %s", asked, exc)
+                finally:
+                    query.drop()
                 return
             parameters = dict(cast(Any, query.parameters))  # its pairs; the stubs do not say it iterates
             request = Request(asked, parameters, _bytes(query.payload), _bytes(query.attachment))
@@ -554,6 +566,13 @@ class _Sent:
 def _settle(done: asyncio.Future[None]) -> None:
     if not done.done():
         done.set_result(None)
+
+
+def oversized(size: int, limit: int) -> ErrorReply | None:
+    """The error reply to a request of ``size`` bytes past ``limit``; None within it."""
+    if size <= limit:
+        return None
+    return ErrorReply(error=f"the request is {size} bytes: at most {limit} are taken")
 
 
 def error_reply(request: Request, exc: Exception) -> ErrorReply:
