@@ -12,7 +12,7 @@ import numpy as np
 from core_cy.plan import workspace_violation
 from wire.config import CellConfig
 from wire.errors import StoreError
-from wire.messages import (REQUEST_LIMITS, CellStatus, FailedJob, JobState, JobStatus, ScanRequest,
+from wire.messages import (REQUEST_LIMITS, CancelRequest, CellStatus, FailedJob, JobState, JobStatus, ScanRequest,
                            parse_request)
 from wire.transport import Request, RequestError, Response
 
@@ -21,6 +21,7 @@ from .job import Checkpoint, IllegalTransition
 from .plan import job_steps
 from .steps import Step
 from .store import JobStore
+from .tokens import JobTokenRefused, check_token, new_token, token_digest
 
 if TYPE_CHECKING:
     from .pool import ReconstructorPool
@@ -75,13 +76,16 @@ class RequestHandlers:
             raise RequestError(f"the queue is full ({self.config.max_queued} jobs waiting): try again later")
         plan = job_steps(scan, poses)
         point = Checkpoint(plan=[step.spec() for step in plan], done=0).model_dump_json()
+        token = new_token()  # the job's secret: its client's alone (only its digest is kept)
         try:  # on disk before the answer, so an answered submit survives a crash
-            status, created = self._jobs.add(scan, n_views=len(poses), now=self.clock(), checkpoint=point)
+            status, created = self._jobs.add(scan, n_views=len(poses), now=self.clock(), checkpoint=point,
+                                             token_digest=token_digest(token))
             await asyncio.to_thread(self._jobs.sync)
         except StoreError as exc:
             raise StoreError(f"the job store could not take the job: {exc}") from None
         if created:
             self._admit(status, scan, plan)
+            return Response(status.model_copy(update={"token": token}).model_dump_json())
         return Response(status.model_dump_json())
 
     async def _on_status(self, request: Request) -> Response:
@@ -119,6 +123,12 @@ class RequestHandlers:
         parts = request.key.split("/")[3:]  # robocell/<cell>/jobs/<id>[/<what>]
         job_id, what = parts[0], (parts[1] if len(parts) > 1 else "status")
         if what == "cancel":
+            try:
+                token = parse_request(CancelRequest, request.payload, REQUEST_LIMITS["cancel"]).token \
+                    if request.payload else None
+                check_token(job_id, token, self._jobs.token_digest(job_id))
+            except (ValueError, JobTokenRefused) as exc:
+                raise RequestError(str(exc)) from None
             return Response((await self._cancel(job_id)).model_dump_json())
         if what not in ("status", "result"):
             raise RequestError(f"unknown job query {what!r}: expected status, result or cancel")

@@ -35,39 +35,13 @@ from pydantic import ValidationError
 from wire.errors import StoreError
 from wire.messages import ACTIVITIES, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest, ScanResult
 
+from .store_schema import SCHEMA as _SCHEMA
+from .store_schema import SCHEMA_VERSION
+from .store_schema import UPGRADES as _UPGRADES
+
 __all__ = ["JobStore", "SCHEMA_VERSION", "job_id_for", "queued_status", "queued_event", "lifecycle_of"]
 
-#: Kept in ``PRAGMA user_version``; a file of an older version is upgraded, a newer one refused.
-SCHEMA_VERSION = 3
 _T = TypeVar("_T")
-# What each version adds to the one before it.
-_UPGRADES = {2: ("ALTER TABLE jobs ADD COLUMN error_kind TEXT",),
-             3: ("ALTER TABLE jobs ADD COLUMN progress TEXT", "ALTER TABLE jobs ADD COLUMN checkpoint TEXT",
-                 "CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,"
-                 " jpeg BLOB NOT NULL, poses TEXT NOT NULL, PRIMARY KEY (job_id, view))")}
-
-# One statement each: sqlite3 runs one at a time inside our transaction (executescript would commit).
-_SCHEMA = (
-    """CREATE TABLE jobs (
-        seq INTEGER PRIMARY KEY,                    -- submission order, the counter in job_id
-        job_id TEXT NOT NULL UNIQUE,
-        request_id TEXT UNIQUE,                     -- NULLs are distinct: only client ids collide
-        state TEXT NOT NULL, view INTEGER, n_views INTEGER NOT NULL, error TEXT,
-        created REAL NOT NULL, updated REAL NOT NULL, recording TEXT,
-        request TEXT NOT NULL,                      -- ScanRequest JSON
-        error_kind TEXT,
-        progress TEXT,                              -- Progress JSON, while it runs
-        checkpoint TEXT)                            -- cell.job.Checkpoint JSON""",
-    "CREATE INDEX jobs_state ON jobs (state)",
-    """CREATE TABLE events (seq INTEGER PRIMARY KEY, job_id TEXT NOT NULL REFERENCES jobs (job_id),
-        event TEXT NOT NULL)                        -- JobEvent JSON""",
-    "CREATE INDEX events_job ON events (job_id)",
-    """CREATE TABLE results (job_id TEXT PRIMARY KEY REFERENCES jobs (job_id),
-        result TEXT NOT NULL)                       -- ScanResult JSON""",
-    """CREATE TABLE pictures (job_id TEXT NOT NULL REFERENCES jobs (job_id), view INTEGER NOT NULL,
-        jpeg BLOB NOT NULL, poses TEXT NOT NULL,    -- JSON: where the flange and the camera stood
-        PRIMARY KEY (job_id, view))""",
-)
 _COLUMNS = "job_id, state, view, n_views, error, created, updated, recording, request, error_kind, progress"
 
 
@@ -129,14 +103,15 @@ class JobStore:
 
     # --- writing ----------------------------------------------------------------------------
 
-    def add(self, request: ScanRequest, *, n_views: int, now: float,
-            checkpoint: str | None = None) -> tuple[JobStatus, bool]:
+    def add(self, request: ScanRequest, *, n_views: int, now: float, checkpoint: str | None = None,
+            token_digest: str | None = None) -> tuple[JobStatus, bool]:
         """Queue a new job, with its first event ("queued"); returns ``(status, True)``.
 
         If a job was already submitted with ``request.request_id``, nothing is
         added and that job comes back as ``(status, False)``, whatever its state.
         ``checkpoint``: the job's plan, as
-        JSON (see :meth:`checkpoint`). On disk once :meth:`sync` returns.
+        JSON (see :meth:`checkpoint`); ``token_digest``: what the job keeps of its token
+        (:meth:`token_digest`). On disk once :meth:`sync` returns.
 
         Raises
         ------
@@ -158,10 +133,10 @@ class JobStore:
             seq = db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM jobs").fetchone()[0]
             status = queued_status(job_id_for(seq, now), request, n_views=n_views, now=now)
             db.execute(
-                "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request, checkpoint)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT INTO jobs (seq, job_id, request_id, state, n_views, created, updated, request, checkpoint,"
+                " token_digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (seq, status.job_id, request.request_id, JobState.QUEUED.value, n_views, now, now,
-                 request.model_dump_json(), checkpoint),
+                 request.model_dump_json(), checkpoint, token_digest),
             )
             self._insert_event(db, queued_event(status))
             return status, True
@@ -261,6 +236,11 @@ class JobStore:
         """The job's result, or None if it has none (yet)."""
         rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id],
                           lambda row: ScanResult.model_validate_json(row[0]))
+        return rows[0] if rows else None
+
+    def token_digest(self, job_id: str) -> str | None:
+        """The digest of the job's token (``cell.tokens``), or None (no such job, or one without)."""
+        rows = self._read("SELECT token_digest FROM jobs WHERE job_id = ?", [job_id], lambda row: row[0])
         return rows[0] if rows else None
 
     def checkpoint(self, job_id: str) -> str | None:

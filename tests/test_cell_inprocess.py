@@ -325,3 +325,36 @@ def test_a_50_mb_submit_is_refused_unread_and_the_daemon_keeps_serving(tmp_path,
         assert result.worker == "real"
 
     _run(scenario())
+
+
+def test_only_the_client_that_submitted_a_job_may_cancel_it(tmp_path):
+    """The submit's answer carries the job's token; another client, without it or with a guess, is
+    refused in one line; the owner's client shows it by itself."""
+    config = _config(tmp_path)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        other = AsyncCellClient(network.session(), config.cell_id, timeout=10.0)
+        try:
+            async with daemon(network, config) as owner:  # no reconstruction worker: the job waits for one
+                status = await owner.submit(ScanRequest(target=target_from_config(config.sim)))
+                refusals = []
+                for guess in (None, "guessed-token-" * 2):
+                    with pytest.raises(CellError) as refused:
+                        await other.cancel(status.job_id, guess)
+                    refusals.append(str(refused.value))
+                still = await other.status(status.job_id)
+                cancelled = await owner.cancel(status.job_id)
+        finally:
+            await other._transport.close()
+            await workers.close()
+        assert status.token is not None and len(status.token) >= 43
+        assert refusals == [
+            f"job {status.job_id}: no token shown: only the client that submitted it may do this "
+            "(its submit's answer holds the token)",
+            f"job {status.job_id}: the token shown is not the job's: only the client that submitted it may do this"]
+        assert not still.lifecycle.finished and still.token is None
+        assert cancelled.state is JobState.CANCELLED
+
+    _run(scenario())

@@ -55,7 +55,7 @@ def test_a_new_store_is_a_wal_database_with_a_schema_version(tmp_path):
     JobStore(tmp_path / "jobs.sqlite").close()
     db = sqlite3.connect(tmp_path / "jobs.sqlite")
     try:
-        assert db.execute("PRAGMA user_version").fetchone() == (SCHEMA_VERSION,) == (3,)
+        assert db.execute("PRAGMA user_version").fetchone() == (SCHEMA_VERSION,) == (4,)
         assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
     finally:
         db.close()
@@ -286,14 +286,14 @@ def test_every_acknowledged_add_survives_kill_9(tmp_path, kill_after):
 
 
 def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
-    """Version 2 adds the error's kind, 3 the progress and the checkpoint; a run directory of an older
+    """Version 2 adds the error's kind, 3 the progress and the checkpoint, 4 the token's digest; a run directory of an older
     robocell opens with its jobs."""
     path = tmp_path / "jobs.sqlite"
     db = sqlite3.connect(path, isolation_level=None)
     for statement in _SCHEMA:  # version 1: without jobs.error_kind, progress, checkpoint, nor pictures
         if "CREATE TABLE pictures" in statement:
             continue
-        db.execute(re.sub(r",(\s*--[^\n]*)?\n\s*error_kind TEXT,.*?checkpoint TEXT\)[^\n]*", ")", statement,
+        db.execute(re.sub(r",(\s*--[^\n]*)?\n\s*error_kind TEXT,.*?token_digest TEXT\)[^\n]*", ")", statement,
                           flags=re.S))
     db.execute("PRAGMA user_version = 1")
     db.execute("INSERT INTO jobs (seq, job_id, state, n_views, error, created, updated, request) VALUES "
@@ -303,7 +303,8 @@ def test_a_store_of_version_1_is_upgraded_and_keeps_its_jobs(tmp_path):
     with JobStore(path) as store:
         old = store.get("20261101-000001")
         assert old.state is JobState.FAILED and old.error == "moving to view 0: no robot" and old.error_kind is None
-        status, _ = store.add(ScanRequest(target=[0.6, 0.0, 0.05]), n_views=3, now=3.0)
+        status, _ = store.add(ScanRequest(target=[0.6, 0.0, 0.05]), n_views=3, now=3.0, token_digest="d" * 64)
+        assert store.token_digest(status.job_id) == "d" * 64 and store.token_digest("20261101-000001") is None
         failed = change(store, status.job_id, JobState.FAILED, message="capturing view 1: camera gone",
                         error_kind="CameraTimeout", now=4.0)
         assert failed.error_kind == "CameraTimeout"

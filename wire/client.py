@@ -29,6 +29,7 @@ log = logging.getLogger(__name__)
 #: arrive before the answer to its submit says which job it is.
 _EARLY_JOBS = 256
 _ALL_JOBS = "*"
+_KEPT_TOKENS = 1024        # the tokens of this many of the jobs it submitted, for its cancels
 
 
 class JobFailed(CellError):
@@ -53,6 +54,8 @@ class AsyncCellClient:
         self._dispatcher: asyncio.Task | None = None
         self._listeners: dict[str, list[asyncio.Queue]] = {}    # job id (or _ALL_JOBS): its watchers
         self._early: OrderedDict[str, list[JobEvent]] = OrderedDict()
+        # The tokens of the jobs this client submitted (the newest few): its cancels show them.
+        self._tokens: OrderedDict[str, str] = OrderedDict()
 
     @classmethod
     async def connect(cls, endpoint: str, cell_id: str, *, settings: dict | None = None,
@@ -100,12 +103,18 @@ class AsyncCellClient:
         deadline = loop.time() + retry_s
         while True:
             try:
-                return parse(JobStatus, await self._ask(keys.submit(self.cell), payload))
+                status = parse(JobStatus, await self._ask(keys.submit(self.cell), payload))
             except RemoteError:
                 raise
             except TransportError:
                 if loop.time() >= deadline:
                     raise
+            else:
+                if status.token is not None:
+                    self._tokens[status.job_id] = status.token
+                    while len(self._tokens) > _KEPT_TOKENS:
+                        self._tokens.popitem(last=False)
+                return status
             await asyncio.sleep(0.1)
 
     async def cell_status(self, *, failures: int = 10) -> CellStatus:
@@ -121,7 +130,8 @@ class AsyncCellClient:
 
     async def cancel(self, job_id: str, token: str | None = None) -> JobStatus:
         """Cancel the job; ``token`` is its submit's ``JobStatus.token`` (a daemon that issues
-        tokens cancels only for it)."""
+        tokens cancels only for it), by default the one this client got when it submitted the job."""
+        token = token or self._tokens.get(job_id)
         payload = None if token is None else CancelRequest(token=token).model_dump_json()
         return parse(JobStatus, await self._ask(keys.cancel(self.cell, job_id), payload))
 
