@@ -214,8 +214,8 @@ class CellDaemon(RequestHandlers):
     def record(self, job: Job, method: str, *args: object) -> None:
         self._recorder.call(job.job_id, self.clock() - job.started, method, *args)
 
-    async def note(self, job: Job, message: str) -> None:
-        log.warning("job %s: %s", job.job_id, message)
+    async def note(self, job: Job, message: str, *, level: int = logging.WARNING) -> None:
+        log.log(level, "job %s: %s", job.job_id, message)
         await self._live[job.job_id].change(message)
 
     async def doing(self, job: Job, activity: JobState, doing: str) -> None:

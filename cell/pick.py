@@ -3,6 +3,8 @@ lift, and with a place carry it over and set it down."""
 
 from __future__ import annotations
 
+import logging
+
 from typing import Any
 
 import numpy as np
@@ -116,7 +118,9 @@ class Gripper(Step):
             pick.held, pick.reason, pick.width = grip.holding, grip.reason, grip.width
             verdict = {True: "holds it", False: "missed it", None: "closed (the gripper cannot tell what it holds)"}
             why = f": {grip.reason}" if grip.reason and grip.holding is not True else ""
-            await cell.note(job, f"the gripper {verdict[grip.holding]}{why}")
+            # Holding it is the pick going as planned: news, not a warning.
+            await cell.note(job, f"the gripper {verdict[grip.holding]}{why}",
+                            level=logging.INFO if grip.holding else logging.WARNING)
         pick.placed = pick.placed or self.places
         return None
 

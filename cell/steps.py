@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import logging
 import time
 from typing import Any, ClassVar, Protocol
 
@@ -66,8 +67,9 @@ class Cell(Protocol):
     def record(self, job: Job, method: str, *args: object) -> None:
         """Add to the job's recording (``cell.recording.JobRecording.<method>``)."""
 
-    async def note(self, job: Job, message: str) -> None:
-        """Tell the job's listeners something that changes nothing (a retry, say)."""
+    async def note(self, job: Job, message: str, *, level: int = logging.WARNING) -> None:
+        """Tell the job's listeners something that changes nothing (a retry, say); logged at ``level``
+        (a warning unless told: news that needs no one's attention is ``logging.INFO``)."""
 
     async def doing(self, job: Job, activity: JobState, doing: str) -> None:
         """The step goes on to something else (a view's capture after its move)."""
@@ -230,7 +232,8 @@ class Reconstruct(Step):
             return None
         views = len(job.captures)
         if nxt is not None and nxt.sure:
-            await cell.note(job, f"the model is sure after {views} views (uncertainty {nxt.uncertainty:.3g})")
+            await cell.note(job, f"the model is sure after {views} views (uncertainty {nxt.uncertainty:.3g})",
+                            level=logging.INFO)
             return None
         if views >= job.request.max_views or nxt is None or nxt.candidate is None \
                 or not 0 <= nxt.candidate < len(candidates):
@@ -240,7 +243,7 @@ class Reconstruct(Step):
             await cell.note(job, f"{why}: ending with a model still unsure{unsure}")
             return None
         await cell.note(job, f"the model is unsure (uncertainty {nxt.uncertainty:.3g}): taking view {views}, "
-                             f"expected to gain {nxt.expected_gain:.3g}")
+                             f"expected to gain {nxt.expected_gain:.3g}", level=logging.INFO)
         return [View(views, candidates[nxt.candidate]), Reconstruct()]
 
 

@@ -62,6 +62,7 @@ def register(commands: Commands) -> None:
 
     cancel = commands.add("cancel", _command(_cancel), help="cancel a job")
     cancel.add_argument("job_id")
+    cancel.add_argument("--token", help="the job's token, from its submit's answer (only its client may cancel it)")
     cancel.add_argument("--json", action="store_true", help="print the job's JobStatus as JSON")
 
 
@@ -325,7 +326,7 @@ async def _status(client: AsyncCellClient, args: argparse.Namespace) -> int:
 
 
 async def _cancel(client: AsyncCellClient, args: argparse.Namespace) -> int:
-    status = await client.cancel(args.job_id)
+    status = await client.cancel(args.job_id, args.token)
     print(status.model_dump_json(indent=1) if args.json else
           f"job {status.job_id}: cancel requested ({status.state.value})")
     return 0

@@ -318,10 +318,14 @@ def test_a_50_mb_submit_is_refused_unread_and_the_daemon_keeps_serving(tmp_path,
             huge = b'{"target": [' + b" " * (50 * 1024 * 1024) + b"0, 0, 0]}"
             with pytest.raises(CellError) as refused:
                 await client._transport.query(keys.submit(config.cell_id), huge, timeout=10)
+            with pytest.raises(CellError) as unversioned:
+                await client._transport.query(keys.submit(config.cell_id), b'{"target": [0.6, 0, 0.05]}', timeout=10)
             result = await client.scan(ScanRequest(target=target_from_config(config.sim)), timeout=30)
         await workers.close()
         assert str(refused.value) == f"the request is {len(huge)} bytes: at most 65536 are taken"
         assert len(huge) not in parsed  # refused before any parse
+        assert str(unversioned.value) == ("invalid ScanRequest: schema_version: Field required "
+                                          "(every request names its schema version, 1 or 2)")
         assert result.worker == "real"
 
     _run(scenario())

@@ -199,6 +199,7 @@ async def _ask(router: str, key: str, payload: str | bytes | None = None, parame
     (json.dumps({"target": [0.6, 0.0, "high"]}), "target.2"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "colour": "red"}), "colour"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "schema_version": 3}), "schema_version"),
+    (json.dumps({"target": [0.6, 0.0, 0.05]}), r"^invalid ScanRequest: schema_version: Field required \("),
     (json.dumps({"target": [0.6, 0.0, 0.05], "plan": {"standoff": -1}}), "plan.standoff"),
     (json.dumps({"target": [0.6, 0.0, 0.05], "plan": {"azimuths_deg": [0, float("nan"), 240]}}),
      "invalid ScanRequest: plan.azimuths_deg.1: Input should be a finite number"),

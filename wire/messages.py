@@ -118,7 +118,9 @@ REQUEST_LIMITS: dict[str, int] = {
 
 def parse_request(model: type[M], payload: bytes | str | None, limit: int) -> M:
     """:func:`parse`, after checking the payload's size against ``limit`` (bytes; see
-    :data:`REQUEST_LIMITS`): a payload of 50 MB is refused unread, with a one-line error.
+    :data:`REQUEST_LIMITS`): a payload of 50 MB is refused unread, with a one-line error. A
+    request names its ``schema_version`` (a client of a later robocell would be misread otherwise):
+    one without it is refused, naming the field.
 
     Raises
     ------
@@ -127,8 +129,12 @@ def parse_request(model: type[M], payload: bytes | str | None, limit: int) -> M:
     ValueError
         As :func:`parse`.
 
-    >>> parse_request(GripRequest, b'{"close": true}', 4096).close
+    >>> parse_request(GripRequest, b'{"schema_version": 2, "close": true}', 4096).close
     True
+    >>> parse_request(GripRequest, b'{"close": true}', 4096)
+    Traceback (most recent call last):
+    ...
+    ValueError: invalid GripRequest: schema_version: Field required (every request names its schema version, 1 or 2)
     >>> parse_request(GripRequest, b" " * 5000, 4096)
     Traceback (most recent call last):
     ...
@@ -137,7 +143,11 @@ def parse_request(model: type[M], payload: bytes | str | None, limit: int) -> M:
     size = 0 if payload is None else len(payload.encode() if isinstance(payload, str) else payload)
     if size > limit:
         raise RequestTooLarge(f"the {model.__name__} is {size} bytes: at most {limit} are taken")
-    return parse(model, payload)
+    request = parse(model, payload)
+    if "schema_version" in model.model_fields and "schema_version" not in request.model_fields_set:
+        raise ValueError(f"invalid {model.__name__}: schema_version: Field required (every request names its "
+                         f"schema version, 1 or {SCHEMA_VERSION})")
+    return request
 
 
 # --- jobs --------------------------------------------------------------------------------------
