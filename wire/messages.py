@@ -70,6 +70,17 @@ class Message(BaseModel):
     schema_version: Annotated[Literal[1, 2], BeforeValidator(_integer)] = SCHEMA_VERSION
 
 
+def _version_required(schema: dict[str, Any]) -> None:
+    schema["required"] = ["schema_version", *schema.get("required", [])]
+
+
+class ClientRequest(Message):
+    """Base of what a client asks of the daemon: its ``schema_version`` is required on the wire
+    (:func:`parse_request` refuses a request without it; a model made in Python has it)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_version_required)
+
+
 def field_errors(exc: ValidationError, *, whole: str = "message", at_most: int = 10) -> str:
     """One line naming each invalid field: ``target: List should have at least 3 items``.
 
@@ -184,7 +195,7 @@ class PickRequest(BaseModel):
     place: Annotated[list[StrictFloat], Field(min_length=2, max_length=2)] | None = None
 
 
-class ScanRequest(Message):
+class ScanRequest(ClientRequest):
     """Scan one object: either explicit flange poses, or a target point to plan views around;
     with ``pick``, then pick it up.
 
@@ -386,14 +397,14 @@ JOB_TOKEN_BYTES = 32
 JobToken = Annotated[StrictStr, Field(min_length=16, max_length=256)]
 
 
-class CancelRequest(Message):
+class CancelRequest(ClientRequest):
     """The payload of a cancel (``robocell/<cell>/jobs/<id>/cancel``): the job's token, which only
     the client that submitted it holds (``JobStatus.token`` in the submit's answer)."""
 
     token: JobToken
 
 
-class PickDecision(Message):
+class PickDecision(ClientRequest):
     """A client's decision on a pick that waits for one: go with grasp ``grasp`` of the result
     (or the daemon's choice, None), or not (``go`` false). Shows the job's token."""
 
