@@ -38,6 +38,7 @@ from wire.messages import REQUEST_LIMITS, JobEvent, JobState, JobStatus, Lifecyc
 from wire.transport import BaseTransport
 
 from .asking import Asker
+from .upkeep import apply_retention_every
 from .handle import JobHandle
 from .job import Checkpoint, Job, Picture
 from .lane import MotionLane
@@ -132,6 +133,8 @@ class CellDaemon(RequestHandlers):
     async def _serve(self, stop: asyncio.Event) -> None:
         transport, cell = self._transport, self.cell
         self._spawn(self._presence.follow())
+        self._spawn(apply_retention_every(self.run_dir, self._jobs, self.config.retention, active=self._live.keys,
+                                          clock=self.clock))
         self.pool.start()
         # Each request's size is checked before it is read: a 50 MB submit is refused unparsed.
         transport.serve(keys.submit(cell), self._on_submit, limit=REQUEST_LIMITS["submit"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -22,6 +23,7 @@ from .plan import job_steps
 from .steps import Step
 from .store import JobStore
 from .tokens import JobTokenRefused, check_token, new_token, token_digest
+from .upkeep import disk_used
 
 if TYPE_CHECKING:
     from .pool import ReconstructorPool
@@ -38,6 +40,7 @@ class RequestHandlers:
 
     config: CellConfig
     cell: str
+    run_dir: Path
     clock: Callable[[], float]
     pool: ReconstructorPool
     _live: dict[str, JobHandle]
@@ -100,13 +103,16 @@ class RequestHandlers:
             return store.counts(), failed
 
         counts, failed = read(self._jobs)
+        disk = await disk_used(self.run_dir, self._jobs, self.config.retention, active=set(self._live),
+                               now=self.clock())
         status = CellStatus(
             cell=self.cell, time=self.clock(), started=self._started,
             workers={part: part in self._presence for part in ("robot", "camera")},
             reconstructors=self.pool.snapshot(), queued=self._queued(), max_queued=self.config.max_queued,
             waiting_for_reconstructor=self.pool.waiting,
             jobs={state.value: n for state, n in counts.items()},
-            recent_failures=[FailedJob(job_id=s.job_id, error=s.error, updated=s.updated) for s in failed])
+            recent_failures=[FailedJob(job_id=s.job_id, error=s.error, updated=s.updated) for s in failed],
+            disk=disk)
         return Response(status.model_dump_json())
 
     async def _on_list(self, request: Request) -> Response:

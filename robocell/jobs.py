@@ -371,6 +371,13 @@ def format_status(status: CellStatus) -> str:
     lines.append(f"queue: {status.queued} waiting for the robot (at most {status.max_queued}), "
                  f"{status.waiting_for_reconstructor} for a reconstructor")
     lines.append("jobs: " + ", ".join(f"{state} {n}" for state, n in status.jobs.items()))
+    if status.disk is not None:
+        disk, mb = status.disk, 1024 * 1024
+        free = "" if disk.free_on_disk is None else f", {disk.free_on_disk / mb:.0f} MB free on its disk"
+        lines.append(f"disk: {(disk.recordings + disk.pictures + disk.store + disk.other) / mb:.1f} MB "
+                     f"(recordings {disk.recordings / mb:.1f}, pictures {disk.pictures / mb:.1f}, "
+                     f"store {disk.store / mb:.1f}){free}; retention will free "
+                     f"{(disk.recordings_to_free + disk.pictures_to_free) / mb:.1f} MB and {disk.jobs_to_prune} jobs")
     if status.recent_failures:
         lines.append("recent failures:")
         for failure in status.recent_failures:

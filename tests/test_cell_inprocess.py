@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
+import time
 from collections.abc import AsyncIterator
 
 import cv2
@@ -362,3 +364,44 @@ def test_only_the_client_that_submitted_a_job_may_cancel_it(tmp_path):
         assert cancelled.state is JobState.CANCELLED
 
     _run(scenario())
+
+
+def test_retention_removes_old_recordings_while_the_cell_runs(tmp_path):
+    """With a short interval the daemon deletes recordings past their age as it runs, keeps the new
+    ones, and its status says what the run directory holds."""
+    config = _config(tmp_path, retention={"interval_s": 0.2, "recordings_max_age_days": 1.0})
+    config.run_dir.mkdir(parents=True, exist_ok=True)
+    old, new = config.run_dir / "20200101-000001.rrd", config.run_dir / "20200101-000002.rrd"
+    for path, age_days in ((old, 3.0), (new, 0.5)):
+        path.write_bytes(b"r" * 100_000)
+        when = time.time() - age_days * 86400
+        os.utime(path, (when, when))
+
+    async def scenario() -> tuple[bool, object]:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        try:
+            async with daemon(network, config) as client:
+                before = (await client.cell_status()).disk
+                for _ in range(500):  # bounded: the first run comes after 0.2 s
+                    if not old.exists():
+                        break
+                    await asyncio.sleep(0.02)
+                after = (await client.cell_status()).disk
+        finally:
+            await workers.close()
+        return before, after
+
+    before, after = asyncio.run(asyncio.wait_for(scenario(), LIMIT_S))
+    assert not old.exists() and new.exists()
+    assert before.recordings >= 200_000 and before.recordings_to_free >= 100_000
+    assert after.recordings_to_free == 0 and 100_000 <= after.recordings < 200_000
+    assert "retention will free" in format_status_of(after)
+
+
+def format_status_of(disk) -> str:
+    from robocell.jobs import format_status
+    from wire.messages import CellStatus
+    status = CellStatus(cell="c", time=0.0, started=0.0, workers={}, reconstructors=[], queued=0, max_queued=1,
+                        waiting_for_reconstructor=0, jobs={}, recent_failures=[], disk=disk)
+    return format_status(status)
