@@ -183,7 +183,7 @@ def _prune_store(store_path: Path, keep: Collection[str], policy: RetentionConfi
             for start in range(0, len(doomed), 500):   # SQLite takes a bounded number of parameters
                 chunk = doomed[start:start + 500]
                 marks = ", ".join("?" * len(chunk))
-                for table in ("events", "results", "jobs"):
+                for table in ("events", "results", "pictures", "jobs"):
                     db.execute(f"DELETE FROM {table} WHERE job_id IN ({marks})", chunk)
             db.execute("COMMIT")
         except BaseException:

@@ -238,6 +238,10 @@ class JobStore:
                           lambda row: ScanResult.model_validate_json(row[0]))
         return rows[0] if rows else None
 
+    def last_seq(self) -> int:
+        """The number of the newest job (0: none yet); the next job's is one more."""
+        return self._read("SELECT COALESCE(MAX(seq), 0) FROM jobs", [], lambda row: int(row[0]))[0]
+
     def token_digest(self, job_id: str) -> str | None:
         """The digest of the job's token (``cell.tokens``), or None (no such job, or one without)."""
         rows = self._read("SELECT token_digest FROM jobs WHERE job_id = ?", [job_id], lambda row: row[0])

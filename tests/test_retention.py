@@ -10,7 +10,7 @@ import pytest
 from cell.retention import GRACE_S, apply_retention, disk_usage
 from cell.store import JobStore
 from wire.config import RetentionConfig, load_config
-from wire.messages import JobState, ScanRequest
+from wire.messages import JobEvent, JobState, ScanRequest
 
 DAY = 86400.0
 NOW = 1_800_000_000.0
@@ -29,9 +29,10 @@ class RunDir:
         when = NOW - age_days * DAY
         status, _ = self.store.add(ScanRequest(target=[0.6, 0.0, 0.05]), n_views=3, now=when)
         if state is not JobState.QUEUED:
-            self.store.update(status.job_id, JobState.MOVING, now=when)
+            self.store.change(JobEvent(job_id=status.job_id, state=JobState.MOVING, message="moving", time=when))
             if state is not JobState.MOVING:
-                self.store.update(status.job_id, state, now=when, error="x" if state is JobState.FAILED else None)
+                self.store.change(JobEvent(job_id=status.job_id, state=state, time=when,
+                                           message="x" if state is JobState.FAILED else state.value))
         if recording_mb:
             self._write(self.root / f"{status.job_id}.rrd", recording_mb, when)
         if pictures:

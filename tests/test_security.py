@@ -105,7 +105,7 @@ def test_three_fake_tokens_that_never_answer_fail_no_job_while_a_real_worker_exi
             pool = await net.pool()
             fakes = []
             for index in range(3):
-                fake = await Transport.open(net.endpoint, connect_timeout_s=10.0)
+                fake = net.network.session()
                 fakes.append(fake)
                 fake.declare_token(keys.reconstructor_alive(f"aaa-fake-{index}"))   # first by name, too
             real = await net.worker("zzz-real")
@@ -131,7 +131,7 @@ def test_busy_heartbeats_forged_under_a_real_workers_id_are_ignored():
             pool = await net.pool()
             real, other = await net.worker("real", 2), await net.worker("other", 2)
             await sees(pool, real, other)
-            forger = await Transport.open(net.endpoint, connect_timeout_s=10.0)
+            forger = net.network.session()
             try:
                 busy = WorkerLoad(worker="real", capacity=1, in_flight=50, period_s=0.5, time=time.time(),
                                   started=time.time())
@@ -240,9 +240,9 @@ def test_a_forged_success_event_does_not_end_scan():
     """Issue 23: on an open router, anyone's ``succeeded`` event made ``scan()`` return a result that never was."""
     async def check():
         async with network() as net:
-            daemon = FakeDaemon(await Transport.open(net.endpoint, connect_timeout_s=10.0), "c1")
-            forger = await Transport.open(net.endpoint, connect_timeout_s=10.0)
-            client = await AsyncCellClient.connect(net.endpoint, "c1")
+            daemon = FakeDaemon(net.network.session(), "c1")
+            forger = net.network.session()
+            client = AsyncCellClient(net.network.session(), "c1")
             try:
                 heard: list[JobEvent] = []
                 scanning = asyncio.ensure_future(client.scan(ScanRequest(target=[0.6, 0.0, 0.05]), timeout=20,
