@@ -38,7 +38,7 @@ class Scan:
         self.K = np.asarray(scan["views"][0]["K"])
         full = [Camera(K=v["K"], T_world_cam=v["T_world_cam"], view=i) for i, v in enumerate(scan["views"])]
         self.cameras = [reduced_camera(v["K"], v["T_world_cam"], view=i) for i, v in enumerate(scan["views"])]
-        fit = reconstruct([View(c, image=j) for c, j in zip(full, self.jpegs)], support_plane=PLANE)
+        fit = reconstruct([View(c, image=j) for c, j in zip(full, self.jpegs)], segmentation=RED_HSV, support_plane=PLANE)
         self.model = fit.superquadric
         planned = plan_grasps(fit.superquadric, PLANE, GRIPPER, residual=fit.residual,
                               silhouette_iou=fit.silhouette_iou, points=fit.points)
