@@ -313,8 +313,10 @@ def test_a_made_up_reconstruction_is_refused(rig):
     finally:
         fake.close()
         rig.reconstructor.announce()
-    assert error.startswith("reconstructing: the answer of liar is refused: camera 0 would be inside it")
-    assert cell.client.status(job_id).error_kind == "ImplausibleResult"
+    # Checked against the daemon's own pictures, refused, and sent again (to the liar: it is alone).
+    assert error.startswith("reconstructing: gave up after 3 attempts: attempt 1 on liar: refused: "
+                            "the model does not match the pictures: view 0 overlaps its silhouette by"), error
+    assert error.count("refused: the model does not match the pictures") == 3, error
 
 
 def test_a_job_the_store_cannot_take_is_refused_and_the_cell_goes_on(rig):
