@@ -160,6 +160,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     points = view.camera.center + np.where(valid, t, 0.0)[:, None] * rays
     evidence = np.full(cw * ch, np.inf, np.float32)
     seen = np.zeros(cw * ch, bool)
+    occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
         uv, depth = other.project(points)
         coarse_uv = other.to_coarse(uv).astype(np.float32)
@@ -171,12 +172,15 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
                            borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
         if hidden is not None:
-            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0)
-            inside &= behind.ravel() == 0
+            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
+            occluded |= inside & behind
+            inside &= ~behind
         difference = _relative_difference(view.coarse, warped).ravel()
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
-    evidence[~seen] = np.nan
+    # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
+    # in the other views that would see it: NaN.
+    evidence[~seen] = np.where(occluded[~seen], np.nan, 0.0)
     return evidence.reshape(ch, cw)
 
 
@@ -483,14 +487,19 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     else:
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), _NOISE_FLOOR)
-    # Where no other view sees the table point behind a pixel (the object hides it from all of them),
-    # the pixel is next to the object's foot, or on it: it counts as standing out.
-    score = np.nan_to_num(evidence / noise, nan=_HIDDEN)
-    standing = np.where(score > 2.5, 255, 0).astype(np.uint8)
-    standing = cv2.morphologyEx(standing, cv2.MORPH_OPEN, _SMALL)
+    score = evidence / noise
+    standing = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     region = _component_near(standing, centre, reach=0.25 * np.hypot(cw, ch))
     if region is None or cv2.countNonZero(region) < 12:
         raise SilhouetteError(_NOTHING, view=view.index)
+    # Where the object hides the table point behind a pixel from every other view, the pixel is next
+    # to the object's foot, or on it: it joins what stands out, for the graph cut to decide.
+    hidden = np.isnan(score)
+    score = np.where(hidden, _HIDDEN, score)
+    if hidden.any():
+        joined = cv2.bitwise_or(standing, np.where(hidden, 255, 0).astype(np.uint8))
+        region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
+        assert region is not None
     return _graph_cut(view, region, score), score
 
 
