@@ -191,13 +191,18 @@ def _background_evidence(view: _View) -> np.ndarray:
     return _shadowless_difference(view.coarse, view.background)
 
 
+_CHROMA_OFFSET = 12.0
+
+
 def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndarray:
     difference = _relative_difference(image, background)
     # A shadow multiplies every channel by about the same factor below 1: compare chromaticities.
-    brightness = image.sum(axis=2) + 3.0
-    ground = background.sum(axis=2) + 3.0
-    chroma = np.abs(image / brightness[..., None] - background / ground[..., None]).sum(axis=2) * 3.0
-    darker = (brightness < ground) & (brightness > 0.15 * ground)
+    # The offset keeps a dark pixel's noise from passing for a change of colour.
+    brightness = image.sum(axis=2) + 3 * _CHROMA_OFFSET
+    ground = background.sum(axis=2) + 3 * _CHROMA_OFFSET
+    chroma = np.abs((image + _CHROMA_OFFSET) / brightness[..., None]
+                    - (background + _CHROMA_OFFSET) / ground[..., None]).sum(axis=2) * 1.5
+    darker = (brightness < 1.05 * ground) & (brightness > 0.15 * ground)
     return np.where(darker, np.minimum(difference, chroma), difference)
 
 
@@ -450,7 +455,9 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     object_colour = local_mean(sure)
     object_distance = _relative_difference(image, object_colour)
     if view.full_background is not None:
-        table_distance = _shadowless_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
+        # Along the edge the empty workspace is the table's own colour there (a print's dark ink next
+        # to the edge would pass for shadow if shadows were forgiven here; the coarse cut left them out).
+        table_distance = _relative_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
     else:
         table_distance = _relative_difference(image, local_mean(table))
     uncertain = (sure == 0) & (table == 0)
