@@ -137,9 +137,14 @@ class _View:
 
 
 def _relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Per-pixel colour difference of two float BGR images, relative to their brightness: a change of
+    """Per-pixel colour difference of two float32 BGR images, relative to their brightness: a change of
     light over the image (vignetting, a gentle fall-off) changes it little, a change of colour much."""
-    return np.abs(a - b).sum(axis=2) / (0.5 * (a.sum(axis=2) + b.sum(axis=2)) + 30.0)
+    difference = cv2.transform(cv2.absdiff(a, b), _CHANNEL_SUM)
+    return difference / (cv2.transform(a + b, _CHANNEL_MEAN) + 30.0)
+
+
+_CHANNEL_SUM = np.ones((1, 3), np.float32)
+_CHANNEL_MEAN = np.full((1, 3), 0.5, np.float32)
 
 
 def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
