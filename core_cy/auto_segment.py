@@ -296,7 +296,10 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     aim = aim_point(cameras if aim_cameras is None else aim_cameras)
     plane = None if support_plane is None else check_support_plane(support_plane, aim)
     standing: list[np.ndarray | None] = [None] * len(views)
-    if plane is not None and not all(view.background is not None for view in views):
+    # With two views the parallax cannot tell the object in one from the other's object mapped through
+    # the plane onto the table beside it (each view's first look holds both): the aim seeds the cut.
+    parallax = plane if len(views) > 2 else None
+    if parallax is not None and not all(view.background is not None for view in views):
         # What stands out in each view, on the first look: where another view's plane point lies behind
         # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
         for view in views:
@@ -304,7 +307,7 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                 evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], plane))
                 first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
                 standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
-    cuts = [_first_cut(view, views, plane, aim, standing) for view in views]
+    cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
@@ -389,15 +392,16 @@ class _Hulls:
             ys, xs = np.nonzero(mask)
             centre = _coarse_aim(view, aim)
             reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]), initial=1.0)) * max(view.sx, view.sy)
-            depth = float(view.camera.project(aim[None, :])[1][0])
-            radius = max(radius, 1.2 * reach_px * depth / view.camera.focal_length)
+            aim_depth = float(view.camera.project(aim[None, :])[1][0])
+            radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
         steps = np.linspace(-radius, radius, _HULL_GRID)
         grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
         self.views = views
-        self.inside, self.pixels = [], []
+        self.inside: list[np.ndarray] = []
+        self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for view, mask in zip(views, masks):
             uv, depth = view.project(grid)
             coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
@@ -425,13 +429,13 @@ class _Hulls:
         coarse, seen, depth = self.pixels[i]
         keep &= seen
         view = self.views[i]
-        hull = np.zeros(self.shape[i], np.uint8)
-        hull[coarse[keep, 1], coarse[keep, 0]] = 255
-        if keep.any():
-            footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
-            size = 2 * int(np.ceil(footprint)) + 3
-            hull = cv2.dilate(hull, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
-        return hull
+        points = np.zeros(self.shape[i], np.uint8)
+        points[coarse[keep, 1], coarse[keep, 0]] = 255
+        if not keep.any():
+            return points
+        footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
+        size = 2 * int(np.ceil(footprint)) + 3
+        return cv2.dilate(points, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
 
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -466,8 +470,7 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     else:
         table_distance = _relative_difference(image, local_mean(table))
     uncertain = (sure == 0) & (table == 0)
-    chosen = np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255
-    chosen = cv2.medianBlur(chosen, 3)
+    chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
     silhouette = np.zeros((height, width), np.uint8)
     silhouette[y0:y1, x0:x1] = chosen
     return mask_with_outline(silhouette, view=view.index)
@@ -500,18 +503,17 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), _NOISE_FLOOR)
     score = evidence / noise
-    standing = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-    region = _component_near(standing, centre, reach=0.25 * np.hypot(cw, ch))
-    if region is None or cv2.countNonZero(region) < 12:
-        raise SilhouetteError(_NOTHING, view=view.index)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
-    # to the object's foot, or on it: it joins what stands out, for the graph cut to decide.
+    # to the object's foot, or on it: it joins what stands out, for the graph cut to decide; but only
+    # what differs from the table says that something stands there at all.
     hidden = np.isnan(score)
     score = np.where(hidden, _HIDDEN, score)
-    if hidden.any():
-        joined = cv2.bitwise_or(standing, np.where(hidden, 255, 0).astype(np.uint8))
-        region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
-        assert region is not None
+    differs = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    differs[hidden] = 0
+    joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
+    region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
+    if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
+        raise SilhouetteError(_NOTHING, view=view.index)
     return _graph_cut(view, region, score), score
 
 
@@ -579,7 +581,8 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) 
         image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
         background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
         cv2.setRNGSeed(0)  # GrabCut's k-means starts from OpenCV's global generator
-        cv2.grabCut(image, mask, None, background_model, object_model, _GC_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model, _GC_ITERATIONS,
+                    cv2.GC_INIT_WITH_MASK)  # the box is unused: the mask seeds it
     result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
     return _filled_region(result, view)
 
