@@ -47,8 +47,10 @@ test: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/robocell demo
 
+# The core on the red scenes and real photographs, then finding printed objects of any colour.
 bench: $(STAMP)
 	$(BIN)/python bench/bench_core.py
+	$(BIN)/python bench/bench_segment.py
 
 bench-cell: $(STAMP)
 	$(BIN)/python bench/bench_cell.py

@@ -42,10 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard", "broad", "grasp"], dest="set_name",
+    which.add_argument("--set", choices=["standard", "broad", "grasp", "printed"], dest="set_name",
                        help="write a fixed benchmark set: standard (the default when --shape is not given; "
                             "32 scans), broad (126: seven families, 3, 4 and 6 views, see bench/bench_core.py), "
-                            "or grasp (bench/bench_grasp.py's scenes, 10 per family)")
+                            "grasp (bench/bench_grasp.py's scenes, 10 per family), or printed (16: printed "
+                            "grocery-like objects on oak, rubber mat, laminate, cutting mat, wood and fabric, "
+                            "lit by a lamp that casts their shadows; no segmentation named, true masks as "
+                            "truth_mask{i}.png; see bench/bench_segment.py)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
                         help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
@@ -64,6 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--masks", action="store_true", help="also write mask{i}.png (not named in scan.json)")
     parser.add_argument("--supplied-masks", action="store_true",
                         help="write mask{i}.png and name them in scan.json (a reconstruction then uses them)")
+    parser.add_argument("--backgrounds", action="store_true",
+                        help="also write background{i}.jpg, the empty workspace from each view's pose under the "
+                             "same light, and name it as the view's background in scan.json")
     parser.add_argument("--jpeg-quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
     parser.add_argument("--noise", type=float, metavar="SIGMA",
                         help="sensor noise, standard deviation in grey levels (default 2)")
@@ -93,7 +99,7 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
     from workers.sim.grasp_set import grasp_set
-    from workers.sim.scans import broad_set, make_spec, write_standard_set
+    from workers.sim.scans import broad_set, make_spec, printed_set, standard_set
 
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
@@ -103,14 +109,9 @@ def run(args: argparse.Namespace) -> int:
         if args.supplied_masks:
             print("robocell sim: --supplied-masks only applies with --shape", file=sys.stderr)
             return 2
-        if args.set_name == "grasp":
-            paths = (spec.write(args.out, write_masks=args.masks) for spec in grasp_set(args.seed))
-        elif args.set_name == "broad":
-            paths = (spec.write(args.out, write_masks=args.masks) for spec in broad_set(args.seed))
-        else:
-            paths = write_standard_set(args.out, seed=args.seed, write_masks=args.masks)
-        for path in paths:
-            print(path, flush=True)
+        sets = {"grasp": grasp_set, "broad": broad_set, "printed": printed_set, "standard": standard_set}
+        for spec in sets[args.set_name or "standard"](args.seed):
+            print(spec.write(args.out, write_masks=args.masks, backgrounds=args.backgrounds), flush=True)
         return 0
     count = 1 if args.count is None else args.count
     views = 3 if args.views is None else args.views
@@ -140,7 +141,8 @@ def run(args: argparse.Namespace) -> int:
         seed = args.seed + i
         spec = make_spec(f"{args.shape}-{seed:03d}", obj, seed, views, distance, elevation,
                          fit_distance=args.distance is None, **look)
-        print(spec.write(args.out, write_masks=args.masks, name_masks=args.supplied_masks), flush=True)
+        print(spec.write(args.out, write_masks=args.masks, name_masks=args.supplied_masks,
+                         backgrounds=args.backgrounds), flush=True)
     return 0
 
 

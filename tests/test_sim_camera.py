@@ -18,6 +18,7 @@ from wire.config import SimConfig
 from wire.errors import ConfigError
 from workers.sim.objects import CupStack, LumpyFigure, SuperquadricObject
 from workers.sim.render import project
+from workers.sim.textures import PrintedObject
 from workers.sim.scans import look_at, object_target
 from workers.sim.scene import scene_from_config, truth_from_config
 from workers.sim.axis import SimCameraServer
@@ -58,6 +59,12 @@ class Pose:
         return self.T
 
 
+def red_scene(sim: SimConfig) -> list:
+    """The ``[sim]`` object as the classic red one (a printed object without its print): these tests
+    find it by its colour."""
+    return [obj.object if isinstance(obj, PrintedObject) else obj for obj in scene_from_config(sim)]
+
+
 @pytest.fixture(scope="module")
 def target() -> np.ndarray:
     return object_target(scene_from_config(SIM)[0])
@@ -70,7 +77,7 @@ def pose(target) -> Pose:
 
 @pytest.fixture
 def server(pose):
-    with SimCameraServer(scene_from_config(SIM), K=K, image_size=(640, 480), pose_provider=pose, auth=None) as srv:
+    with SimCameraServer(red_scene(SIM), K=K, image_size=(640, 480), pose_provider=pose, auth=None) as srv:
         yield srv
 
 
@@ -169,7 +176,7 @@ def test_pose_provider_errors_are_500(target):
         raise RuntimeError("zenoh gone")
 
     for provider in (broken, lambda: np.eye(3)):
-        with SimCameraServer(scene_from_config(SIM), K=K, pose_provider=provider, auth=None) as srv:
+        with SimCameraServer(red_scene(SIM), K=K, pose_provider=provider, auth=None) as srv:
             with httpx.Client(base_url=srv.url, timeout=10.0) as c:
                 assert c.get(SNAPSHOT).status_code == 500
 
@@ -188,7 +195,7 @@ def digest_header(user: str, password: str, nonce: str, uri: str, nc: int = 1, r
 @pytest.fixture(scope="module")
 def digest_server(target):
     pose = Pose(look_at(target + [0.25, 0.1, 0.35], target))
-    with SimCameraServer(scene_from_config(SIM), K=scaled_K(K, (640, 480), (160, 120)), image_size=(160, 120),
+    with SimCameraServer(red_scene(SIM), K=scaled_K(K, (640, 480), (160, 120)), image_size=(160, 120),
                          pose_provider=pose, username="root", password="pass word", auth="digest") as srv:
         yield srv
 
@@ -222,7 +229,7 @@ def test_digest_auth(digest_server):
 
 def test_basic_auth(target):
     pose = Pose(look_at(target + [0.25, 0.1, 0.35], target))
-    with SimCameraServer(scene_from_config(SIM), K=K, pose_provider=pose, username="root", password="pw",
+    with SimCameraServer(red_scene(SIM), K=K, pose_provider=pose, username="root", password="pw",
                          auth="basic") as srv, httpx.Client(base_url=srv.url, timeout=10.0) as c:
         params = {"action": "list", "group": "Properties.Image.Resolution"}
         refused = c.get("/axis-cgi/param.cgi", params=params, auth=httpx.BasicAuth("root", "nope"))
@@ -249,6 +256,8 @@ def test_server_arguments_are_checked():
 def test_scene_from_config(shape, kind):
     sim = SimConfig(shape=shape, size=[0.025, 0.035, 0.05], position=[0.5, 0.1])
     (obj,) = scene_from_config(sim)
+    if isinstance(obj, PrintedObject):  # scene.PRINTED_CELL_SCENE: the same object, printed
+        obj = obj.object
     assert isinstance(obj, kind)
     v = obj.mesh()[0]
     assert v[:, 2].min() == pytest.approx(0.0, abs=1e-9)  # stands on the table

@@ -20,7 +20,8 @@ from wire.errors import CameraError
 from workers.camera.backend import Camera, Snapshot
 
 from .objects import SimObject
-from .render import TableScene, render
+from .render import render
+from .scene import surroundings
 
 __all__ = ["SceneCamera", "SimCamera", "scaled_K"]
 
@@ -44,8 +45,11 @@ def scaled_K(K: ArrayLike, image_size: tuple[int, int], size: tuple[int, int]) -
 class SceneCamera:
     """Renders ``scene_objects`` on the table as a camera at a pose sees them; thread-safe.
 
-    The table's look comes from ``seed``; the sensor noise from ``seed`` and the picture's
-    number, so no two pictures are alike and a run repeats exactly.
+    The table and the lamp are :func:`workers.sim.scene.surroundings` of the objects and
+    ``seed`` (printed objects stand on oak under a lamp that casts their shadow); the sensor
+    noise comes from ``seed`` and the picture's number, so no two pictures are alike and a
+    run repeats exactly. With :attr:`object_present` False (or ``jpeg(..., empty=True)``) it
+    photographs the empty workspace: the same table under the same lamp, no object, no shadow.
     """
 
     def __init__(self, scene_objects: Sequence[SimObject], *, K: ArrayLike, image_size: tuple[int, int],
@@ -55,13 +59,18 @@ class SceneCamera:
         self.image_size = (int(image_size[0]), int(image_size[1]))
         self._dist = None if dist is None else np.asarray(dist, dtype=np.float64)
         self._seed, self.jpeg_quality = int(seed), int(jpeg_quality)
-        self._table = TableScene.from_seed(self._seed)
+        self._table, self._light = surroundings(self._objects, self._seed)
         self._lock = threading.Lock()  # one render at a time bounds memory
         self._count = 0
+        #: Whether the object stands on the table; False: pictures of the empty workspace.
+        self.object_present = True
 
     def jpeg(self, T_world_cam: ArrayLike, *, size: tuple[int, int] | None = None,
-             quality: int | None = None) -> bytes:
+             quality: int | None = None, empty: bool | None = None) -> bytes:
         """The JPEG the camera takes at ``T_world_cam`` (camera-to-world, OpenCV axes).
+
+        ``empty``: True for the empty workspace, False with the object; None (the default)
+        as :attr:`object_present` has it.
 
         Raises
         ------
@@ -73,10 +82,12 @@ class SceneCamera:
             raise ValueError(f"the camera pose must be a finite 4x4 matrix, got shape {T.shape}")
         size = self.image_size if size is None else size
         K = self.K if size == self.image_size else scaled_K(self.K, self.image_size, size)
+        empty = not self.object_present if empty is None else empty
         with self._lock:
             self._count += 1
-            bgr, _ = render(self._objects, T, K, self._dist, size,
-                            rng=np.random.default_rng([self._seed, self._count]), table=self._table)
+            bgr, _ = render([] if empty else self._objects, T, K, self._dist, size,
+                            rng=np.random.default_rng([self._seed, self._count]), table=self._table,
+                            light=self._light)
         ok, encoded = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality or self.jpeg_quality])
         if not ok:
             raise ValueError("JPEG encoding failed")

@@ -5,6 +5,7 @@ plus ``truth.json``, the ground truth to score a reconstruction against.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from dataclasses import dataclass, field
@@ -16,11 +17,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
-from .render import AMBIENT, TableScene, render
+from .render import AMBIENT, Light, TableScene, render
+from .textures import PrintedObject, product_look, table_look
 
 __all__ = [
     "HSV_SEGMENTATION",
     "BROAD_FAMILIES",
+    "PRINTED_SCENES",
     "ScanSpec",
     "broad_set",
     "default_K",
@@ -29,6 +32,7 @@ __all__ = [
     "make_spec",
     "object_target",
     "plan_views",
+    "printed_set",
     "standard_set",
     "write_scan",
     "write_standard_set",
@@ -144,6 +148,12 @@ def write_scan(
     name_masks: bool = False,
     noise_sigma: float = 2.0,
     ambient: float = AMBIENT,
+    table: TableScene | None = None,
+    light: Light | None = None,
+    blur_sigma: float = 0.5,
+    segmentation: dict[str, Any] | None = HSV_SEGMENTATION,
+    truth_masks: bool = False,
+    backgrounds: bool = False,
 ) -> Path:
     """Render and write one scan bundle; return its directory.
 
@@ -155,8 +165,17 @@ def write_scan(
     so a reconstruction still has to segment the images, unless ``name_masks``
     (which implies ``write_masks``) supplies them as each view's ``mask``.
     ``noise_sigma`` (grey levels) and ``ambient`` (see :func:`render`) set the
-    sensor noise and how dark the shaded side is. The table's look and the
-    sensor noise follow ``seed``: the same arguments give the same bytes.
+    sensor noise and how dark the shaded side is. The table's look (unless
+    ``table`` is given) and the sensor noise follow ``seed``: the same arguments
+    give the same bytes.
+
+    ``light`` (see :func:`render`) lights the scene and casts the shadows;
+    ``blur_sigma`` is the lens blur; ``segmentation`` goes into scan.json as it
+    is, None leaving the key out (the reader's default). ``truth_masks`` writes
+    the true silhouettes as ``truth_mask{i}.png``, never named in scan.json;
+    ``backgrounds`` also writes ``background{i}.jpg``, the empty workspace from
+    the same pose under the same light (no object, no shadow, its own sensor
+    noise), named as each view's ``background``.
     """
     objs = [objects] if isinstance(objects, SimObject) else list(objects)
     if not objs:
@@ -164,25 +183,37 @@ def write_scan(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     K = np.asarray(K, dtype=np.float64)
-    table = TableScene.from_seed(seed)
-    views = []
-    for i, T in enumerate(cameras):
-        bgr, mask = render(objs, T, K, dist, image_size, rng=np.random.default_rng([seed, i]),
-                           noise_sigma=noise_sigma, table=table, ambient=ambient)
+    table = TableScene.from_seed(seed) if table is None else table
+    look = dict(noise_sigma=noise_sigma, table=table, ambient=ambient, light=light, blur_sigma=blur_sigma)
+
+    def write_jpeg(name: str, bgr: NDArray[np.uint8]) -> None:
         ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         if not ok:
-            raise RuntimeError(f"JPEG encoding failed for view {i}")
-        (out / f"view{i}.jpg").write_bytes(jpg.tobytes())
+            raise RuntimeError(f"JPEG encoding failed for {name}")
+        (out / name).write_bytes(jpg.tobytes())
+
+    views = []
+    for i, T in enumerate(cameras):
+        bgr, mask = render(objs, T, K, dist, image_size, rng=np.random.default_rng([seed, i]), **look)
+        write_jpeg(f"view{i}.jpg", bgr)
         if write_masks or name_masks:
             cv2.imwrite(str(out / f"mask{i}.png"), mask)
+        if truth_masks:
+            cv2.imwrite(str(out / f"truth_mask{i}.png"), mask)
         view: dict[str, Any] = {"image": f"view{i}.jpg", "K": K.tolist()}
         if name_masks:
             view["mask"] = f"mask{i}.png"
+        if backgrounds:
+            empty, _ = render([], T, K, dist, image_size, rng=np.random.default_rng([seed, i, 1]), **look)
+            write_jpeg(f"background{i}.jpg", empty)
+            view["background"] = f"background{i}.jpg"
         if dist is not None:
             view["dist"] = np.asarray(dist, dtype=np.float64).ravel().tolist()
         view["T_world_cam"] = np.asarray(T, dtype=np.float64).tolist()
         views.append(view)
-    scan = {"views": views, "segmentation": HSV_SEGMENTATION, "support_plane": [0, 0, 1, 0]}
+    scan: dict[str, Any] = {"views": views, "segmentation": segmentation, "support_plane": [0, 0, 1, 0]}
+    if segmentation is None:
+        del scan["segmentation"]
     (out / "scan.json").write_bytes(_json_bytes(scan))
     truth = objs[0].truth() if len(objs) == 1 else {"kind": "scene", "objects": [o.truth() for o in objs]}
     (out / "truth.json").write_bytes(_json_bytes(truth))
@@ -204,14 +235,24 @@ class ScanSpec:
     jpeg_quality: int = 90
     noise_sigma: float = 2.0
     ambient: float = AMBIENT
+    # The look of the printed scenes (see write_scan); the defaults are the red scenes'.
+    table: TableScene | None = None
+    light: Light | None = None
+    blur_sigma: float = 0.5
+    segmentation: dict[str, Any] | None = field(default_factory=lambda: HSV_SEGMENTATION)
+    truth_masks: bool = False
+    table_kind: str = ""  # what a benchmark groups the scan by
+    object_kind: str = ""
 
-    def write(self, out_dir: str | Path, write_masks: bool = False, name_masks: bool = False) -> Path:
-        """Write the bundle to ``out_dir / name`` (see :func:`write_scan` for the masks)."""
+    def write(self, out_dir: str | Path, write_masks: bool = False, name_masks: bool = False,
+              backgrounds: bool = False) -> Path:
+        """Write the bundle to ``out_dir / name`` (see :func:`write_scan` for the masks and backgrounds)."""
         return write_scan(
             Path(out_dir) / self.name, self.objects, self.cameras, self.K, self.dist,
             seed=self.seed, image_size=self.image_size, jpeg_quality=self.jpeg_quality,
             write_masks=write_masks, name_masks=name_masks, noise_sigma=self.noise_sigma,
-            ambient=self.ambient,
+            ambient=self.ambient, table=self.table, light=self.light, blur_sigma=self.blur_sigma,
+            segmentation=self.segmentation, truth_masks=self.truth_masks, backgrounds=backgrounds,
         )
 
 
@@ -352,4 +393,88 @@ def broad_set(seed: int = 0, per_family: int = 6, view_counts: Sequence[int] = (
             for n in view_counts:
                 specs.append(make_spec(f"{family}-{i:02d}-{n}v", obj, scene_seed, n, elevation_deg=(20.0, 60.0),
                                        **look))
+    return specs
+
+
+# --- printed objects on real-looking tables ---------------------------------------------------
+
+#: The printed set's scenes: (table kind, look, shape, views). Shapes: see :func:`_printed_shape`.
+PRINTED_SCENES: tuple[tuple[str, str, str, int], ...] = (
+    ("oak", "mustard", "bottle", 3),
+    ("oak", "table-colour", "box", 3),
+    ("oak", "soup-can", "lying-can", 4),
+    ("rubber-mat", "dark", "can", 3),
+    ("rubber-mat", "tin", "tin", 3),
+    ("rubber-mat", "printed", "ellipsoid", 6),
+    ("laminate", "white", "box", 3),
+    ("laminate", "sugar-box", "tall-box", 3),
+    ("laminate", "mustard", "bottle", 4),
+    ("cutting-mat", "sugar-box", "lying-box", 3),
+    ("cutting-mat", "soup-can", "can", 3),
+    ("cutting-mat", "printed", "lying-can", 3),
+    ("wood", "tin", "lying-can", 3),
+    ("wood", "printed", "box", 4),
+    ("fabric", "soup-can", "can", 3),
+    ("fabric", "printed", "ellipsoid", 3),
+)
+
+
+def _printed_shape(shape: str, rng: np.random.Generator, xy: tuple[float, float], yaw: float) -> SuperquadricObject:
+    """A grocery-sized superquadric: bottle (rounded shoulders, oval), can, tin (short, wide), lying can,
+    box, tall box (a sugar box on its end), lying box, ellipsoid; sizes vary by about 15 %."""
+    k = rng.uniform(0.85, 1.15, 3)
+    family, size, lying = {
+        "bottle": ((0.45, 1.0), [0.034, 0.024, 0.085], False),
+        "can": ("cylinder", [0.034, 0.034, 0.05], False),
+        "tin": ("cylinder", [0.045, 0.045, 0.022], False),
+        "lying-can": ("cylinder", [0.033, 0.033, 0.055], True),
+        "box": ("box", [0.04, 0.032, 0.035], False),
+        "tall-box": ("box", [0.045, 0.025, 0.075], False),
+        "lying-box": ("box", [0.045, 0.025, 0.075], True),
+        "ellipsoid": ("ellipsoid", [0.05, 0.035, 0.03], False),
+    }[shape]
+    size = np.asarray(size) * k
+    if family == "cylinder":
+        size[1] = size[0]
+    return SuperquadricObject.on_table(family, size, xy, yaw, lying=lying)  # type: ignore[arg-type]
+
+
+def printed_set(seed: int = 0) -> list[ScanSpec]:
+    """Printed objects on real-looking tables, lit by one lamp that casts their shadows.
+
+    One scan per row of :data:`PRINTED_SCENES`: grocery-like objects (a yellow mustard
+    bottle, a white-and-blue sugar box, a red-and-white soup can, a blue-and-yellow tin,
+    an object the colour of its table, a white object on white laminate, a dark one on a
+    dark mat, and randomly printed ones) on oak, a rubber mat, white laminate, a cutting
+    mat and the classic wood and fabric. The lamp's direction (azimuth any, 35-70 degrees
+    high), strength and warmth, the lens blur, sensor noise, JPEG quality, sizes, yaws and places
+    (within 5 cm of (0.6, 0)) follow ``seed``. The bundles name no segmentation (the
+    default finds the object) and carry their true masks as ``truth_mask{i}.png``; names
+    are ``{table}-{look}-{shape}``, and ``table_kind``, ``object_kind`` say which.
+    """
+    specs = []
+    for index, (kind, look_name, shape, n_views) in enumerate(PRINTED_SCENES):
+        rng = np.random.default_rng([seed, 300, index])
+        scene_seed = 1000 * seed + 300 + index
+        rho, phi = 0.05 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+        xy = (0.6 + rho * np.cos(phi), rho * np.sin(phi))
+        obj = _printed_shape(shape, rng, xy, rng.uniform(0, 180))
+        table = TableScene.of_kind(kind, scene_seed)
+        if look_name == "table-colour":
+            look = table_look(table, xy)
+        else:
+            look = product_look(look_name, rng, float(obj.size[2]))
+        ambient = float(rng.uniform(0.25, 0.45))
+        elevation = float(rng.uniform(35, 70))
+        # The lit table at 85-100 % of its albedo, as a camera's exposure would put it.
+        strength = (float(rng.uniform(0.85, 1.0)) - ambient) / np.sin(np.radians(elevation))
+        warmth = float(rng.uniform(0.0, 0.12))  # from a daylight-white lamp to a warm one
+        light = Light.from_angles(float(rng.uniform(0, 360)), elevation, strength, ambient,
+                                  colour=(1.0 - warmth, 1.0 - warmth / 3, 1.0))
+        spec = make_spec(f"{kind}-{look_name}-{shape}", PrintedObject(obj, look), scene_seed, n_views,
+                         elevation_deg=(30.0, 60.0), jpeg_quality=int(rng.integers(80, 96)),
+                         noise_sigma=float(rng.uniform(1.5, 3.0)))
+        specs.append(dataclasses.replace(
+            spec, table=table, light=light, blur_sigma=float(rng.uniform(0.5, 0.9)), segmentation=None,
+            truth_masks=True, table_kind=kind, object_kind=look_name))
     return specs

@@ -1,16 +1,33 @@
-"""The simulated scene of a cell's configuration: one known object on the table."""
+"""The simulated scene of a cell's configuration: one known object on the table.
+
+With :data:`PRINTED_CELL_SCENE` the object wears a printed look (a sugar box, a soup can,
+a random print) and stands on an oak table under one lamp that casts its shadow
+(:func:`surroundings`); without it, it is the classic red object on the pale table, unlit,
+which the red HSV segmentation finds.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
+
+import numpy as np
 
 from core_cy.superquadric import Superquadric
 
 from wire.config import SimConfig
 from wire.errors import ConfigError
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
+from .render import Light, TableScene
+from .textures import PrintedObject, product_look
 
-__all__ = ["scene_from_config", "truth_from_config", "target_from_config"]
+__all__ = ["PRINTED_CELL_SCENE", "scene_from_config", "surroundings", "truth_from_config", "target_from_config"]
+
+#: Whether the cell's simulated object is printed, on an oak table under a lamp (True), or red on the
+#: pale table (False). It needs a segmentation that finds an object of any colour (``auto``), the
+#: default once it exists: until then the cell's scans, which name no segmentation, look for red.
+PRINTED_CELL_SCENE = False
+#: The look each shape of ``[sim]`` wears when printed.
+_LOOK_OF_SHAPE = {"box": "sugar-box", "cylinder": "soup-can"}
 
 
 def scene_from_config(sim: SimConfig) -> list[SimObject]:
@@ -26,19 +43,39 @@ def scene_from_config(sim: SimConfig) -> list[SimObject]:
         If the size does not make a valid object of that shape.
     """
     try:
+        obj: SimObject
         if sim.grasp_scene is not None:
             from .grasp_set import grasp_object
 
-            return [grasp_object(sim.grasp_scene, sim.seed)]
-        if sim.shape == "cup-stack":
-            return [CupStack(sim.position, *sim.size)]
-        if sim.shape == "lumpy":
-            return [LumpyFigure(sim.position, sim.size, seed=sim.seed)]
-        return [SuperquadricObject.on_table(sim.shape, sim.size, sim.position, sim.yaw_deg)]
+            obj = grasp_object(sim.grasp_scene, sim.seed)
+        elif sim.shape == "cup-stack":
+            obj = CupStack(sim.position, *sim.size)
+        elif sim.shape == "lumpy":
+            obj = LumpyFigure(sim.position, sim.size, seed=sim.seed)
+        else:
+            obj = SuperquadricObject.on_table(sim.shape, sim.size, sim.position, sim.yaw_deg)
+        if not PRINTED_CELL_SCENE:
+            return [obj]
+        look_name = "printed" if sim.grasp_scene is not None else _LOOK_OF_SHAPE.get(sim.shape, "printed")
+        height = float(np.ptp(obj.mesh()[0][:, 2])) / 2
+        return [PrintedObject(obj, product_look(look_name, np.random.default_rng([sim.seed, 41]), height))]
     except KeyError:
         raise ConfigError(f"sim: no grasp scene {sim.grasp_scene!r}") from None
     except ValueError as exc:
         raise ConfigError(f"sim: size {sim.size} does not make a {sim.shape}: {exc}") from exc
+
+
+def surroundings(objects: Sequence[SimObject], seed: int) -> tuple[TableScene, Light | None]:
+    """The table and the lamp round ``objects``: for printed objects, an oak table and a lamp whose
+    direction follows ``seed``; for the classic red ones, their pale table (from ``seed``), unlit."""
+    if not any(isinstance(obj, PrintedObject) for obj in objects):
+        return TableScene.from_seed(seed), None
+    rng = np.random.default_rng([seed, 43])
+    elevation = float(rng.uniform(45, 65))
+    ambient = 0.35
+    light = Light.from_angles(float(rng.uniform(0, 360)), elevation, (0.95 - ambient) / np.sin(np.radians(elevation)),
+                              ambient)
+    return TableScene.of_kind("oak", seed), light
 
 
 def truth_from_config(sim: SimConfig) -> dict[str, Any]:
