@@ -43,13 +43,16 @@ from .segment import mask_with_outline
 __all__ = ["auto_silhouettes", "aim_point"]
 
 #: The coarse images' longer side, px: the cues and the graph cut work there.
-COARSE_SIDE = 160
+COARSE_SIDE = 200
 #: A view in which nothing stands out over this share of the evidence's noise is empty.
 _NOTHING = "nothing stands on the table near the views' aim"
 _GC_ITERATIONS = 3
 #: The evidence's noise is taken to be at least this (a relative colour difference): JPEG and a
 #: pixel's worth of misregistration leave that much on a flat table.
 _NOISE_FLOOR = 0.03
+#: Against a picture of the empty workspace from the same pose nothing is misregistered: JPEG and the
+#: sensor's noise are all.
+_BACKGROUND_NOISE_FLOOR = 0.015
 #: The score of a pixel whose table point no other view sees: above the threshold of standing out,
 #: below that of a sure seed.
 _HIDDEN = 3.0
@@ -197,6 +200,9 @@ def _background_evidence(view: _View) -> np.ndarray:
 
 
 _CHROMA_OFFSET = 12.0
+#: How far a shadow's chromaticity may move from the lit table's (a warm lamp's colour leaves it):
+#: less than an object's print of another colour does.
+_LAMP_HUE_SHIFT = 0.12
 
 
 def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndarray:
@@ -299,7 +305,7 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     # With two views the parallax cannot tell the object in one from the other's object mapped through
     # the plane onto the table beside it (each view's first look holds both): the aim seeds the cut.
     parallax = plane if len(views) > 2 else None
-    if parallax is not None and not all(view.background is not None for view in views):
+    if parallax is not None:
         # What stands out in each view, on the first look: where another view's plane point lies behind
         # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
         for view in views:
@@ -494,14 +500,28 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     it came from, in units of its noise (None without a plane or a background)."""
     cw, ch = view.coarse_size
     centre = _coarse_aim(view, aim)
+    floor = _NOISE_FLOOR
     if view.background is not None:
         evidence = _background_evidence(view)
+        floor = _BACKGROUND_NOISE_FLOOR
+        if plane is not None:
+            # A shadow under a coloured lamp is not of the table's chromaticity (the lamp's colour is
+            # gone from it), but it is on the table: darker than the empty workspace, and mapped
+            # through the plane by the other views like the rest of the table.
+            mapped = _parallax_evidence(view, [v for v in views if v is not view], plane,
+                                        [standing[v.index] for v in views if v is not view])
+            mapped_score = np.nan_to_num(mapped, nan=np.inf) / max(_noise_level(mapped), _NOISE_FLOOR)
+            image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
+            brightness, ground = image.sum(axis=2), empty.sum(axis=2)
+            hue_shift = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
+            shadow = (brightness < 0.95 * ground) & (hue_shift < _LAMP_HUE_SHIFT) & (mapped_score < 1.5)
+            evidence = np.where(shadow, np.minimum(evidence, mapped), evidence)
     elif plane is not None:
         evidence = _parallax_evidence(view, [v for v in views if v is not view], plane,
                                       [standing[v.index] for v in views if v is not view])
     else:
         return _cut_around_aim(view, centre), None
-    noise = max(_noise_level(evidence), _NOISE_FLOOR)
+    noise = max(_noise_level(evidence), floor)
     score = evidence / noise
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
     # to the object's foot, or on it: it joins what stands out, for the graph cut to decide; but only
