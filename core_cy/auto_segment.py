@@ -477,6 +477,8 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
         table_distance = _relative_difference(image, local_mean(table))
     uncertain = (sure == 0) & (table == 0)
     chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
+    if not cv2.countNonZero(chosen):
+        raise SilhouetteError(_NOTHING, view=view.index)
     silhouette = np.zeros((height, width), np.uint8)
     silhouette[y0:y1, x0:x1] = chosen
     return mask_with_outline(silhouette, view=view.index)
