@@ -310,7 +310,7 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
         # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
         for view in views:
             if view.background is None:
-                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], plane))
+                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
                 first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
                 standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
     cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
