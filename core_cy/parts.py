@@ -55,9 +55,6 @@ PART_GAIN = 0.02
 _VIEWS_TO_PAY = 2
 # Edge samples per view for the union: a part that owns a tenth of the outline has ten.
 _PART_SAMPLES = 96
-# Edge samples per view to screen the proposals on (their first few steps, where only the order of
-# their costs counts): a coarser outline ranks them alike at a fraction of the evaluations' cost.
-_SCREEN_SAMPLES = 48
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
 _ITERATIONS = 30
 # A hull point projecting this far (px) outside the union's outline is unexplained in that view.
@@ -161,11 +158,9 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         return PartsFit((single,), ious)
     points = np.asarray(points, dtype=np.float64)
     plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
-    outlines = [silhouette_outline(silhouette) for silhouette in silhouettes]
-    fitter, screen = (_Fitter(cameras, [edge_samples(outline, silhouette, None, count=count)
-                                        for outline, silhouette in zip(outlines, silhouettes)],
-                              single.T_world_object[:3, 3], support_plane, 1.0)
-                      for count in (_PART_SAMPLES, _SCREEN_SAMPLES))
+    edges = [edge_samples(silhouette_outline(silhouette), silhouette, None, count=_PART_SAMPLES)
+             for silhouette in silhouettes]
+    fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
     current: tuple[Superquadric, ...] = (single,)
     # A union of every part paying that explains more in one view but not yet in two (a dumbbell's
     # two weights without the bar between them) goes one round on before it is given up.
@@ -183,8 +178,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
-        screened = screen.result(screen.best_of(proposals, 0, finalists=1)).parts
-        candidate = fitter.result(fitter.descent(screened).run(_ITERATIONS)).parts
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
         # More parts must explain more: as much as one part must pay, in as many views.
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
