@@ -102,6 +102,8 @@ def measure(specs, out: Path, repeat: int, today: Path | None = None):
 
 
 def table(title: str, rows) -> None:
+    if not rows:
+        return  # nothing measured (--per-kind 0: the standard set alone)
     print(f"\n{title}")
     print(f"{'kind':<16}{'one sq: mean':>13}{'worst':>7}{'parts: mean':>13}{'worst':>7}{'parts used':>12}"
           f"{'time x':>8}")

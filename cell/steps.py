@@ -133,10 +133,18 @@ class View(Step):
         moved = parse_reply(MoveReply, reply.payload, "the robot worker")
         job.durations_s[f"move{view}"] = moved.duration_s
         flange = job.flange = np.asarray(moved.T_base_flange)
-        cell.record(job, "log_robot_pose", flange)
-        await cell.doing(job, JobState.CAPTURING, f"capturing view {view}")
-        reply = await cell.ask(job, "camera", keys.camera_capture(config.cell_id),
-                               CaptureRequest(job_id=job.job_id, view=view), config.timeouts.capture_s)
+        # The capture is asked first, and the job's change is stored, told and recorded while
+        # the camera works: the same change in the same order, off the way of the picture.
+        capture = asyncio.ensure_future(cell.ask(job, "camera", keys.camera_capture(config.cell_id),
+                                                 CaptureRequest(job_id=job.job_id, view=view),
+                                                 config.timeouts.capture_s))
+        try:
+            await cell.doing(job, JobState.CAPTURING, f"capturing view {view}")
+            cell.record(job, "log_robot_pose", flange)
+        except BaseException:
+            capture.cancel()
+            raise
+        reply = await capture
         info = parse_reply(CaptureInfo, reply.attachment, "the camera worker")
         job.durations_s[f"capture{view}"] = info.duration_s
         picture = Picture(reply.payload, flange, camera_poses([flange], config.T_flange_cam)[0])

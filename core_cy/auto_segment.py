@@ -43,13 +43,16 @@ from .segment import mask_with_outline
 __all__ = ["auto_silhouettes", "aim_point"]
 
 #: The coarse images' longer side, px: the cues and the graph cut work there.
-COARSE_SIDE = 160
+COARSE_SIDE = 200
 #: A view in which nothing stands out over this share of the evidence's noise is empty.
 _NOTHING = "nothing stands on the table near the views' aim"
 _GC_ITERATIONS = 3
 #: The evidence's noise is taken to be at least this (a relative colour difference): JPEG and a
 #: pixel's worth of misregistration leave that much on a flat table.
 _NOISE_FLOOR = 0.03
+#: Against a picture of the empty workspace from the same pose nothing is misregistered: JPEG and the
+#: sensor's noise are all.
+_BACKGROUND_NOISE_FLOOR = 0.015
 #: The score of a pixel whose table point no other view sees: above the threshold of standing out,
 #: below that of a sure seed.
 _HIDDEN = 3.0
@@ -137,9 +140,14 @@ class _View:
 
 
 def _relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Per-pixel colour difference of two float BGR images, relative to their brightness: a change of
+    """Per-pixel colour difference of two float32 BGR images, relative to their brightness: a change of
     light over the image (vignetting, a gentle fall-off) changes it little, a change of colour much."""
-    return np.abs(a - b).sum(axis=2) / (0.5 * (a.sum(axis=2) + b.sum(axis=2)) + 30.0)
+    difference = cv2.transform(cv2.absdiff(a, b), _CHANNEL_SUM)
+    return difference / (cv2.transform(a + b, _CHANNEL_MEAN) + 30.0)
+
+
+_CHANNEL_SUM = np.ones((1, 3), np.float32)
+_CHANNEL_MEAN = np.full((1, 3), 0.5, np.float32)
 
 
 def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
@@ -160,6 +168,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     points = view.camera.center + np.where(valid, t, 0.0)[:, None] * rays
     evidence = np.full(cw * ch, np.inf, np.float32)
     seen = np.zeros(cw * ch, bool)
+    occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
         uv, depth = other.project(points)
         coarse_uv = other.to_coarse(uv).astype(np.float32)
@@ -171,12 +180,15 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
                            borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
         if hidden is not None:
-            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0)
-            inside &= behind.ravel() == 0
+            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
+            occluded |= inside & behind
+            inside &= ~behind
         difference = _relative_difference(view.coarse, warped).ravel()
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
-    evidence[~seen] = np.nan
+    # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
+    # in the other views that would see it: NaN.
+    evidence[~seen] = np.where(occluded[~seen], np.nan, 0.0)
     return evidence.reshape(ch, cw)
 
 
@@ -187,13 +199,21 @@ def _background_evidence(view: _View) -> np.ndarray:
     return _shadowless_difference(view.coarse, view.background)
 
 
+_CHROMA_OFFSET = 12.0
+#: How far a shadow's chromaticity may move from the lit table's (a warm lamp's colour leaves it):
+#: less than an object's print of another colour does.
+_LAMP_HUE_SHIFT = 0.12
+
+
 def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndarray:
     difference = _relative_difference(image, background)
     # A shadow multiplies every channel by about the same factor below 1: compare chromaticities.
-    brightness = image.sum(axis=2) + 3.0
-    ground = background.sum(axis=2) + 3.0
-    chroma = np.abs(image / brightness[..., None] - background / ground[..., None]).sum(axis=2) * 3.0
-    darker = (brightness < ground) & (brightness > 0.15 * ground)
+    # The offset keeps a dark pixel's noise from passing for a change of colour.
+    brightness = image.sum(axis=2) + 3 * _CHROMA_OFFSET
+    ground = background.sum(axis=2) + 3 * _CHROMA_OFFSET
+    chroma = np.abs((image + _CHROMA_OFFSET) / brightness[..., None]
+                    - (background + _CHROMA_OFFSET) / ground[..., None]).sum(axis=2) * 1.5
+    darker = (brightness < 1.05 * ground) & (brightness > 0.15 * ground)
     return np.where(darker, np.minimum(difference, chroma), difference)
 
 
@@ -282,15 +302,18 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     aim = aim_point(cameras if aim_cameras is None else aim_cameras)
     plane = None if support_plane is None else check_support_plane(support_plane, aim)
     standing: list[np.ndarray | None] = [None] * len(views)
-    if plane is not None and not all(view.background is not None for view in views):
+    # With two views the parallax cannot tell the object in one from the other's object mapped through
+    # the plane onto the table beside it (each view's first look holds both): the aim seeds the cut.
+    parallax = plane if len(views) > 2 else None
+    if parallax is not None:
         # What stands out in each view, on the first look: where another view's plane point lies behind
         # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
         for view in views:
             if view.background is None:
-                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], plane))
+                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
                 first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
                 standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
-    cuts = [_first_cut(view, views, plane, aim, standing) for view in views]
+    cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
@@ -375,15 +398,16 @@ class _Hulls:
             ys, xs = np.nonzero(mask)
             centre = _coarse_aim(view, aim)
             reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]), initial=1.0)) * max(view.sx, view.sy)
-            depth = float(view.camera.project(aim[None, :])[1][0])
-            radius = max(radius, 1.2 * reach_px * depth / view.camera.focal_length)
+            aim_depth = float(view.camera.project(aim[None, :])[1][0])
+            radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
         steps = np.linspace(-radius, radius, _HULL_GRID)
         grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
         self.views = views
-        self.inside, self.pixels = [], []
+        self.inside: list[np.ndarray] = []
+        self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for view, mask in zip(views, masks):
             uv, depth = view.project(grid)
             coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
@@ -411,13 +435,13 @@ class _Hulls:
         coarse, seen, depth = self.pixels[i]
         keep &= seen
         view = self.views[i]
-        hull = np.zeros(self.shape[i], np.uint8)
-        hull[coarse[keep, 1], coarse[keep, 0]] = 255
-        if keep.any():
-            footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
-            size = 2 * int(np.ceil(footprint)) + 3
-            hull = cv2.dilate(hull, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
-        return hull
+        points = np.zeros(self.shape[i], np.uint8)
+        points[coarse[keep, 1], coarse[keep, 0]] = 255
+        if not keep.any():
+            return points
+        footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
+        size = 2 * int(np.ceil(footprint)) + 3
+        return cv2.dilate(points, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
 
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -446,12 +470,15 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     object_colour = local_mean(sure)
     object_distance = _relative_difference(image, object_colour)
     if view.full_background is not None:
-        table_distance = _shadowless_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
+        # Along the edge the empty workspace is the table's own colour there (a print's dark ink next
+        # to the edge would pass for shadow if shadows were forgiven here; the coarse cut left them out).
+        table_distance = _relative_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
     else:
         table_distance = _relative_difference(image, local_mean(table))
     uncertain = (sure == 0) & (table == 0)
-    chosen = np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255
-    chosen = cv2.medianBlur(chosen, 3)
+    chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
+    if not cv2.countNonZero(chosen):
+        raise SilhouetteError(_NOTHING, view=view.index)
     silhouette = np.zeros((height, width), np.uint8)
     silhouette[y0:y1, x0:x1] = chosen
     return mask_with_outline(silhouette, view=view.index)
@@ -475,21 +502,39 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     it came from, in units of its noise (None without a plane or a background)."""
     cw, ch = view.coarse_size
     centre = _coarse_aim(view, aim)
+    floor = _NOISE_FLOOR
     if view.background is not None:
         evidence = _background_evidence(view)
+        floor = _BACKGROUND_NOISE_FLOOR
+        if plane is not None:
+            # A shadow under a coloured lamp is not of the table's chromaticity (the lamp's colour is
+            # gone from it), but it is on the table: darker than the empty workspace, and mapped
+            # through the plane by the other views like the rest of the table.
+            mapped = _parallax_evidence(view, [v for v in views if v is not view], plane,
+                                        [standing[v.index] for v in views if v is not view])
+            mapped_score = np.nan_to_num(mapped, nan=np.inf) / max(_noise_level(mapped), _NOISE_FLOOR)
+            image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
+            brightness, ground = image.sum(axis=2), empty.sum(axis=2)
+            hue_shift = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
+            shadow = (brightness < 0.95 * ground) & (hue_shift < _LAMP_HUE_SHIFT) & (mapped_score < 1.5)
+            evidence = np.where(shadow, np.minimum(evidence, mapped), evidence)
     elif plane is not None:
         evidence = _parallax_evidence(view, [v for v in views if v is not view], plane,
                                       [standing[v.index] for v in views if v is not view])
     else:
         return _cut_around_aim(view, centre), None
-    noise = max(_noise_level(evidence), _NOISE_FLOOR)
-    # Where no other view sees the table point behind a pixel (the object hides it from all of them),
-    # the pixel is next to the object's foot, or on it: it counts as standing out.
-    score = np.nan_to_num(evidence / noise, nan=_HIDDEN)
-    standing = np.where(score > 2.5, 255, 0).astype(np.uint8)
-    standing = cv2.morphologyEx(standing, cv2.MORPH_OPEN, _SMALL)
-    region = _component_near(standing, centre, reach=0.25 * np.hypot(cw, ch))
-    if region is None or cv2.countNonZero(region) < 12:
+    noise = max(_noise_level(evidence), floor)
+    score = evidence / noise
+    # Where the object hides the table point behind a pixel from every other view, the pixel is next
+    # to the object's foot, or on it: it joins what stands out, for the graph cut to decide; but only
+    # what differs from the table says that something stands there at all.
+    hidden = np.isnan(score)
+    score = np.where(hidden, _HIDDEN, score)
+    differs = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    differs[hidden] = 0
+    joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
+    region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
+    if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
         raise SilhouetteError(_NOTHING, view=view.index)
     return _graph_cut(view, region, score), score
 
@@ -558,7 +603,8 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) 
         image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
         background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
         cv2.setRNGSeed(0)  # GrabCut's k-means starts from OpenCV's global generator
-        cv2.grabCut(image, mask, None, background_model, object_model, _GC_ITERATIONS, cv2.GC_INIT_WITH_MASK)
+        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model, _GC_ITERATIONS,
+                    cv2.GC_INIT_WITH_MASK)  # the box is unused: the mask seeds it
     result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
     return _filled_region(result, view)
 

@@ -15,7 +15,7 @@ from ._carve_cy import carve_view
 from .camera import Camera
 from .errors import GeometryError
 
-__all__ = ["occupancy", "carve", "clip_to_plane", "check_support_plane"]
+__all__ = ["occupancy", "carve", "clip_to_plane", "check_support_plane", "lift_above_plane"]
 
 # The edge is where the smoothed silhouette crosses one half; the blur makes
 # bilinear interpolation find it between pixel centres, not on them.
@@ -100,13 +100,17 @@ def carve(directions, centre, radius: float, cameras, occupancies) -> tuple[np.n
     return radii, observed.view(bool)
 
 
-def check_support_plane(plane, centre) -> np.ndarray:
+def check_support_plane(plane, centre, radius: float = 0.0) -> np.ndarray:
     """Validate a support plane ``[nx, ny, nz, d]`` and return it with a unit normal.
+
+    A centre found from the silhouettes alone (the enclosing sphere's) of a flat object lying on the
+    table may come out a little below it; ``radius``, the object's size, says how far below is still
+    that and not a wrong plane: up to ``_BELOW_FRACTION`` of it (see :func:`lift_above_plane`).
 
     Raises
     ------
     GeometryError
-        If the plane is malformed, or the object's centre lies below it (the
+        If the plane is malformed, or the object's centre lies clearly below it (the
         plane, or its side, is wrong: the object would be under the table).
     """
     plane = np.asarray(plane, dtype=np.float64)
@@ -117,12 +121,35 @@ def check_support_plane(plane, centre) -> np.ndarray:
         raise GeometryError("support_plane's normal [nx, ny, nz] is zero")
     plane = plane / norm
     height = plane[:3] @ np.asarray(centre, dtype=np.float64) + plane[3]
-    if height <= 0:
+    if height <= -_BELOW_FRACTION * float(radius):
         raise GeometryError(
             f"the support plane puts the object under the table: its centre is {-height:.4g} "
             "below the plane (the object stands where n . x + d >= 0)"
         )
     return plane
+
+
+#: A centre below the plane by less than this fraction of the object's radius is a flat object's
+#: centre placed a little low by its silhouettes; an inverted or wrong plane puts it about a whole
+#: radius below.
+_BELOW_FRACTION = 0.25
+#: How far above the plane, as a fraction of the radius, a centre at or below it is lifted: carving
+#: looks out from the centre, and needs it on the object's side of the table.
+_LIFT_FRACTION = 0.01
+
+
+def lift_above_plane(centre, radius: float, plane) -> np.ndarray:
+    """The centre, moved along the plane's unit normal to at least ``_LIFT_FRACTION * radius`` above it.
+
+    >>> lift_above_plane([0.0, 0.0, -0.002], 0.1, np.array([0.0, 0.0, 1.0, 0.0])).round(6).tolist()
+    [0.0, 0.0, 0.001]
+    >>> lift_above_plane([0.0, 0.0, 0.05], 0.1, np.array([0.0, 0.0, 1.0, 0.0])).tolist()
+    [0.0, 0.0, 0.05]
+    """
+    centre = np.asarray(centre, dtype=np.float64)
+    height = plane[:3] @ centre + plane[3]
+    floor = _LIFT_FRACTION * float(radius)
+    return centre if height >= floor else centre + (floor - height) * plane[:3]
 
 
 def clip_to_plane(directions, radii, centre, plane) -> np.ndarray:

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from .camera import Camera, undistort_mask
-from .carve import carve, check_support_plane, clip_to_plane, occupancy
+from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
 from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
@@ -269,7 +269,9 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             lap("edges")
     cameras = [view.camera for view in views]
     centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
-    plane = None if support_plane is None else check_support_plane(support_plane, centre)
+    plane = None if support_plane is None else check_support_plane(support_plane, centre, radius)
+    if plane is not None:
+        centre = lift_above_plane(centre, radius, plane)
     lap("centroid")
 
     directions = fibonacci_sphere(options.n_points)

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from workers.sim.objects import COMPOUNDS, FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject, compound
+from workers.sim.objects import COMPOUND_KINDS, FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject, compound
 
 from .command import Commands
 
@@ -20,7 +20,7 @@ __all__ = ["register", "add_arguments", "run"]
 
 # A flat box is a box thin along z; a plate, a thin cylinder standing on its rim.
 PRESETS = {"flat-box": ("box", False), "plate": ("cylinder", True)}
-SHAPES = [*FAMILIES, *PRESETS, "cup-stack", "lumpy", *COMPOUNDS]
+SHAPES = [*FAMILIES, *PRESETS, "cup-stack", "lumpy", *COMPOUND_KINDS]
 # Defaults for --size per shape (metres). For a cup stack: bottom radius, rim
 # radius, height of one cup; for a lumpy figure: the radii of its ellipsoid.
 DEFAULT_SIZE = {
@@ -42,13 +42,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard", "broad", "grasp", "printed"], dest="set_name",
+    which.add_argument("--set", choices=["standard", "broad", "grasp", "printed", "compound"], dest="set_name",
                        help="write a fixed benchmark set: standard (the default when --shape is not given; "
                             "32 scans), broad (126: seven families, 3, 4 and 6 views, see bench/bench_core.py), "
                             "grasp (bench/bench_grasp.py's scenes, 10 per family), or printed (16: printed "
                             "grocery-like objects on oak, rubber mat, laminate, cutting mat, wood and fabric, "
                             "lit by a lamp that casts their shadows; no segmentation named, true masks as "
-                            "truth_mask{i}.png; see bench/bench_segment.py)")
+                            "truth_mask{i}.png; see bench/bench_segment.py), or compound (22: two of each everyday "
+                            "compound object, a bottle, mug, dumbbell, lamp, hammer, ..., truth.json listing "
+                            "its parts)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
                         help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
@@ -82,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _make_object(args: argparse.Namespace) -> SimObject:
     position = tuple(args.position) if args.position is not None else (0.6, 0.0)
-    if args.shape in COMPOUNDS:
+    if args.shape in COMPOUND_KINDS:
         if args.size is not None or args.lying:
             raise ValueError(f"--size and --lying do not apply to {args.shape} (its parts follow --seed)")
         return compound(args.shape, position, 30.0 if args.yaw is None else args.yaw, seed=args.seed)
@@ -99,7 +101,7 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
     from workers.sim.grasp_set import grasp_set
-    from workers.sim.scans import broad_set, make_spec, printed_set, standard_set
+    from workers.sim.scans import broad_set, compound_set, make_spec, printed_set, standard_set
 
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
@@ -109,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         if args.supplied_masks:
             print("robocell sim: --supplied-masks only applies with --shape", file=sys.stderr)
             return 2
-        sets = {"grasp": grasp_set, "broad": broad_set, "printed": printed_set, "standard": standard_set}
+        sets = {"grasp": grasp_set, "broad": broad_set, "printed": printed_set, "standard": standard_set,
+                "compound": compound_set}
         for spec in sets[args.set_name or "standard"](args.seed):
             print(spec.write(args.out, write_masks=args.masks, backgrounds=args.backgrounds), flush=True)
         return 0

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.carve import carve, check_support_plane, clip_to_plane, occupancy
+from core_cy.carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
 from core_cy.errors import GeometryError
 from core_cy.sphere import enclosing_sphere, fibonacci_sphere
 
@@ -83,6 +83,15 @@ def test_support_plane_above_the_object_is_an_error():
         check_support_plane([0, 0, 1, -0.2], [0.6, 0.0, 0.05])
     with pytest.raises(GeometryError, match="normal"):
         check_support_plane([0, 0, 0, 1], [0.6, 0.0, 0.05])
+
+
+def test_a_centre_a_little_below_the_plane_is_a_flat_object_lifted_onto_it():
+    table = [0.0, 0.0, 1.0, 0.0]
+    plane = check_support_plane(table, [0.6, 0.0, -0.002], radius=0.1)  # 2 % of the radius: a low centre
+    centre = lift_above_plane([0.6, 0.0, -0.002], 0.1, plane)
+    assert plane[:3] @ centre + plane[3] > 0
+    with pytest.raises(GeometryError, match="under the table"):  # half the radius: the plane is wrong
+        check_support_plane(table, [0.6, 0.0, -0.05], radius=0.1)
 
 
 def test_parallel_views_are_an_error():

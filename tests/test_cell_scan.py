@@ -270,7 +270,7 @@ def test_reconstruction_error_fails_the_job_with_the_cores_message(cell):
     status = cell.submit(flange_poses=look_away_poses(cell.config), label="nothing in view")
     final = cell.wait(status.job_id)
     assert final.state is JobState.FAILED
-    assert final.error.startswith("reconstructing: view 0: the silhouette is empty"), final.error
+    assert final.error.startswith("reconstructing: view 0: nothing stands on the table near the views' aim"), final.error
     with pytest.raises(RemoteError, match=f"job {status.job_id} has no result: it is failed"):
         cell.client.result(status.job_id)
 

@@ -146,7 +146,7 @@ def test_poses_that_disagree_about_the_object(sphere_bundle):
     flipped[:3, 3] += [0.3, -0.3, 0.0]
     views[0] = View(type(views[0].camera)(K=views[0].camera.K, T_world_cam=flipped, view=0), image=views[0].image)
     with pytest.raises(CoreError, match="view"):
-        reconstruct(views)
+        reconstruct(views, segmentation=RED_HSV)
 
 
 def test_options_are_checked():

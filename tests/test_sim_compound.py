@@ -108,3 +108,18 @@ def test_union_silhouette_iou_of_a_sphere_seen_by_an_ideal_camera():
     moved[0, 3] = 0.1  # a second sphere, beside the first, that the silhouette does not have
     both = [sphere, Part(half.size, half.shape, moved)]
     assert union_silhouette_iou(both, K, T, silhouette) == pytest.approx(0.5, abs=0.03)
+
+
+def test_robocell_sim_writes_an_everyday_compound_with_its_parts(tmp_path, capsys):
+    import json
+
+    from robocell.main import main
+
+    assert main(["sim", "scans", "--shape", "hammer", "--out", str(tmp_path)]) == 0
+    (bundle,) = [line for line in capsys.readouterr().out.splitlines() if line]
+    truth = json.loads((tmp_path / "hammer-000" / "truth.json").read_text())
+    assert bundle.endswith("hammer-000")
+    # The head and the handle, as the simulator's own object says: nothing lost on the way to the file.
+    expected = compound("hammer", (0.6, 0.0), 30.0, seed=0).truth()["parts"]
+    assert len(truth["parts"]) == len(expected) >= 2
+    np.testing.assert_allclose([p["size"] for p in truth["parts"]], [p["size"] for p in expected])

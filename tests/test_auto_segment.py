@@ -1,0 +1,170 @@
+"""The ``auto`` segmentation (DESIGN.md §1.10), scored against the true silhouettes of scenes
+ray-traced apart from it (tests/seg_scenes.py): textures, a cast shadow, area-true edges, blur,
+noise, JPEG."""
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from core_cy.auto_segment import aim_point, auto_silhouettes
+from core_cy.camera import Camera
+from core_cy.errors import GeometryError, ImageError, SilhouetteError
+from core_cy.quality import silhouette_iou
+from core_cy.reconstruct import View, reconstruct
+from tests.seg_scenes import Scene, render_scan
+from wire.bundle import load_bundle
+from wire.errors import BundleError
+
+TABLE = [0.0, 0.0, 1.0, 0.0]
+
+SCENES = {
+    "red box on a beige table": Scene(),
+    "printed can on wood": Scene(shape="cylinder", size=(0.035, 0.035, 0.06), object_print="label",
+                                 table_texture="wood", yaw=1.0),
+    "white box on a dark mat": Scene(object_bgr=(230, 230, 230), table_bgr=(30, 32, 35), light=(-0.4, 0.5, 0.8)),
+    # Dino- and temple-like: a bright object on a dark, uniform ground.
+    "white can on black": Scene(shape="cylinder", size=(0.03, 0.03, 0.05), object_bgr=(225, 230, 235),
+                                table_bgr=(12, 12, 12), light=(0.2, 0.3, 0.9), ambient=0.6),
+}
+
+
+def robocell(*args):
+    return subprocess.run([sys.executable, "-m", "robocell", *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a > 0, b > 0
+    return float((a & b).sum() / max(1, (a | b).sum()))
+
+
+@pytest.fixture(scope="module")
+def scans():
+    return {name: render_scan(scene, seed=number) for number, (name, scene) in enumerate(SCENES.items())}
+
+
+def _cameras(cams):
+    return [Camera(K=K, T_world_cam=T, view=index) for index, (K, T) in enumerate(cams)]
+
+
+@pytest.mark.parametrize("name, plane", [(name, TABLE) for name in SCENES] + [
+    # Without a plane the aim alone seeds the cut: a one-coloured object is found whole.
+    ("red box on a beige table", None), ("white can on black", None)])
+def test_silhouettes_against_the_truth(scans, name, plane):
+    images, truths, cams = scans[name]
+    found = auto_silhouettes(images, _cameras(cams), support_plane=plane)
+    ious = [_iou(silhouette, truth) for (silhouette, _), truth in zip(found, truths)]
+    assert min(ious) > 0.9, ious
+    for silhouette, outline in found:  # one filled region, 0/255, its outline on it
+        assert set(np.unique(silhouette)) == {0, 255}
+        assert silhouette[outline[:, 1], outline[:, 0]].all()
+
+
+@pytest.mark.xfail(reason="a flat object top of exactly the table's colour and light has no cue at the coarse "
+                          "scale: its sides are found, its top is not (a known limit)", strict=False)
+def test_an_object_the_colour_of_the_table():
+    scene = Scene(shape="cylinder", size=(0.035, 0.035, 0.05), object_bgr=(150, 170, 190), table_texture="grid")
+    images, truths, cams = render_scan(scene, seed=5)
+    found = auto_silhouettes(images, _cameras(cams), support_plane=TABLE)
+    assert min(_iou(s, t) for (s, _), t in zip(found, truths)) > 0.85
+
+
+def test_a_background_picture_is_used(scans):
+    scene = SCENES["printed can on wood"]
+    images, truths, cams = scans["printed can on wood"]
+    empty, _, _ = render_scan(Scene(**{**scene.__dict__, "with_object": False}), seed=1)
+    found = auto_silhouettes(images, _cameras(cams), support_plane=TABLE, backgrounds=empty)
+    ious = [_iou(silhouette, truth) for (silhouette, _), truth in zip(found, truths)]
+    assert np.mean(ious) > 0.95 and min(ious) > 0.93, ious
+
+
+def test_a_shadow_alone_is_no_object():
+    """The object is out of the pictures (held above them, say) and only its shadow is on the table."""
+    images, _, cams = render_scan(Scene(shadow_only=True), seed=3)
+    with pytest.raises(SilhouetteError, match=r"^view \d: nothing stands on the table near the views' aim"):
+        auto_silhouettes(images, _cameras(cams), support_plane=TABLE)
+
+
+def test_an_empty_table_names_the_view():
+    empty, _, cams = render_scan(Scene(with_object=False), seed=0)
+    with pytest.raises(SilhouetteError, match="^view 0: nothing stands on the table near the views' aim"):
+        auto_silhouettes(empty, _cameras(cams), support_plane=TABLE)
+
+
+def test_a_background_of_another_size_names_the_view(scans):
+    images, _, cams = scans["red box on a beige table"]
+    backgrounds = [None, np.zeros((10, 10, 3), np.uint8), None]
+    with pytest.raises(ImageError, match="^view 1: the background is 10x10 pixels, but its image is 320x240"):
+        auto_silhouettes(images, _cameras(cams), support_plane=TABLE, backgrounds=backgrounds)
+
+
+def test_parallel_axes_converge_nowhere():
+    T = np.eye(4)
+    shifted = np.eye(4)
+    shifted[0, 3] = 0.1
+    K = [[300, 0, 159.5], [0, 300, 119.5], [0, 0, 1]]
+    with pytest.raises(GeometryError, match="parallel"):
+        aim_point([Camera(K=K, T_world_cam=T), Camera(K=K, T_world_cam=shifted)])
+
+
+def _write_bundle(directory, images, cams, *, backgrounds=None, plane=TABLE):
+    directory.mkdir(parents=True)
+    views = []
+    for index, (image, (K, T)) in enumerate(zip(images, cams)):
+        cv2.imwrite(str(directory / f"view{index}.jpg"), image, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        view = {"image": f"view{index}.jpg", "K": np.asarray(K).tolist(), "T_world_cam": np.asarray(T).tolist()}
+        if backgrounds is not None:
+            cv2.imwrite(str(directory / f"bg{index}.jpg"), backgrounds[index], [cv2.IMWRITE_JPEG_QUALITY, 95])
+            view["background"] = f"bg{index}.jpg"
+        views.append(view)
+    scan = {"views": views}
+    if plane is not None:
+        scan["support_plane"] = plane
+    (directory / "scan.json").write_text(json.dumps(scan))
+    return directory
+
+
+def test_masks_out_are_what_the_fit_used(tmp_path, scans):
+    images, truths, cams = scans["printed can on wood"]
+    bundle = _write_bundle(tmp_path / "can", images, cams)
+    process = robocell("reconstruct", bundle, "--masks-out", tmp_path / "masks")
+    assert process.returncode == 0, process.stderr
+    line = json.loads(process.stdout.splitlines()[0])
+    masks = [cv2.imread(str(tmp_path / "masks" / "can" / f"mask{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(3)]
+    from core_cy.superquadric import Superquadric
+
+    fitted = Superquadric.from_dict(line["superquadric"])
+    for camera, mask, reported, truth in zip(_cameras(cams), masks, line["silhouette_iou"], truths):
+        assert set(np.unique(mask)) == {0, 255}
+        assert silhouette_iou(fitted, camera, mask, cv2.boundingRect(mask)) == pytest.approx(reported, abs=2e-4)
+        assert _iou(mask, truth) > 0.9
+
+
+def test_a_bundle_background_is_read_and_checked(tmp_path, scans):
+    scene = SCENES["red box on a beige table"]
+    images, truths, cams = scans["red box on a beige table"]
+    empty, _, _ = render_scan(Scene(**{**scene.__dict__, "with_object": False}), seed=0)
+    bundle = _write_bundle(tmp_path / "box", images, cams, backgrounds=empty)
+    loaded = load_bundle(bundle)
+    assert all(view.background is not None for view in loaded.views)
+    result = reconstruct(loaded.views, segmentation=loaded.segmentation, support_plane=loaded.support_plane)
+    assert min(_iou(s, t) for s, t in zip(result.silhouettes, truths)) > 0.93
+
+    cv2.imwrite(str(bundle / "bg1.jpg"), cv2.resize(empty[1], (304, 228)))  # near enough for K, not its image
+    with pytest.raises(BundleError, match="^view 1: background file 'bg1.jpg' is 304x228 pixels, but its image"):
+        load_bundle(bundle)
+    (bundle / "bg1.jpg").unlink()
+    with pytest.raises(BundleError, match="^view 1: background file 'bg1.jpg' not found"):
+        load_bundle(bundle)
+
+
+def test_reconstruct_defaults_to_auto(scans):
+    images, truths, cams = scans["white box on a dark mat"]
+    views = [View(camera, image=cv2.imencode(".jpg", image)[1].tobytes())
+             for camera, image in zip(_cameras(cams), images)]
+    result = reconstruct(views, support_plane=TABLE)
+    assert min(_iou(s, t) for s, t in zip(result.silhouettes, truths)) > 0.9
