@@ -137,6 +137,25 @@ def _segmented(jpeg: bytes, segmentation: Segmentation, view: int) -> np.ndarray
         return np.where(reduced >= 128, 255, 0).astype(np.uint8)
 
 
+def _auto_full_size(jpegs: Sequence[bytes], cameras: Sequence[Camera], support_plane: Sequence[float] | None,
+                    shapes: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
+    """The auto segmentation of the full pictures, reduced to ``shapes``."""
+    unscale = np.linalg.inv(reduced_camera(np.eye(3), np.eye(4)).K)
+    full = [Camera(K=unscale @ camera.K, T_world_cam=camera.T_world_cam, dist=camera.dist, view=camera.view)
+            for camera in cameras]
+    images = []
+    for view, jpeg in enumerate(jpegs):
+        image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+        if image is None:
+            raise CoreError(f"view {view}: the picture cannot be decoded")
+        images.append(image)
+    reduced = []
+    for (silhouette, _), shape in zip(auto_silhouettes(images, full, support_plane=support_plane), shapes):
+        small = cv2.resize(silhouette, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+        reduced.append(np.where(small >= 128, 255, 0).astype(np.uint8))
+    return reduced
+
+
 def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
                         cameras: Sequence[Camera], support_plane: Sequence[float] | None = None) -> list[np.ndarray]:
     """Each picture decoded at 1/:data:`REDUCTION` of its size, segmented, and undistorted to the
@@ -149,7 +168,10 @@ def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
     """
     if segmentation.method == "auto":  # the cell's default; it sees all the views at once
         images = [_decoded_reduced(jpeg, view) for view, jpeg in enumerate(jpegs)]
-        found = [silhouette for silhouette, _ in auto_silhouettes(images, cameras, support_plane=support_plane)]
+        try:
+            found = [silhouette for silhouette, _ in auto_silhouettes(images, cameras, support_plane=support_plane)]
+        except CoreError:  # too little of it left in the small pictures (low views, a thin object)
+            found = _auto_full_size(jpegs, cameras, support_plane, [image.shape for image in images])
     silhouettes = []
     for view, (jpeg, camera) in enumerate(zip(jpegs, cameras)):
         silhouette = found[view] if segmentation.method == "auto" else _segmented(jpeg, segmentation, view)
