@@ -226,7 +226,7 @@ class Reconstruct(Step):
             job.reconstruction = (reply.attachment or b"", reply.payload, cell.clock() - job.started)
             nxt = answer.result.next_view
             job.result = ScanResult(
-                job_id=job.job_id, superquadric=fit, grasps=grasps,
+                job_id=job.job_id, superquadric=fit, parts=answer.result.parts, grasps=grasps,
                 silhouette_iou=answer.result.silhouette_iou, residual=answer.result.residual,
                 timings_ms=answer.result.timings_ms, T_base_cam=[c.T_base_cam.tolist() for c in job.captures],
                 durations_s=job.durations_s, worker=worker, attempts=attempt,
@@ -262,8 +262,10 @@ def _reconstruct_request(job: Job, config: CellConfig) -> ReconstructRequest:
                if (value := getattr(settings, name)) is not None}
     views = [ReconstructView(camera=camera, T_world_cam=c.T_base_cam.tolist(), length=len(c.jpeg))
              for c in job.captures]
+    # The scan's own segmentation, else the cell's [scan] one; None is auto (the core's default).
+    segmentation = job.request.segmentation or config.scan.segmentation
     return ReconstructRequest(job_id=job.job_id, views=views, support_plane=config.support_plane, options=options,
-                              gripper=config.gripper.dimensions())
+                              gripper=config.gripper.dimensions(), segmentation=segmentation)
 
 
 def parse_reply(model, payload, who: str):

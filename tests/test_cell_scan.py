@@ -60,6 +60,9 @@ def test_scan_scores_well_against_the_truth(cell, scanned):
     assert np.linalg.norm(fit.T_world_object[:3, 3] - truth.T_world_object[:3, 3]) < 0.01
     assert result.timings_ms["total"] > 0
     assert len(result.T_base_cam) == 3
+    # The simulated box is one superquadric: one part, the superquadric itself (DESIGN.md §3).
+    assert len(result.parts) == 1
+    assert volumetric_iou(truth, Superquadric.from_dict(result.parts[0].model_dump())) > 0.7
 
 
 def test_scan_goes_through_every_state_in_order(cell, scanned):
@@ -273,6 +276,15 @@ def test_reconstruction_error_fails_the_job_with_the_cores_message(cell):
     assert final.error.startswith("reconstructing: view 0: nothing stands on the table near the views' aim"), final.error
     with pytest.raises(RemoteError, match=f"job {status.job_id} has no result: it is failed"):
         cell.client.result(status.job_id)
+
+
+def test_a_scan_requests_segmentation_reaches_the_reconstruction(cell):
+    # Told the object is brighter than white, the reconstruction finds nothing: the request's method
+    # was used (the default, auto, finds the simulated object).
+    status = cell.submit(segmentation={"method": "threshold", "value": 255}, label="a method the scene defeats")
+    final = cell.wait(status.job_id)
+    assert final.state is JobState.FAILED
+    assert "grey > 255" in final.error, final.error
 
 
 def test_job_queries_list_idempotency_and_unknown_jobs(cell, scanned):

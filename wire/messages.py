@@ -356,7 +356,11 @@ class PickOutcome(BaseModel):
 
 class ScanResult(Message):
     job_id: str
+    #: The one superquadric closest to the whole object, for programs that take one.
     superquadric: Superquadric
+    #: The model as parts (DESIGN.md §1.11), the object their union; one part for an object that is
+    #: one superquadric, empty from an older reconstruction worker.
+    parts: Annotated[list[Superquadric], Field(max_length=6)] = []
     #: Grasps of the cell's gripper, best first; empty when none is likely to hold (DESIGN.md §3).
     grasps: list[Grasp] = []
     #: For a job that asked for a pick.
