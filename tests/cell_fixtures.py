@@ -217,24 +217,30 @@ class RunningCell:
         return worker_id
 
     def put_job_on(self, worker_id: str, *, tries: int = 4) -> str:
-        """Submit jobs, one at a time, until one is in flight at ``worker_id`` (a slow worker); its id.
+        """Submit bursts of jobs until one is in flight at ``worker_id`` (a slow worker); its id.
 
-        Ties between idle workers go to the one used least recently, so a few tries do.
+        A proven worker that is free always takes a job before a new one (cell/pool.py), so each
+        try submits as many jobs at once as the pool has slots: the proven workers fill first, and
+        the rest go to the others.
         """
         for _ in range(tries):
-            job_id = self.submit(label=f"for {worker_id}").job_id
-            prefix = f"{self.config.cell_id}/{job_id}/"
+            slots = max(1, sum(r.capacity for r in self.status().reconstructors))
+            job_ids = [self.submit(label=f"for {worker_id}").job_id for _ in range(slots)]
+            prefixes = {f"{self.config.cell_id}/{job_id}/": job_id for job_id in job_ids}
 
             def placed() -> str | None:
-                if self.client.status(job_id).state.finished:
-                    return "elsewhere"
                 for worker in self.status().reconstructors:
-                    if any(ticket.startswith(prefix) for ticket in worker.tickets_here):
-                        return "there" if worker.worker == worker_id else "elsewhere"
+                    for ticket in worker.tickets_here:
+                        job_id = next((j for p, j in prefixes.items() if ticket.startswith(p)), None)
+                        if job_id is not None and worker.worker == worker_id:
+                            return job_id
+                if all(self.client.status(j).state.finished for j in job_ids):
+                    return "elsewhere"
                 return None
 
-            if wait_until(placed, timeout=JOB_TIMEOUT_S, interval=0.02, what=f"job {job_id} placed") == "there":
-                return job_id
+            found = wait_until(placed, timeout=JOB_TIMEOUT_S, interval=0.02, what=f"jobs {job_ids} placed")
+            if found != "elsewhere":
+                return found
         raise AssertionError(f"no job went to {worker_id} in {tries} tries")
 
 

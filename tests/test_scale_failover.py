@@ -21,6 +21,7 @@ from tests.cell_fixtures import InProcessWorker, RunningCell, cell_config, runni
 
 HEARTBEAT_S = 1.0
 SLOW_S = 1.5
+FAST_S = 0.5
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +29,9 @@ def cell(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover",
                          timeouts={"heartbeat_s": HEARTBEAT_S, "reconstruct_s": 20.0, "outage_s": 5.0},
                          reconstruct={"max_attempts": 3})
-    with running_cell(config, reconstructors=0, workers={"fast": 0.0, "victim": SLOW_S, "frozen": SLOW_S}) as running:
+    # "fast" takes a little time too: a proven worker that is free always gets the next job (cell/pool.py),
+    # so a job reaches a slow one only while "fast" is busy with another of a burst (put_job_on).
+    with running_cell(config, reconstructors=0, workers={"fast": FAST_S, "victim": SLOW_S, "frozen": SLOW_S}) as running:
         try:
             yield running
         finally:
