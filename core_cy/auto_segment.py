@@ -250,6 +250,31 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
     return contradicted
 
 
+def _texture_lost(view: _View) -> np.ndarray:
+    """Where the empty workspace shows a texture (grain, a grid, a weave) that the image no longer shows
+    with the same pattern: a shadow darkens the table's texture but keeps it; an object hides it."""
+    assert view.background is not None
+    image = cv2.cvtColor(np.clip(view.coarse, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    empty = cv2.cvtColor(np.clip(view.background, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    window = (_TEXTURE_WINDOW, _TEXTURE_WINDOW)
+    mean_i, mean_e = cv2.blur(image, window), cv2.blur(empty, window)
+    var_i = np.maximum(cv2.blur(image * image, window) - mean_i * mean_i, 0.0)
+    var_e = np.maximum(cv2.blur(empty * empty, window) - mean_e * mean_e, 0.0)
+    cov = cv2.blur(image * empty, window) - mean_i * mean_e
+    correlation = cov / np.sqrt(var_i * var_e + 1e-6)
+    # The texture must stand clear of the noise, relative to the table's brightness.
+    textured = np.sqrt(var_e) > _TEXTURE_CONTRAST * mean_e + 1.5
+    lost = np.where(textured & (correlation < _TEXTURE_KEPT), 255, 0).astype(np.uint8)
+    # The grain is not everywhere: where it is lost here and there across a face, the face hides it all.
+    closed = cv2.morphologyEx(lost, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, window))
+    return cv2.morphologyEx(closed, cv2.MORPH_OPEN, _SMALL) > 0
+
+
+_TEXTURE_WINDOW = 5
+_TEXTURE_CONTRAST = 0.03
+_TEXTURE_KEPT = 0.5
+
+
 def _plane_points(view: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The support plane's points (N, 3) behind each coarse pixel of ``view``, and which rays meet it."""
     rays = view.rays(view.coarse_grid())
@@ -320,6 +345,17 @@ def _component_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.n
         candidates = np.unique(labels[ys[near], xs[near]])
         label = int(candidates[np.argmax(stats[candidates, cv2.CC_STAT_AREA])])
     return (labels == label).astype(np.uint8) * 255
+
+
+def _components_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.ndarray:
+    """All connected regions of ``binary`` with a pixel within ``reach`` px of ``point`` (0/255)."""
+    count, labels = cv2.connectedComponents(binary, connectivity=8)
+    ys, xs = np.nonzero(labels)
+    near = np.hypot(xs - point[0], ys - point[1]) <= reach
+    chosen = np.zeros(count, bool)
+    chosen[np.unique(labels[ys[near], xs[near]])] = True
+    chosen[0] = False
+    return np.where(chosen[labels], 255, 0).astype(np.uint8)
 
 
 def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *, support_plane=None,
@@ -589,7 +625,8 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
             # front of it, sees it darkened alike. Where such a view does not, something stands there.
             others = [v for v in views if v is not view and v.background is not None]
             contradicted = _darkening_contradicted(view, others, plane, standing)
-            evidence = np.where(contradicted, _relative_difference(view.coarse, view.background), evidence)
+            evidence = np.where(contradicted | _texture_lost(view), _relative_difference(view.coarse, view.background),
+                                evidence)
             # A shadow under a coloured lamp is not of the table's chromaticity (the lamp's colour is
             # gone from it), but it is on the table: darker than the empty workspace, and mapped
             # through the plane by the other views like the rest of the table.
@@ -619,7 +656,19 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
     if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
         raise SilhouetteError(_NOTHING, view=view.index)
+    if view.background is not None:
+        # Against the empty workspace what differs is the object: no colour model is needed to say so
+        # (and one would lose an object of the table's colour); the gaps of a face whose print matches
+        # the table here and there are closed, and its holes filled.
+        closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
+        near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
+        hull = cv2.convexHull(cv2.findNonZero(near))
+        return cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
+                               cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3)), score
     return _graph_cut(view, region, score), score
+
+
+_CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
 
 _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
