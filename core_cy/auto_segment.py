@@ -657,14 +657,14 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
         raise SilhouetteError(_NOTHING, view=view.index)
     if view.background is not None:
-        # Against the empty workspace what differs is the object: no colour model is needed to say so
-        # (and one would lose an object of the table's colour); the gaps of a face whose print matches
-        # the table here and there are closed, and its holes filled.
+        # Against the empty workspace what differs is the object, but in pieces where its print or its
+        # colour matches the table here and there: every piece near the aim joins, within their convex
+        # outline, for the graph cut to seed from (one piece alone loses an object of the table's colour).
         closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
         near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
         hull = cv2.convexHull(cv2.findNonZero(near))
-        return cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
-                               cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3)), score
+        region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
+                                 cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
     return _graph_cut(view, region, score), score
 
 
