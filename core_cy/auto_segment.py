@@ -199,6 +199,107 @@ def _background_evidence(view: _View) -> np.ndarray:
     return _shadowless_difference(view.coarse, view.background)
 
 
+def _darkening(view: _View) -> np.ndarray:
+    """How much darker than the empty workspace each coarse pixel is (image over background brightness)."""
+    assert view.background is not None
+    return (view.coarse.sum(axis=2) + 3 * _CHROMA_OFFSET) / (view.background.sum(axis=2) + 3 * _CHROMA_OFFSET)
+
+
+def _shadow_of_table(view: _View) -> np.ndarray:
+    """Pixels darker than the empty workspace with about its chromaticity (a shadow's look; an object of the
+    table's colour may look so too)."""
+    assert view.background is not None
+    image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
+    hue_shift = np.abs(image / image.sum(axis=2)[..., None] - empty / empty.sum(axis=2)[..., None]).sum(axis=2)
+    ratio = _darkening(view)
+    return (ratio < 0.97) & (ratio > 0.1) & (hue_shift < _LAMP_HUE_SHIFT)
+
+
+#: How far two views' darkening of one table point may differ for both to be the same shadow: a shadow's
+#: edge is soft and the views' pixels are not the same size on the table.
+_SHADOW_AGREEMENT = 0.08
+#: Coarse pixels around what stands out in another view that are taken to be hidden by it there too.
+_OCCLUSION_MARGIN = 1
+
+
+def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndarray,
+                            standing: Sequence[np.ndarray | None]) -> np.ndarray:
+    """Where another view, seeing the same table point through the support plane, does not see it darkened
+    alike: a shadow lies on the table, so what such a view denies stands above it."""
+    cw, ch = view.coarse_size
+    contradicted = np.zeros((ch, cw), bool)
+    ratio = _darkening(view)
+    points, valid = _plane_points(view, plane)
+    for other in others:
+        maps, inside = _plane_maps(other, points, valid, (cw, ch))
+        other_shadow = _shadow_of_table(other).astype(np.uint8)
+        # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
+        other_ratio = _darkening(other).astype(np.float32)
+        high, low = cv2.dilate(other_ratio, _SMALL), cv2.erode(other_ratio, _SMALL)
+        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_shadow = cv2.remap(cv2.dilate(other_shadow, _SMALL), maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
+                                  borderValue=0) > 0
+        agrees = warped_shadow & (ratio >= warped_low - _SHADOW_AGREEMENT) & (ratio <= warped_high + _SHADOW_AGREEMENT)
+        hidden = standing[other.index]
+        if hidden is not None:
+            # Where the other view sees the object in front of the table point, it says nothing of it.
+            inside &= cv2.remap(cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN), maps[..., 0], maps[..., 1],
+                                cv2.INTER_NEAREST, borderValue=0).ravel() == 0
+        contradicted |= inside.reshape(ch, cw) & ~agrees
+    return contradicted
+
+
+def _texture_lost(view: _View) -> np.ndarray:
+    """Where the empty workspace shows a texture (grain, a grid, a weave) that the image no longer shows
+    with the same pattern: a shadow darkens the table's texture but keeps it; an object hides it."""
+    assert view.background is not None
+    image = cv2.cvtColor(np.clip(view.coarse, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    empty = cv2.cvtColor(np.clip(view.background, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY).astype(np.float32)
+    window = (_TEXTURE_WINDOW, _TEXTURE_WINDOW)
+    mean_i, mean_e = cv2.blur(image, window), cv2.blur(empty, window)
+    var_i = np.maximum(cv2.blur(image * image, window) - mean_i * mean_i, 0.0)
+    var_e = np.maximum(cv2.blur(empty * empty, window) - mean_e * mean_e, 0.0)
+    cov = cv2.blur(image * empty, window) - mean_i * mean_e
+    correlation = cov / np.sqrt(var_i * var_e + 1e-6)
+    # The texture must stand clear of the noise, relative to the table's brightness.
+    textured = np.sqrt(var_e) > _TEXTURE_CONTRAST * mean_e + 1.5
+    lost = np.where(textured & (correlation < _TEXTURE_KEPT), 255, 0).astype(np.uint8)
+    # The grain is not everywhere: where it is lost here and there across a face, the face hides it all.
+    closed = cv2.morphologyEx(lost, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, window))
+    return cv2.morphologyEx(closed, cv2.MORPH_OPEN, _SMALL) > 0
+
+
+_TEXTURE_WINDOW = 5
+_TEXTURE_CONTRAST = 0.03
+_TEXTURE_KEPT = 0.5
+
+
+def _plane_points(view: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The support plane's points (N, 3) behind each coarse pixel of ``view``, and which rays meet it."""
+    rays = view.rays(view.coarse_grid())
+    normal, offset = plane[:3], plane[3]
+    height = float(normal @ view.camera.center + offset)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -height / (rays @ normal)
+    valid = np.isfinite(t) & (t > 0)
+    return view.camera.center + np.where(valid, t, 0.0)[:, None] * rays, valid
+
+
+def _plane_maps(other: _View, points: np.ndarray, valid: np.ndarray,
+                size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Coarse pixel coordinates in ``other`` of plane ``points``, as (h, w, 2) float32 maps for
+    cv2.remap, and which of them ``other`` sees."""
+    cw, ch = size
+    uv, depth = other.project(points)
+    coarse_uv = other.to_coarse(uv).astype(np.float32)
+    ow, oh = other.coarse_size
+    inside = valid & (depth > 0) & (coarse_uv[:, 0] >= 0) & (coarse_uv[:, 1] >= 0) & \
+        (coarse_uv[:, 0] <= ow - 1) & (coarse_uv[:, 1] <= oh - 1)
+    return coarse_uv.reshape(ch, cw, 2), inside
+
+
+
 _CHROMA_OFFSET = 12.0
 #: How far a shadow's chromaticity may move from the lit table's (a warm lamp's colour leaves it):
 #: less than an object's print of another colour does.
@@ -244,6 +345,17 @@ def _component_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.n
         candidates = np.unique(labels[ys[near], xs[near]])
         label = int(candidates[np.argmax(stats[candidates, cv2.CC_STAT_AREA])])
     return (labels == label).astype(np.uint8) * 255
+
+
+def _components_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.ndarray:
+    """All connected regions of ``binary`` with a pixel within ``reach`` px of ``point`` (0/255)."""
+    count, labels = cv2.connectedComponents(binary, connectivity=8)
+    ys, xs = np.nonzero(labels)
+    near = np.hypot(xs - point[0], ys - point[1]) <= reach
+    chosen = np.zeros(count, bool)
+    chosen[np.unique(labels[ys[near], xs[near]])] = True
+    chosen[0] = False
+    return np.where(chosen[labels], 255, 0).astype(np.uint8)
 
 
 def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *, support_plane=None,
@@ -307,12 +419,12 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     parallax = plane if len(views) > 2 else None
     if parallax is not None:
         # What stands out in each view, on the first look: where another view's plane point lies behind
-        # it, that view sees the object, not the table, and cannot confirm or deny a pixel.
+        # it, that view sees the object, not the table, and cannot confirm or deny a pixel (nor, with
+        # backgrounds, confirm that a darkening there is a shadow on the table).
         for view in views:
-            if view.background is None:
-                evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
-                first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
-                standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
+            evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
+            first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
+            standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
     cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
@@ -507,6 +619,14 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         evidence = _background_evidence(view)
         floor = _BACKGROUND_NOISE_FLOOR
         if plane is not None:
+            # A pixel darker than the empty workspace with its chromaticity looks like a shadow, and is
+            # taken for one; but so looks an object of the table's colour, or a white one on white. A
+            # shadow lies on the table: another view that sees the same table point, with nothing in
+            # front of it, sees it darkened alike. Where such a view does not, something stands there.
+            others = [v for v in views if v is not view and v.background is not None]
+            contradicted = _darkening_contradicted(view, others, plane, standing)
+            evidence = np.where(contradicted | _texture_lost(view), _relative_difference(view.coarse, view.background),
+                                evidence)
             # A shadow under a coloured lamp is not of the table's chromaticity (the lamp's colour is
             # gone from it), but it is on the table: darker than the empty workspace, and mapped
             # through the plane by the other views like the rest of the table.
@@ -536,7 +656,19 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
     if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
         raise SilhouetteError(_NOTHING, view=view.index)
+    if view.background is not None:
+        # Against the empty workspace what differs is the object, but in pieces where its print or its
+        # colour matches the table here and there: every piece near the aim joins, within their convex
+        # outline, for the graph cut to seed from (one piece alone loses an object of the table's colour).
+        closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
+        near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
+        hull = cv2.convexHull(cv2.findNonZero(near))
+        region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
+                                 cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
     return _graph_cut(view, region, score), score
+
+
+_CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 
 
 _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
