@@ -103,7 +103,7 @@ def union_ious(parts, cameras, silhouettes, boxes) -> tuple[list[float], np.ndar
 
 
 def _iou(object_pixels: np.ndarray, covers: list[np.ndarray]) -> float:
-    covered = np.logical_or.reduce(covers) if covers else np.zeros_like(object_pixels)
+    covered = np.any(np.stack(covers), axis=0) if covers else np.zeros_like(object_pixels)
     union = int(np.count_nonzero(object_pixels | covered))
     return int(np.count_nonzero(object_pixels & covered)) / union if union else 0.0
 
@@ -295,7 +295,7 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) ->
                                                        silhouette, box)
         if object_pixels is None:
             continue
-        covered = np.logical_or.reduce(covers).astype(np.uint8)
+        covered = np.any(np.stack(covers), axis=0).astype(np.uint8)
         # Distance (px) of every pixel of the box from the union's outline, outside it.
         distance = cv2.distanceTransform(1 - covered, cv2.DIST_L2, 3)
         uv, depth = camera.project(points)

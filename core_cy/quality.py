@@ -81,7 +81,7 @@ def union_hull_iou(uvs, silhouette: np.ndarray, box=None) -> float:
     object_pixels, covers, _ = hull_covers(uvs, silhouette, box)
     if object_pixels is None:
         return 0.0
-    covered = np.logical_or.reduce(covers) if covers else np.zeros_like(object_pixels)
+    covered = np.any(np.stack(covers), axis=0) if covers else np.zeros_like(object_pixels)
     union = int(np.count_nonzero(object_pixels | covered))
     return int(np.count_nonzero(object_pixels & covered)) / union if union else 0.0
 
