@@ -7,8 +7,8 @@ KERNELS = ["_carve_cy", "_edges_cy", "_grasp_cy", "_least_squares_cy", "_silhoue
 
 extensions = [
     Extension(
-        f"core_cy.{name}",
-        [f"core_cy/{name}.pyx"],
+        f"robocell.core_cy.{name}",
+        [f"robocell/core_cy/{name}.pyx"],
         include_dirs=[np.get_include()],
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
         extra_compile_args=["-O3"],

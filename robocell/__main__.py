@@ -2,7 +2,7 @@
 
 import sys
 
-from .main import main
+from .cli.main import main
 
 # Guarded: a process started with multiprocessing's "spawn" (the daemon's recorder) imports the
 # parent's main module again, and must not run the command a second time.

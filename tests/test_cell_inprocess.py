@@ -20,20 +20,20 @@ import cv2
 import numpy as np
 import pytest
 
-import cell.daemon
-import cell.requests
-from cell.daemon import CellDaemon
-from cell.store import JobStore
-from wire import keys
-from wire.client import AsyncCellClient
-from wire.errors import CellError, StoreError
-from wire.fake_transport import MemoryNetwork
-from wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
+import robocell.cell.daemon
+import robocell.cell.requests
+from robocell.cell.daemon import CellDaemon
+from robocell.cell.store import JobStore
+from robocell.wire import keys
+from robocell.wire.client import AsyncCellClient
+from robocell.wire.errors import CellError, StoreError
+from robocell.wire.fake_transport import MemoryNetwork
+from robocell.wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
                            MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
                            RobotState, ScanRequest, Superquadric)
-from wire.transport import Request, Response
-from workers.reconstruct.worker import ReconstructWorker
-from workers.sim.scene import target_from_config
+from robocell.wire.transport import Request, Response
+from robocell.workers.reconstruct.worker import ReconstructWorker
+from robocell.workers.sim.scene import target_from_config
 
 from tests.cell_fixtures import cell_config
 
@@ -153,7 +153,7 @@ def _run(coroutine) -> None:
 
 
 def test_a_plan_that_would_grow_past_its_cap_ends_with_what_it_has_and_says_so(tmp_path, monkeypatch):
-    monkeypatch.setattr(cell.daemon, "MAX_PLAN_STEPS", 6)  # 3 views and a reconstruction, then one more view
+    monkeypatch.setattr(robocell.cell.daemon, "MAX_PLAN_STEPS", 6)  # 3 views and a reconstruction, then one more view
     config = _config(tmp_path)
 
     async def scenario() -> None:
@@ -304,13 +304,13 @@ def test_a_fake_workers_oversized_model_is_refused_and_the_job_succeeds_on_the_r
 def test_a_50_mb_submit_is_refused_unread_and_the_daemon_keeps_serving(tmp_path, monkeypatch):
     config = _config(tmp_path)
     parsed: list[int] = []
-    real_parse = cell.requests.parse_request
+    real_parse = robocell.cell.requests.parse_request
 
     def counting(model, payload, limit):
         parsed.append(len(payload))
         return real_parse(model, payload, limit)
 
-    monkeypatch.setattr(cell.requests, "parse_request", counting)
+    monkeypatch.setattr(robocell.cell.requests, "parse_request", counting)
 
     async def scenario() -> None:
         network = MemoryNetwork()
@@ -400,8 +400,8 @@ def test_retention_removes_old_recordings_while_the_cell_runs(tmp_path):
 
 
 def format_status_of(disk) -> str:
-    from robocell.jobs import format_status
-    from wire.messages import CellStatus
+    from robocell.cli.jobs import format_status
+    from robocell.wire.messages import CellStatus
     status = CellStatus(cell="c", time=0.0, started=0.0, workers={}, reconstructors=[], queued=0, max_queued=1,
                         waiting_for_reconstructor=0, jobs={}, recent_failures=[], disk=disk)
     return format_status(status)

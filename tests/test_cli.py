@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
 
-from robocell.jobs import format_status
-from robocell.main import build_parser, main
-from wire.config import CellConfig, load_config
-from wire.messages import CellStatus, ReconstructorStatus
+from robocell.cli.jobs import format_status
+from robocell.cli.main import build_parser, main
+from robocell.wire.config import CellConfig, load_config
+from robocell.wire.messages import CellStatus, ReconstructorStatus
 
 from tests.bundles import edit_scan
 from tests.cell_fixtures import free_port, wait_until
@@ -124,12 +124,12 @@ def test_bad_bundles_fail_one_by_one(tmp_path, sphere_bundle_template):
 
 # --- one way to build the command ----------------------------------------------------------------------
 
-HEAVY = ("zenoh", "cv2", "scipy", "rerun", "httpx", "core_cy.reconstruct", "pydantic")
+HEAVY = ("zenoh", "cv2", "scipy", "rerun", "httpx", "robocell.core_cy.reconstruct", "pydantic")
 
 
 def test_the_parser_loads_nothing_heavy():
     """`robocell --help` and the parsing before every command load none of what the commands run."""
-    probe = ("import sys; from robocell.main import build_parser; build_parser(); "
+    probe = ("import sys; from robocell.cli.main import build_parser; build_parser(); "
              f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
@@ -230,7 +230,7 @@ def test_status_columns_line_up_with_their_headers():
 @pytest.fixture
 def recording(tmp_path):
     """A run directory with one job's recording, and the configuration that names it."""
-    from cell.recording import JobRecording
+    from robocell.cell.recording import JobRecording
 
     run_dir = tmp_path / "runs"
     with JobRecording(run_dir / "j1.rrd", "j1") as rec:
@@ -316,9 +316,9 @@ def _held_port() -> socket.socket:
 def test_up_names_the_process_that_holds_the_routers_port(tmp_path):
     import asyncio
 
-    from robocell.demo import local_config
-    from robocell.up import CellProcesses
-    from wire.errors import CellError
+    from robocell.cli.demo import local_config
+    from robocell.cli.up import CellProcesses
+    from robocell.wire.errors import CellError
 
     with _held_port() as listener:
         port = listener.getsockname()[1]
@@ -344,19 +344,20 @@ def test_replay_web_on_a_held_port_says_so_before_any_address(recording, capsys)
 
 def test_camera_probe_logs_no_library_chatter(tmp_path):
     """httpx logs each request at INFO: left out unless -v."""
-    from wire.config import SimConfig
-    from workers.sim.axis import SimCameraServer
-    from workers.sim.scans import default_K, look_at
-    from workers.sim.scene import scene_from_config
+    from robocell.wire.config import SimConfig
+    from robocell.workers.sim.axis import SimCameraServer
+    from robocell.workers.sim.scans import default_K, look_at
+    from robocell.workers.sim.scene import scene_from_config
 
     size = (320, 240)
     pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])
     with SimCameraServer(scene_from_config(SimConfig()), K=default_K(size), image_size=size,
                          pose_provider=lambda: pose) as camera:
-        quiet = subprocess.run([sys.executable, "-m", "robocell", "camera", "probe", camera.url], capture_output=True,
-                               text=True, timeout=60)
-        verbose = subprocess.run([sys.executable, "-m", "robocell", "-v", "camera", "probe", camera.url],
-                                 capture_output=True, text=True, timeout=60)
+        # A generous timeout per request: the simulated camera renders each snapshot, slowly on a loaded machine.
+        probe = ["camera", "probe", camera.url, "--timeout", "30"]
+        quiet = subprocess.run([sys.executable, "-m", "robocell", *probe], capture_output=True, text=True, timeout=300)
+        verbose = subprocess.run([sys.executable, "-m", "robocell", "-v", *probe], capture_output=True, text=True,
+                                 timeout=300)
     assert quiet.returncode == 0, quiet.stderr
     assert "snapshot     ok" in quiet.stdout
     assert quiet.stderr == ""
