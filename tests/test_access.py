@@ -347,9 +347,74 @@ def test_a_denied_command_says_the_user_may_not_ask(cell, tmp_path, monkeypatch,
     path.write_text(json.dumps(config))
     monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", _password("dashboard"))
     assert main(["--config", str(path), "cancel", "no-such-job"]) == 1
+    # Issue 24: which role may not do what, at once (an observer sees the daemon is up).
     assert capsys.readouterr().err == (
-        f"robocell cancel: no cell daemon is running for cell {cell.config.cell_id} at {cell.endpoint}, or the "
-        f"router's access control does not let user 'dashboard' ask it\n")
+        f"robocell cancel: user 'dashboard' may not cancel jobs in cell {cell.config.cell_id} (only the client role "
+        f"may): the router's access control drops its query, though the cell's daemon is up\n")
+    assert main(["--config", str(path), "scan", "--target", "0.6", "0", "0.03"]) == 1
+    assert capsys.readouterr().err == (
+        f"robocell scan: user 'dashboard' may not submit jobs in cell {cell.config.cell_id} (only the client role "
+        f"may): the router's access control drops its query, though the cell's daemon is up\n")
+
+
+def _as_user(cell, tmp_path, user: str, **zenoh) -> Path:
+    """The cell's configuration file, but logged in as ``user``."""
+    config = json.loads(cell.config_path.read_text())
+    config["zenoh"].update(user=user, **zenoh)
+    path = tmp_path / f"{user}.json"
+    path.write_text(json.dumps(config))
+    return path
+
+
+def test_a_wrong_password_says_the_router_refused_the_credentials(cell, tmp_path, monkeypatch, capsys):
+    """Issue 24: it read as "cannot reach the Zenoh router ... Timeout"."""
+    from robocell.main import main
+
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", "not-alices-password")
+    assert main(["--config", str(_as_user(cell, tmp_path, "alice")), "status"]) == 1
+    assert capsys.readouterr().err == (
+        f"robocell status: the router refused the credentials: user 'alice' with that password is not in the "
+        f"users' dictionary of the router at {cell.endpoint}\n")
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", _password("alice"))   # and the right one is let in
+    assert main(["--config", str(_as_user(cell, tmp_path, "alice")), "status"]) == 0
+
+
+def test_a_user_that_cannot_see_the_daemon_is_told_which_role_submits(cell):
+    with pytest.raises(NoResponder) as unanswered:
+        cell.client("recon1").submit(cell.request(label="recon1's"))
+    assert str(unanswered.value) == (
+        f"nobody answers on robocell/{cell.config.cell_id}/submit: no cell daemon is running for cell "
+        f"{cell.config.cell_id}, or user 'recon1' may not submit jobs there (only the client role may)")
+
+
+def test_a_part_run_by_a_user_without_its_role_says_so_at_once(cell, tmp_path):
+    """Issue 24: a role mismatch was a silent wait; the part's declarations were dropped unseen."""
+    environment = {**os.environ, "ROBOCELL_ZENOH_PASSWORD": _password("alice")}
+    for part, role in (("robot", "robot1"), ("camera", "camera1")):
+        ran = subprocess.run([sys.executable, "-m", "robocell", "--config", str(_as_user(cell, tmp_path, "alice")),
+                              "worker", part], capture_output=True, text=True, timeout=START_TIMEOUT_S, env=environment)
+        assert ran.returncode == 1
+        assert (f"user 'alice' may not run the {part} worker of cell {cell.config.cell_id}: [zenoh.roles] {part} is "
+                f"{role} (alice is client); the router's access control would drop its declarations unseen") \
+            in ran.stderr
+        assert "Traceback" not in ran.stderr
+
+
+def test_up_with_a_part_its_user_may_not_be_says_so_before_starting_anything(cell, tmp_path):
+    """deploy/cell-host.toml's user cell1 is daemon, robot and camera: not a reconstruction worker."""
+    from robocell.up import CellProcesses
+    from wire.errors import AccessDenied
+
+    data = json.loads(cell.config_path.read_text())
+    data["run_dir"] = str(tmp_path / "run")
+    data["zenoh"].update(router=f"tls/127.0.0.1:{free_port()}", user="cell1")
+    data["zenoh"]["roles"].update(robot=["cell1"], camera=["cell1"])
+    (tmp_path / "cell.json").write_text(json.dumps(data))
+    processes = CellProcesses(load_config(tmp_path / "cell.json"), reconstructors=1)
+    with pytest.raises(AccessDenied, match=r"^user 'cell1' may not run a reconstruction worker: \[zenoh.roles\] "
+                                           r"reconstruct is recon1, recon2 \(cell1 is camera, daemon, robot\)"):
+        asyncio.run(processes.start(ready_timeout=5))
+    assert all(child.process is None for child in processes.children)
 
 
 def test_a_client_cannot_move_the_robot_or_take_pictures(cell):

@@ -52,7 +52,7 @@ def serve_camera(transport: BaseTransport, config: CellConfig, camera: Camera) -
 
 def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
-        transport = await open_transport(config)
+        transport = await open_transport(config, role="camera")
         try:
             async with make_camera(config, transport) as camera:
                 serve_camera(transport, config, camera)

@@ -90,7 +90,7 @@ def main(config: CellConfig) -> int:
         backend = make_backend(config)
         await backend.open()
         try:
-            transport = await open_transport(config)
+            transport = await open_transport(config, role="robot")
             try:
                 serve_robot(transport, config, backend)
                 transport.declare_token(keys.alive(config.cell_id, "robot"))
