@@ -35,7 +35,7 @@ from wire import keys
 from wire.access import ROLES, access_control, permissions
 from wire.client import CellClient
 from wire.config import CellConfig, load_config
-from wire.errors import CellError, NoResponder
+from wire.errors import CellError, NoResponder, RemoteError
 from wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
 from wire.transport import Transport
 from workers.camera.backend import Camera
@@ -99,8 +99,13 @@ class CountingRobot(SimRobot):
     def __init__(self, config: CellConfig) -> None:
         super().__init__(config.robot, gripper=SceneGripper.from_config(config))
         self.moves = 0
+        self.grips = 0
         self.free = asyncio.Event()
         self.free.set()
+
+    async def grip(self, close: bool):
+        self.grips += 1
+        return await super().grip(close)
 
     async def move(self, target, on_progress):
         self.moves += 1
@@ -575,3 +580,72 @@ def test_only_clients_submit(cell, user):
     if user == "intruder":
         with pytest.raises(NoResponder):
             cell.client(user).list()
+
+
+def test_another_client_cannot_cancel_a_job_without_its_token(cell):
+    """Issue 23: any client could cancel another's job. Bob is a client too: the router lets him
+    ask, and the daemon refuses him in one line, with no token and with a guessed one."""
+    alice, bob = cell.client("alice"), cell.client("bob")
+    with cell.robot_held():
+        job = alice.submit(cell.request(label="alice's, held"))
+        _wait_state(alice, job.job_id, JobState.MOVING)
+        refusals = []
+        for guess in (None, "guessed-token-" * 3):
+            with pytest.raises(RemoteError) as refused:
+                bob.cancel(job.job_id, guess)
+            refusals.append(str(refused.value))
+        assert alice.status(job.job_id).state is JobState.MOVING
+        assert alice.cancel(job.job_id).state is JobState.CANCELLED   # with the token of its submit
+    assert refusals == [f"job {job.job_id}: no token shown: only the client that submitted it may do this (its "
+                        f"submit's answer holds the token)",
+                        f"job {job.job_id}: the token shown is not the job's: only the client that submitted it "
+                        f"may do this"]
+
+
+def test_every_queryable_refuses_an_oversized_request_unread_and_a_wrong_type(cell):
+    """Issue 23: bounded requests (each queryable checks a request's size before it reads it, a
+    50 MB submit included) and strict types (``{"close": "yes"}`` closes no gripper), on the real
+    daemon, robot and camera under access control: alice asks the daemon, the daemon's user the parts."""
+    from wire.messages import REQUEST_LIMITS
+
+    cell_id = cell.config.cell_id
+    job = cell.client("alice").submit(cell.request(label="sized"))
+    assert cell.client("alice").wait(job.job_id, timeout=JOB_TIMEOUT_S).state is JobState.SUCCEEDED
+    daemon_keys = {keys.submit(cell_id): "submit", keys.jobs(cell_id): "query", keys.status(cell_id): "query",
+                   keys.job(cell_id, job.job_id): "query", keys.result(cell_id, job.job_id): "query",
+                   keys.cancel(cell_id, job.job_id): "cancel"}
+    part_keys = {keys.robot_move(cell_id): "part", keys.robot_grip(cell_id): "part",
+                 keys.camera_capture(cell_id): "part"}
+    moves, grips, shots, jobs = cell.robot.moves, cell.robot.grips, cell.camera.shots, cell.job_count()
+
+    async def ask(session: Transport, key: str, payload: bytes) -> str:
+        with pytest.raises(CellError) as refused:
+            await session.query(key, payload, timeout=20.0)
+        return str(refused.value)
+
+    async def try_all() -> dict[str, str]:
+        alice, daemon_user = await cell.open("alice"), await cell.open("cell1")
+        said = {}
+        for session, asked in ((alice, daemon_keys), (daemon_user, part_keys)):
+            for key, limit in asked.items():
+                over = REQUEST_LIMITS[limit] + 1
+                said[key] = await ask(session, key, b" " * over)
+                assert said[key] == f"the request is {over} bytes: at most {REQUEST_LIMITS[limit]} are taken", key
+        huge = b'{"target": [0.6, 0, 0.05], "label": "' + b"x" * (50 * 1024 * 1024) + b'"}'
+        said["50 MB submit"] = await ask(alice, keys.submit(cell_id), huge)
+        said["50 MB size"] = str(len(huge))
+        said["close yes"] = await ask(daemon_user, keys.robot_grip(cell_id), b'{"schema_version": 2, "close": "yes"}')
+        said["move strings"] = await ask(daemon_user, keys.robot_move(cell_id), json.dumps(
+            {"schema_version": 2, "T_base_flange": [[str(v) for v in row] for row in np.eye(4)]}).encode())
+        said["cancel number"] = await ask(alice, keys.cancel(cell_id, job.job_id),
+                                          b'{"schema_version": 2, "token": 12345678901234567890}')
+        return said
+
+    said = cell.loop.run(try_all(), timeout=120)
+    assert said["50 MB submit"] == (f"the request is {said['50 MB size']} bytes: at most "
+                                    f"{REQUEST_LIMITS['submit']} are taken")
+    assert said["close yes"].startswith("invalid GripRequest: close: Input should be a valid boolean")
+    assert said["move strings"].startswith("invalid MoveRequest: T_base_flange.0.0: Input should be a valid number")
+    assert said["cancel number"].startswith("invalid CancelRequest: token: Input should be a valid string")
+    # Nothing moved, closed, took a picture or was queued.
+    assert (cell.robot.moves, cell.robot.grips, cell.camera.shots, cell.job_count()) == (moves, grips, shots, jobs)

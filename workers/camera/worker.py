@@ -14,7 +14,7 @@ import time
 from wire import keys
 from wire.backends import load_backend
 from wire.config import CellConfig
-from wire.messages import CaptureInfo
+from wire.messages import REQUEST_LIMITS, CaptureInfo
 from wire.process import open_transport, run_until_stopped
 from wire.transport import BaseTransport, Request, Response
 
@@ -47,7 +47,7 @@ def serve_camera(transport: BaseTransport, config: CellConfig, camera: Camera) -
                            source=camera.source, time=time.time(), duration_s=time.monotonic() - began)
         return Response(picture.data, encoding=picture.encoding, attachment=info.model_dump_json())
 
-    transport.serve(keys.camera_capture(config.cell_id), on_capture)
+    transport.serve(keys.camera_capture(config.cell_id), on_capture, limit=REQUEST_LIMITS["part"])
 
 
 def main(config: CellConfig) -> int:

@@ -16,7 +16,7 @@ import numpy as np
 from wire import keys
 from wire.backends import load_backend
 from wire.config import CellConfig
-from wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
+from wire.messages import REQUEST_LIMITS, GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
 from wire.process import open_transport, run_until_stopped
 from wire.transport import Request, RequestError, Response, Transport
 
@@ -80,9 +80,11 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
         state = RobotState(T_base_flange=backend.pose().tolist(), moving=moving, time=time.time())
         return Response(state.model_dump_json())
 
-    transport.serve(keys.robot_move(cell), on_move)
-    transport.serve(keys.robot_grip(cell), on_grip)
-    transport.serve(keys.robot_state(cell), on_state)
+    # Each request's size is checked before it is read (a move takes well under 1 kB).
+    limit = REQUEST_LIMITS["part"]
+    transport.serve(keys.robot_move(cell), on_move, limit=limit)
+    transport.serve(keys.robot_grip(cell), on_grip, limit=limit)
+    transport.serve(keys.robot_state(cell), on_state, limit=limit)
 
 
 def main(config: CellConfig) -> int:
