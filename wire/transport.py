@@ -305,15 +305,15 @@ class Transport(BaseTransport):
         TransportError
             If the router cannot be reached (or, for a router, the endpoint cannot be bound).
         """
-        if mode != "client":
+        if mode == "router":
             config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms)
             try:
                 session = await asyncio.to_thread(zenoh.open, config)
             except zenoh.ZError as exc:
                 raise TransportError(f"cannot listen on {endpoint}: {_zenoh_message(exc)}") from exc
             return cls(session, asyncio.get_running_loop(), endpoint)
-        session = await _connect(endpoint, settings or {}, lease_ms, connect_timeout_s)
-        transport = cls(session, asyncio.get_running_loop(), endpoint, follow_link=True)
+        session = await _connect(endpoint, mode, settings or {}, lease_ms, connect_timeout_s)
+        transport = cls(session, asyncio.get_running_loop(), endpoint, follow_link=mode == "client")
         transport.user = cast(str | None, (settings or {}).get(_USER))
         return transport
 
@@ -572,7 +572,7 @@ _PROBE_TIMEOUT_S = 1.0
 _REFUSALS = 2
 
 
-async def _connect(endpoint: str, settings: dict, lease_ms: int | None, timeout_s: float) -> zenoh.Session:
+async def _connect(endpoint: str, mode: str, settings: dict, lease_ms: int | None, timeout_s: float) -> zenoh.Session:
     """A client session to the router at ``endpoint``, trying again until ``timeout_s`` has passed.
 
     Zenoh tells a session that the router refused (a wrong password, an untrusted certificate)
@@ -583,7 +583,7 @@ async def _connect(endpoint: str, settings: dict, lease_ms: int | None, timeout_
     """
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout_s
-    config = session_config(endpoint, settings=settings, lease_ms=lease_ms)   # one attempt: no time-out
+    config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms)   # one attempt: no time-out
     refusals = 0
     while True:
         try:
