@@ -28,22 +28,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocell.demo import free_port
+from robocell.cli.demo import free_port
 from tests.cell_fixtures import LoopThread, accepts, wait_until
 from tests.pki import router_tls_settings, tls_settings, write_pki
-from wire import keys
-from wire.access import ROLES, access_control, permissions
-from wire.client import CellClient
-from wire.config import CellConfig, load_config
-from wire.errors import CellError, NoResponder, RemoteError
-from wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
-from wire.transport import Transport
-from workers.camera.backend import Camera
-from workers.camera.worker import make_camera, serve_camera
-from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
-from workers.robot.worker import serve_robot
-from workers.sim.robot import SceneGripper, SimRobot
-from workers.sim.scene import target_from_config
+from robocell.wire import keys
+from robocell.wire.access import ROLES, access_control, permissions
+from robocell.wire.client import CellClient
+from robocell.wire.config import CellConfig, load_config
+from robocell.wire.errors import CellError, NoResponder, RemoteError
+from robocell.wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
+from robocell.wire.transport import Transport
+from robocell.workers.camera.backend import Camera
+from robocell.workers.camera.worker import make_camera, serve_camera
+from robocell.workers.reconstruct.worker import ReconstructWorker, reconstruct_request
+from robocell.workers.robot.worker import serve_robot
+from robocell.workers.sim.robot import SceneGripper, SimRobot
+from robocell.workers.sim.scene import target_from_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 #: The users of the router's dictionary: those deploy/cell-host.toml gives roles, and one it does not.
@@ -344,7 +344,7 @@ def test_an_observer_reads_but_cannot_submit_or_cancel(cell):
 
 def test_a_denied_command_says_the_user_may_not_ask(cell, tmp_path, monkeypatch, capsys):
     """Zenoh drops a denied query unanswered: the command line names that reason beside a missing daemon."""
-    from robocell.main import main
+    from robocell.cli.main import main
 
     config = json.loads(cell.config_path.read_text())
     config["zenoh"]["user"] = "dashboard"
@@ -373,7 +373,7 @@ def _as_user(cell, tmp_path, user: str, **zenoh) -> Path:
 
 def test_a_wrong_password_says_the_router_refused_the_credentials(cell, tmp_path, monkeypatch, capsys):
     """Issue 24: it read as "cannot reach the Zenoh router ... Timeout"."""
-    from robocell.main import main
+    from robocell.cli.main import main
 
     monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", "not-alices-password")
     assert main(["--config", str(_as_user(cell, tmp_path, "alice")), "status"]) == 1
@@ -407,8 +407,8 @@ def test_a_part_run_by_a_user_without_its_role_says_so_at_once(cell, tmp_path):
 
 def test_up_with_a_part_its_user_may_not_be_says_so_before_starting_anything(cell, tmp_path):
     """deploy/cell-host.toml's user cell1 is daemon, robot and camera: not a reconstruction worker."""
-    from robocell.up import CellProcesses
-    from wire.errors import AccessDenied
+    from robocell.cli.up import CellProcesses
+    from robocell.wire.errors import AccessDenied
 
     data = json.loads(cell.config_path.read_text())
     data["run_dir"] = str(tmp_path / "run")
@@ -606,7 +606,7 @@ def test_every_queryable_refuses_an_oversized_request_unread_and_a_wrong_type(ce
     """Issue 23: bounded requests (each queryable checks a request's size before it reads it, a
     50 MB submit included) and strict types (``{"close": "yes"}`` closes no gripper), on the real
     daemon, robot and camera under access control: alice asks the daemon, the daemon's user the parts."""
-    from wire.messages import REQUEST_LIMITS
+    from robocell.wire.messages import REQUEST_LIMITS
 
     cell_id = cell.config.cell_id
     job = cell.client("alice").submit(cell.request(label="sized"))

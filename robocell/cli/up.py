@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError
-from wire.transport import Transport
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError
+from robocell.wire.transport import Transport
 
 __all__ = ["CellProcesses", "up", "serves_sim_camera", "on_interrupt", "port_holder", "check_port_free"]
 
@@ -135,7 +135,7 @@ class CellProcesses:
     def _check_roles(self) -> None:
         """Every part runs as ``[zenoh] user``: under the config's own access control, one whose
         role that user lacks would be dropped unseen, and the cell wait for it in vain."""
-        from wire.process import check_part
+        from robocell.wire.process import check_part
 
         for child in self.children:
             role = "reconstruct" if child.name.startswith("reconstruct-") else child.name
