@@ -44,7 +44,7 @@ def _roles_summary(config: CellConfig) -> str:
 def run_daemon(config: CellConfig) -> int:
     """The cell daemon, with its job store in the run directory."""
     async def run(stop: asyncio.Event) -> None:
-        transport = await open_transport(config)
+        transport = await open_transport(config, role="daemon")
         try:
             await CellDaemon(config, transport).run(stop)
         finally:

@@ -35,7 +35,7 @@ from robocell.wire import keys
 from robocell.wire.access import ROLES, access_control, permissions
 from robocell.wire.client import CellClient
 from robocell.wire.config import CellConfig, load_config
-from robocell.wire.errors import CellError, NoResponder
+from robocell.wire.errors import CellError, NoResponder, RemoteError
 from robocell.wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
 from robocell.wire.transport import Transport
 from robocell.workers.camera.backend import Camera
@@ -99,8 +99,13 @@ class CountingRobot(SimRobot):
     def __init__(self, config: CellConfig) -> None:
         super().__init__(config.robot, gripper=SceneGripper.from_config(config))
         self.moves = 0
+        self.grips = 0
         self.free = asyncio.Event()
         self.free.set()
+
+    async def grip(self, close: bool):
+        self.grips += 1
+        return await super().grip(close)
 
     async def move(self, target, on_progress):
         self.moves += 1
@@ -347,9 +352,74 @@ def test_a_denied_command_says_the_user_may_not_ask(cell, tmp_path, monkeypatch,
     path.write_text(json.dumps(config))
     monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", _password("dashboard"))
     assert main(["--config", str(path), "cancel", "no-such-job"]) == 1
+    # Issue 24: which role may not do what, at once (an observer sees the daemon is up).
     assert capsys.readouterr().err == (
-        f"robocell cancel: no cell daemon is running for cell {cell.config.cell_id} at {cell.endpoint}, or the "
-        f"router's access control does not let user 'dashboard' ask it\n")
+        f"robocell cancel: user 'dashboard' may not cancel jobs in cell {cell.config.cell_id} (only the client role "
+        f"may): the router's access control drops its query, though the cell's daemon is up\n")
+    assert main(["--config", str(path), "scan", "--target", "0.6", "0", "0.03"]) == 1
+    assert capsys.readouterr().err == (
+        f"robocell scan: user 'dashboard' may not submit jobs in cell {cell.config.cell_id} (only the client role "
+        f"may): the router's access control drops its query, though the cell's daemon is up\n")
+
+
+def _as_user(cell, tmp_path, user: str, **zenoh) -> Path:
+    """The cell's configuration file, but logged in as ``user``."""
+    config = json.loads(cell.config_path.read_text())
+    config["zenoh"].update(user=user, **zenoh)
+    path = tmp_path / f"{user}.json"
+    path.write_text(json.dumps(config))
+    return path
+
+
+def test_a_wrong_password_says_the_router_refused_the_credentials(cell, tmp_path, monkeypatch, capsys):
+    """Issue 24: it read as "cannot reach the Zenoh router ... Timeout"."""
+    from robocell.cli.main import main
+
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", "not-alices-password")
+    assert main(["--config", str(_as_user(cell, tmp_path, "alice")), "status"]) == 1
+    assert capsys.readouterr().err == (
+        f"robocell status: the router refused the credentials: user 'alice' with that password is not in the "
+        f"users' dictionary of the router at {cell.endpoint}\n")
+    monkeypatch.setenv("ROBOCELL_ZENOH_PASSWORD", _password("alice"))   # and the right one is let in
+    assert main(["--config", str(_as_user(cell, tmp_path, "alice")), "status"]) == 0
+
+
+def test_a_user_that_cannot_see_the_daemon_is_told_which_role_submits(cell):
+    with pytest.raises(NoResponder) as unanswered:
+        cell.client("recon1").submit(cell.request(label="recon1's"))
+    assert str(unanswered.value) == (
+        f"nobody answers on robocell/{cell.config.cell_id}/submit: no cell daemon is running for cell "
+        f"{cell.config.cell_id}, or user 'recon1' may not submit jobs there (only the client role may)")
+
+
+def test_a_part_run_by_a_user_without_its_role_says_so_at_once(cell, tmp_path):
+    """Issue 24: a role mismatch was a silent wait; the part's declarations were dropped unseen."""
+    environment = {**os.environ, "ROBOCELL_ZENOH_PASSWORD": _password("alice")}
+    for part, role in (("robot", "robot1"), ("camera", "camera1")):
+        ran = subprocess.run([sys.executable, "-m", "robocell", "--config", str(_as_user(cell, tmp_path, "alice")),
+                              "worker", part], capture_output=True, text=True, timeout=START_TIMEOUT_S, env=environment)
+        assert ran.returncode == 1
+        assert (f"user 'alice' may not run the {part} worker of cell {cell.config.cell_id}: [zenoh.roles] {part} is "
+                f"{role} (alice is client); the router's access control would drop its declarations unseen") \
+            in ran.stderr
+        assert "Traceback" not in ran.stderr
+
+
+def test_up_with_a_part_its_user_may_not_be_says_so_before_starting_anything(cell, tmp_path):
+    """deploy/cell-host.toml's user cell1 is daemon, robot and camera: not a reconstruction worker."""
+    from robocell.cli.up import CellProcesses
+    from robocell.wire.errors import AccessDenied
+
+    data = json.loads(cell.config_path.read_text())
+    data["run_dir"] = str(tmp_path / "run")
+    data["zenoh"].update(router=f"tls/127.0.0.1:{free_port()}", user="cell1")
+    data["zenoh"]["roles"].update(robot=["cell1"], camera=["cell1"])
+    (tmp_path / "cell.json").write_text(json.dumps(data))
+    processes = CellProcesses(load_config(tmp_path / "cell.json"), reconstructors=1)
+    with pytest.raises(AccessDenied, match=r"^user 'cell1' may not run a reconstruction worker: \[zenoh.roles\] "
+                                           r"reconstruct is recon1, recon2 \(cell1 is camera, daemon, robot\)"):
+        asyncio.run(processes.start(ready_timeout=5))
+    assert all(child.process is None for child in processes.children)
 
 
 def test_a_client_cannot_move_the_robot_or_take_pictures(cell):
@@ -510,3 +580,72 @@ def test_only_clients_submit(cell, user):
     if user == "intruder":
         with pytest.raises(NoResponder):
             cell.client(user).list()
+
+
+def test_another_client_cannot_cancel_a_job_without_its_token(cell):
+    """Issue 23: any client could cancel another's job. Bob is a client too: the router lets him
+    ask, and the daemon refuses him in one line, with no token and with a guessed one."""
+    alice, bob = cell.client("alice"), cell.client("bob")
+    with cell.robot_held():
+        job = alice.submit(cell.request(label="alice's, held"))
+        _wait_state(alice, job.job_id, JobState.MOVING)
+        refusals = []
+        for guess in (None, "guessed-token-" * 3):
+            with pytest.raises(RemoteError) as refused:
+                bob.cancel(job.job_id, guess)
+            refusals.append(str(refused.value))
+        assert alice.status(job.job_id).state is JobState.MOVING
+        assert alice.cancel(job.job_id).state is JobState.CANCELLED   # with the token of its submit
+    assert refusals == [f"job {job.job_id}: no token shown: only the client that submitted it may do this (its "
+                        f"submit's answer holds the token)",
+                        f"job {job.job_id}: the token shown is not the job's: only the client that submitted it "
+                        f"may do this"]
+
+
+def test_every_queryable_refuses_an_oversized_request_unread_and_a_wrong_type(cell):
+    """Issue 23: bounded requests (each queryable checks a request's size before it reads it, a
+    50 MB submit included) and strict types (``{"close": "yes"}`` closes no gripper), on the real
+    daemon, robot and camera under access control: alice asks the daemon, the daemon's user the parts."""
+    from robocell.wire.messages import REQUEST_LIMITS
+
+    cell_id = cell.config.cell_id
+    job = cell.client("alice").submit(cell.request(label="sized"))
+    assert cell.client("alice").wait(job.job_id, timeout=JOB_TIMEOUT_S).state is JobState.SUCCEEDED
+    daemon_keys = {keys.submit(cell_id): "submit", keys.jobs(cell_id): "query", keys.status(cell_id): "query",
+                   keys.job(cell_id, job.job_id): "query", keys.result(cell_id, job.job_id): "query",
+                   keys.cancel(cell_id, job.job_id): "cancel"}
+    part_keys = {keys.robot_move(cell_id): "part", keys.robot_grip(cell_id): "part",
+                 keys.camera_capture(cell_id): "part"}
+    moves, grips, shots, jobs = cell.robot.moves, cell.robot.grips, cell.camera.shots, cell.job_count()
+
+    async def ask(session: Transport, key: str, payload: bytes) -> str:
+        with pytest.raises(CellError) as refused:
+            await session.query(key, payload, timeout=20.0)
+        return str(refused.value)
+
+    async def try_all() -> dict[str, str]:
+        alice, daemon_user = await cell.open("alice"), await cell.open("cell1")
+        said = {}
+        for session, asked in ((alice, daemon_keys), (daemon_user, part_keys)):
+            for key, limit in asked.items():
+                over = REQUEST_LIMITS[limit] + 1
+                said[key] = await ask(session, key, b" " * over)
+                assert said[key] == f"the request is {over} bytes: at most {REQUEST_LIMITS[limit]} are taken", key
+        huge = b'{"target": [0.6, 0, 0.05], "label": "' + b"x" * (50 * 1024 * 1024) + b'"}'
+        said["50 MB submit"] = await ask(alice, keys.submit(cell_id), huge)
+        said["50 MB size"] = str(len(huge))
+        said["close yes"] = await ask(daemon_user, keys.robot_grip(cell_id), b'{"schema_version": 2, "close": "yes"}')
+        said["move strings"] = await ask(daemon_user, keys.robot_move(cell_id), json.dumps(
+            {"schema_version": 2, "T_base_flange": [[str(v) for v in row] for row in np.eye(4)]}).encode())
+        said["cancel number"] = await ask(alice, keys.cancel(cell_id, job.job_id),
+                                          b'{"schema_version": 2, "token": 12345678901234567890}')
+        return said
+
+    said = cell.loop.run(try_all(), timeout=120)
+    assert said["50 MB submit"] == (f"the request is {said['50 MB size']} bytes: at most "
+                                    f"{REQUEST_LIMITS['submit']} are taken")
+    assert said["close yes"].startswith("invalid GripRequest: close: Input should be a valid boolean")
+    assert said["move strings"].startswith("invalid MoveRequest: T_base_flange.0.0: Input should be a valid number")
+    assert said["cancel number"].startswith("invalid CancelRequest: token: Input should be a valid string")
+    # Nothing moved, closed, took a picture or was queued.
+    assert (cell.robot.moves, cell.robot.grips, cell.camera.shots, cell.job_count()) == (moves, grips, shots, jobs)

@@ -12,7 +12,7 @@ import pytest
 
 from robocell.cli.demo import free_port
 from tests.pki import router_tls_settings, tls_settings, write_pki
-from robocell.wire.errors import CellError, TransportError
+from robocell.wire.errors import CellError, CredentialsRefused, TransportError
 from robocell.wire.transport import Response, Transport
 
 
@@ -66,19 +66,45 @@ def test_client_with_credentials_and_ca_is_served(pki):
     assert reply.payload.startswith(b"\xff\xd8") and reply.encoding == "image/jpeg"
 
 
-@pytest.mark.parametrize("settings, why", [
-    (dict(user=None), "no credentials"),
-    (dict(password="wrong-password"), "wrong password"),
-    (dict(user="intruder", password="right-password"), "unknown user"),
-    (dict(ca=False), "does not trust the router's certificate"),
-])
-def test_client_without_the_right_credentials_cannot_connect(pki, settings, why):
+@pytest.mark.parametrize("settings, said", [
+    (dict(user=None), "the router at {endpoint} refused the session: it asks for a user and password"),
+    (dict(password="wrong-password"), "the router refused the credentials: user 'cell1' with that password is not "
+                                      "in the users' dictionary of the router at {endpoint}"),
+    (dict(user="intruder", password="right-password"), "the router refused the credentials: user 'intruder'"),
+    (dict(ca=False), "the router at {endpoint} was refused: its certificate is not trusted "),
+], ids=["no credentials", "wrong password", "unknown user", "does not trust the router's certificate"])
+def test_client_without_the_right_credentials_is_told_what_the_router_refused_at_once(pki, settings, said):
+    """Issue 24: a wrong password read as "cannot reach the Zenoh router", after the whole wait.
+    Given 30 s to wait for a router, the client is told within them: Zenoh would try for all 30."""
     async def check(endpoint):
-        with pytest.raises(TransportError, match="cannot reach the Zenoh router"):
-            client = await Transport.open(endpoint, settings=_client_settings(pki, **settings))
+        began = time.monotonic()
+        with pytest.raises(CredentialsRefused) as refused:
+            client = await Transport.open(endpoint, settings=_client_settings(pki, **settings), connect_timeout_s=30)
             await client.close()
+        return endpoint, str(refused.value), time.monotonic() - began
 
-    _run(_with_router(pki, check))
+    endpoint, message, waited_s = _run(_with_router(pki, check))
+    assert message.startswith(said.format(endpoint=endpoint)) and "\n" not in message
+    assert waited_s < 30
+
+
+def test_a_client_with_the_right_credentials_waits_for_a_router_that_comes_late(pki):
+    """Trying again while nothing listens is still how a client waits for a router that is starting."""
+    async def check():
+        endpoint = f"tls/127.0.0.1:{free_port()}"
+        connecting = asyncio.ensure_future(Transport.open(endpoint, settings=_client_settings(pki),
+                                                          connect_timeout_s=30))
+        await asyncio.sleep(1.0)
+        assert not connecting.done()
+        router = await Transport.open(endpoint, mode="router",
+                                      settings={**tls_settings(pki), **router_tls_settings(pki)})
+        try:
+            client = await connecting
+            await client.close()
+        finally:
+            await router.close()
+
+    _run(check())
 
 
 def test_plain_tcp_to_a_tls_router_is_refused(pki):

@@ -48,7 +48,8 @@ from collections.abc import Iterable, Mapping
 
 from . import keys
 
-__all__ = ["ROLES", "POOL_ROLES", "USER_NAME", "permissions", "access_control", "pool_subject"]
+__all__ = ["ROLES", "POOL_ROLES", "USER_NAME", "PARTS", "permissions", "access_control", "pool_subject",
+           "roles_that_may", "what_a_query_asks", "part_refusal"]
 
 #: What a user name must match: the router's dictionary holds ``user:password`` lines.
 USER_NAME = re.compile(r"[^:\s](?:[^:]*[^:\s])?")
@@ -204,3 +205,74 @@ def access_control(users: Mapping[str, Mapping[str, Iterable[str]]]) -> dict[str
                      for subject in ordered],
     }
 
+
+
+#: What each part of a cell does under its role, for the one line that says it may not.
+PARTS = {"daemon": "run the cell daemon", "robot": "run the robot worker", "camera": "run the camera worker",
+         "reconstruct": "run a reconstruction worker"}
+
+
+def roles_that_may(verb: str, key: str, cell: str) -> list[str]:
+    """The roles whose rules let a session ``verb`` (see :func:`permissions`) on ``key`` in ``cell``.
+
+    >>> roles_that_may("query", "robocell/cell1/submit", "cell1")
+    ['client']
+    >>> roles_that_may("query", "robocell/cell1/jobs/42", "cell1")
+    ['client', 'observer']
+    """
+    import zenoh   # only here: the configuration, which imports this module, is read without Zenoh
+
+    asked = zenoh.KeyExpr(key)
+    return [role for role in ROLES
+            if any(granted == verb and zenoh.KeyExpr(expr).includes(asked) for granted, expr in permissions(role, cell))]
+
+
+def what_a_query_asks(key: str, cell: str) -> str:
+    """A query on one of the daemon's keys in words: ``"submit jobs"``, ``"cancel jobs"``, ...
+
+    >>> what_a_query_asks("robocell/cell1/jobs/7/cancel", "cell1")
+    'cancel jobs'
+    """
+    parts = key.split("/")
+    if key == keys.submit(cell):
+        return "submit jobs"
+    if key == keys.jobs(cell):
+        return "list jobs"
+    if key == keys.status(cell):
+        return "read the cell's status"
+    if len(parts) == 5 and key.startswith(keys.jobs(cell) + "/"):
+        return {"cancel": "cancel jobs", "result": "read job results"}.get(parts[4], f"ask {key}")
+    if len(parts) == 4 and key.startswith(keys.jobs(cell) + "/"):
+        return "read a job's status"
+    return f"ask {key}"
+
+
+def part_refusal(users: Mapping[str, Mapping[str, Iterable[str]]], user: str | None, role: str, cell: str) -> str | None:
+    """Why the router's access control, made from ``users`` (cell id -> role -> user names, as
+    :func:`access_control` takes them), would drop what a part of ``role`` declares in ``cell``
+    as ``user``, unseen: one line; None when it lets the part run, or without access control.
+
+    >>> users = {"cell1": {"robot": ["robot1"], "client": ["alice"]}}
+    >>> part_refusal(users, "robot1", "robot", "cell1") is None
+    True
+    >>> part_refusal(users, "alice", "robot", "cell1")
+    "user 'alice' may not run the robot worker of cell cell1: [zenoh.roles] robot is robot1 (alice is client); \
+the router's access control would drop its declarations unseen"
+    """
+    if not users:
+        return None
+    if role in POOL_ROLES:   # a pool worker serves every cell, whichever cell's table names it
+        holders = sorted({name for roles in users.values() for name in roles.get(role, ())})
+    else:
+        holders = sorted(users.get(cell, {}).get(role, ()))
+    if user is not None and user in holders:
+        return None
+    what = f"{PARTS.get(role, role)}" + ("" if role in POOL_ROLES else f" of cell {cell}")
+    if user is None:
+        return (f"a session without a user may not {what}: the router's access control ([zenoh.roles]) lets only "
+                f"users it names do anything; set [zenoh] user (one of [zenoh.roles] {role}: "
+                f"{', '.join(holders) or 'nobody'})")
+    has = sorted({r for roles in users.values() for r, names in roles.items() if user in names})
+    return (f"user {user!r} may not {what}: [zenoh.roles] {role} is {', '.join(holders) or 'nobody'} "
+            f"({user} is {', '.join(has) or 'in no role'}); the router's access control would drop its "
+            f"declarations unseen")

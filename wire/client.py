@@ -18,7 +18,8 @@ from collections import OrderedDict
 from collections.abc import AsyncIterator, Callable
 
 from . import keys
-from .errors import CellError, LinkDown, RemoteError, TransportError
+from .access import roles_that_may, what_a_query_asks
+from .errors import AccessDenied, CellError, LinkDown, NoResponder, RemoteError, TransportError
 from .messages import CancelRequest, CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
 from .transport import Subscription, Transport
 
@@ -30,6 +31,7 @@ log = logging.getLogger(__name__)
 _EARLY_JOBS = 256
 _ALL_JOBS = "*"
 _KEPT_TOKENS = 1024        # the tokens of this many of the jobs it submitted, for its cancels
+_DAEMON_SEEN_S = 1.0       # how long a query that nobody answered waits to hear whether the daemon is up
 
 
 class JobFailed(CellError):
@@ -77,8 +79,30 @@ class AsyncCellClient:
         await self.close()
 
     async def _ask(self, key: str, payload: str | None = None, parameters: str = "") -> bytes:
-        reply = await self._transport.query(key, payload, timeout=self.timeout, parameters=parameters)
+        try:
+            reply = await self._transport.query(key, payload, timeout=self.timeout, parameters=parameters)
+        except NoResponder:
+            raise await self._unanswered(key) from None
         return reply.payload
+
+    async def _unanswered(self, key: str) -> NoResponder:
+        """Why nobody answered on one of the daemon's keys. Zenoh's access control drops a denied
+        query as if nobody served it: a daemon whose liveliness token this user sees, and which
+        still does not answer, was not asked, and the error says which roles may ask."""
+        what = what_a_query_asks(key, self.cell)
+        roles = roles_that_may("query", key, self.cell)
+        may = f"only the {' and '.join(roles)} role{'s' if len(roles) > 1 else ''} may" if roles else "no role may"
+        user = self._transport.user
+        who = f"user {user!r}" if user is not None else "this session"
+        try:
+            daemon_up = bool(await self._transport.alive(keys.alive(self.cell, "daemon"), timeout=_DAEMON_SEEN_S))
+        except (CellError, TimeoutError):
+            daemon_up = False
+        if daemon_up:
+            return AccessDenied(f"{who} may not {what} in cell {self.cell} ({may}): the router's access control "
+                                f"drops its query, though the cell's daemon is up")
+        return NoResponder(f"nobody answers on {key}: no cell daemon is running for cell {self.cell}"
+                           + (f", or {who} may not {what} there ({may})" if user is not None else ""))
 
     async def submit(self, request: ScanRequest, *, retry_s: float = 0.0) -> JobStatus:
         """Queue a scan; with ``request.request_id`` set, submitting again returns the same job.

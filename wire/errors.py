@@ -7,8 +7,10 @@
     ├── ConfigError        the configuration file is missing or invalid
     ├── StoreError         the job store's database cannot be opened, read or written
     ├── TransportError     Zenoh could not carry a message
+    │   ├── CredentialsRefused the router refused the session's user and password (or certificate)
     │   ├── LinkDown           the link to the router is down: nothing can be asked or answered
     │   ├── NoResponder        nobody answers on a key: the worker is not running
+    │   │   └── AccessDenied       the router's access control does not let this user do it
     │   ├── TransportTimeout   the answer did not come in time
     │   └── RemoteError        the other side answered with an error
     ├── CameraError        a snapshot could not be grabbed from the camera
@@ -42,7 +44,8 @@ from typing import Any
 
 __all__ = [
     "CellError", "BundleError", "ConfigError", "StoreError",
-    "TransportError", "LinkDown", "NoResponder", "TransportTimeout", "RemoteError",
+    "TransportError", "CredentialsRefused", "LinkDown", "NoResponder", "AccessDenied", "TransportTimeout",
+    "RemoteError",
     "CameraError", "CameraAuthError", "CameraResponseError", "CameraTimeout", "CameraConnectionError",
     "RobotError", "MoveRefused", "MoveFailed", "Unreachable", "EmergencyStop", "DrivesOff",
     "wire_kind", "from_reply",
@@ -106,6 +109,11 @@ class TransportError(CellError):
     """Zenoh could not open a session, or carry a message."""
 
 
+class CredentialsRefused(TransportError):
+    """The router is there, but refused this session: its user name and password (or the router's
+    certificate, which this side does not trust). Trying again cannot help."""
+
+
 class LinkDown(TransportError):
     """The link to the Zenoh router is down (the router stopped, or the network): a query was not
     sent, or its answer cannot come. Zenoh reconnects by itself when the router is back."""
@@ -113,6 +121,11 @@ class LinkDown(TransportError):
 
 class NoResponder(TransportError):
     """Nobody answers on the key: the worker or daemon behind it is not running."""
+
+
+class AccessDenied(NoResponder):
+    """The router's access control does not let this session's user do what it asked (Zenoh drops
+    a denied query, declaration or publication unanswered): the message says which role may."""
 
 
 class TransportTimeout(TransportError):

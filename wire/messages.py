@@ -123,6 +123,7 @@ REQUEST_LIMITS: dict[str, int] = {
     "cancel": 4 * 1024,             # CancelRequest
     "pick": 4 * 1024,               # PickDecision
     "query": 4 * 1024,              # jobs, jobs/<id>, jobs/<id>/result, status: parameters only
+    "part": 4 * 1024,               # the robot's move, gripper and state, the camera's capture
     "worker": 1024 * 1024,          # a worker's JSON answer (ReconstructReply: grasps, timings)
 }
 

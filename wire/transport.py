@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from .errors import CellError, LinkDown, NoResponder, TransportError, TransportTimeout, from_reply, wire_kind
+from .errors import (CellError, CredentialsRefused, LinkDown, NoResponder, TransportError, TransportTimeout, from_reply,
+                     wire_kind)
 from .messages import ErrorReply
 
 __all__ = ["BaseTransport", "Transport", "Request", "Response", "RequestError", "Reply", "Subscription",
@@ -158,6 +159,8 @@ class BaseTransport(abc.ABC):
 
     endpoint: str
     link_losses: int
+    #: The Zenoh user this session logged in as (None: no user), for errors that name it.
+    user: str | None = None
 
     @property
     @abc.abstractmethod
@@ -296,17 +299,23 @@ class Transport(BaseTransport):
 
         Raises
         ------
+        CredentialsRefused
+            If the router is there but refuses the session: its user name and password (or the
+            router's certificate is not one this side trusts). Said at once, not retried.
         TransportError
             If the router cannot be reached (or, for a router, the endpoint cannot be bound).
         """
-        config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms,
-                                connect_timeout_ms=int(connect_timeout_s * 1000))
-        try:
-            session = await asyncio.to_thread(zenoh.open, config)
-        except zenoh.ZError as exc:
-            what = "listen on" if mode == "router" else "reach the Zenoh router at"
-            raise TransportError(f"cannot {what} {endpoint}: {_zenoh_message(exc)}") from exc
-        return cls(session, asyncio.get_running_loop(), endpoint, follow_link=mode == "client")
+        if mode == "router":
+            config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms)
+            try:
+                session = await asyncio.to_thread(zenoh.open, config)
+            except zenoh.ZError as exc:
+                raise TransportError(f"cannot listen on {endpoint}: {_zenoh_message(exc)}") from exc
+            return cls(session, asyncio.get_running_loop(), endpoint)
+        session = await _connect(endpoint, mode, settings or {}, lease_ms, connect_timeout_s)
+        transport = cls(session, asyncio.get_running_loop(), endpoint, follow_link=mode == "client")
+        transport.user = cast(str | None, (settings or {}).get(_USER))
+        return transport
 
     async def close(self) -> None:
         if self._closed:
@@ -550,6 +559,111 @@ class Transport(BaseTransport):
         async with asyncio.timeout(timeout + 5.0):
             await done
         return sorted(keys)
+
+
+_USER = "transport/auth/usrpwd/user"
+_ROOT_CA = "transport/link/tls/root_ca_certificate"
+_CLIENT_CERTIFICATE = ("transport/link/tls/connect_certificate", "transport/link/tls/connect_private_key")
+#: Between two tries of a router that is not there yet, and how long a probe of its port may take.
+_CONNECT_RETRY_S = 0.25
+_PROBE_TIMEOUT_S = 1.0
+#: Tries in a row that the router answered and refused, before that is its answer: one could
+#: have met a router that was only beginning to listen.
+_REFUSALS = 2
+
+
+async def _connect(endpoint: str, mode: str, settings: dict, lease_ms: int | None, timeout_s: float) -> zenoh.Session:
+    """A client session to the router at ``endpoint``, trying again until ``timeout_s`` has passed.
+
+    Zenoh tells a session that the router refused (a wrong password, an untrusted certificate)
+    only in its log, and then tries again until its time-out, as if the router were not there.
+    So each try here is one attempt of Zenoh's; after one that failed, the router's port is
+    probed: a router that listens, and still turned the session away twice, refused it, and
+    that is said at once, with what it refused (:func:`_refusal`).
+    """
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s
+    config = session_config(endpoint, mode=mode, settings=settings, lease_ms=lease_ms)   # one attempt: no time-out
+    refusals = 0
+    while True:
+        try:
+            return await asyncio.to_thread(zenoh.open, config)
+        except zenoh.ZError as exc:
+            error = exc
+        refusals = refusals + 1 if await _listening(endpoint) else 0
+        if refusals >= _REFUSALS:
+            raise await _refusal(endpoint, settings) from error
+        if loop.time() >= deadline and refusals == 0:   # a router that listens is asked once more
+            raise TransportError(f"cannot reach the Zenoh router at {endpoint}: {_zenoh_message(error)}") from error
+        await asyncio.sleep(min(_CONNECT_RETRY_S, max(deadline - loop.time(), 0.0)) if refusals == 0 else 0.05)
+
+
+def _host_port(endpoint: str) -> tuple[str, str, int] | None:
+    """``(protocol, host, port)`` of a ``tcp/`` or ``tls/`` endpoint; None for any other.
+
+    >>> _host_port("tls/[::1]:7447#iface=lo"), _host_port("tcp/cellhost:7447"), _host_port("udp/h:1")
+    (('tls', '::1', 7447), ('tcp', 'cellhost', 7447), None)
+    """
+    protocol, _, address = endpoint.partition("/")
+    address = re.split(r"[?#]", address, maxsplit=1)[0]
+    host, _, port = address.rpartition(":")
+    if protocol not in ("tcp", "tls") or not host or not port.isdigit():
+        return None
+    return protocol, host.removeprefix("[").removesuffix("]"), int(port)
+
+
+async def _listening(endpoint: str) -> bool:
+    """Whether something takes TCP connections at the endpoint (False for a protocol not probed)."""
+    address = _host_port(endpoint)
+    if address is None:
+        return False
+    try:
+        async with asyncio.timeout(_PROBE_TIMEOUT_S):
+            _, writer = await asyncio.open_connection(address[1], address[2])
+    except (OSError, TimeoutError):
+        return False
+    writer.close()
+    return True
+
+
+async def _refusal(endpoint: str, settings: dict) -> CredentialsRefused:
+    """What a router that listens at ``endpoint`` refused: the router's certificate, which this side
+    does not trust (a TLS handshake tells), or else the session's user name and password."""
+    protocol, host, port = cast(tuple[str, str, int], _host_port(endpoint))
+    if protocol == "tls":
+        untrusted = await _untrusted_certificate(host, port, settings)
+        if untrusted is not None:
+            return CredentialsRefused(f"the router at {endpoint} was refused: its certificate is not trusted "
+                                      f"({untrusted}); {_ROOT_CA} names the CA that signed it")
+    user = settings.get(_USER)
+    if user is None:
+        return CredentialsRefused(f"the router at {endpoint} refused the session: it asks for a user and password "
+                                  f"(set [zenoh] user, and ROBOCELL_ZENOH_PASSWORD), or it is no Zenoh router")
+    return CredentialsRefused(f"the router refused the credentials: user {user!r} with that password is not in the "
+                              f"users' dictionary of the router at {endpoint}")
+
+
+async def _untrusted_certificate(host: str, port: int, settings: dict) -> str | None:
+    """Why the router's TLS certificate fails this side's checks, as Zenoh's own would; None if it
+    passes (or the handshake cannot be tried the way Zenoh would make it)."""
+    import ssl
+
+    try:
+        context = ssl.create_default_context(cafile=cast(str | None, settings.get(_ROOT_CA)))
+        certificate, key = (settings.get(name) for name in _CLIENT_CERTIFICATE)
+        if certificate and key:
+            context.load_cert_chain(str(certificate), str(key))
+    except (OSError, ssl.SSLError, TypeError):
+        return None
+    try:
+        async with asyncio.timeout(_PROBE_TIMEOUT_S):
+            _, writer = await asyncio.open_connection(host, port, ssl=context, server_hostname=host)
+    except ssl.SSLCertVerificationError as exc:
+        return exc.verify_message or str(exc)
+    except (OSError, TimeoutError):
+        return None
+    writer.close()
+    return None
 
 
 @dataclass

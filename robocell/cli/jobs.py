@@ -72,7 +72,7 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
 
     def run(args: argparse.Namespace) -> int:
         from robocell.wire.config import load_config
-        from robocell.wire.errors import CellError, NoResponder
+        from robocell.wire.errors import AccessDenied, CellError, NoResponder
 
         config = load_config(args.config)
         args.cell_config = config
@@ -80,6 +80,9 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
             args.prepared = prepare(args)
         try:
             return asyncio.run(_connected(action, args, config))
+        except AccessDenied as exc:   # the daemon is up, and the router dropped this user's query
+            print(f"robocell {args.command}: {exc}", file=sys.stderr)
+            return 1
         except NoResponder:
             # Every query of these commands goes to the daemon: nobody answering means there is none,
             # or (Zenoh's access control drops a denied query unanswered) that this user may not ask it.

@@ -120,6 +120,7 @@ class CellProcesses:
         """
         if any(child.name == "router" for child in self.children):
             self._check_router_port()
+        self._check_roles()
         self.log_dir.mkdir(parents=True, exist_ok=True)
         # The JSON masks the camera password; the children get it from the environment instead.
         self.config_path.write_text(self.config.model_dump_json(indent=1))
@@ -130,6 +131,17 @@ class CellProcesses:
         for child in self.children:
             await self._spawn(child)
         await self.wait_ready(ready_timeout)
+
+    def _check_roles(self) -> None:
+        """Every part runs as ``[zenoh] user``: under the config's own access control, one whose
+        role that user lacks would be dropped unseen, and the cell wait for it in vain."""
+        from robocell.wire.process import check_part
+
+        for child in self.children:
+            role = "reconstruct" if child.name.startswith("reconstruct-") else child.name
+            if role in ("robot", "camera", "daemon", "reconstruct"):
+                worker_id = child.argv[-1] if role == "reconstruct" and "--id" in child.argv else None
+                check_part(self.config, role, worker_id)
 
     def _check_router_port(self) -> None:
         check_port_free(self.config.zenoh.router, what="the router's port", setting="[zenoh] router")

@@ -14,7 +14,7 @@ import time
 from robocell.wire import keys
 from robocell.wire.backends import load_backend
 from robocell.wire.config import CellConfig
-from robocell.wire.messages import CaptureInfo
+from robocell.wire.messages import REQUEST_LIMITS, CaptureInfo
 from robocell.wire.process import open_transport, run_until_stopped
 from robocell.wire.transport import BaseTransport, Request, Response
 
@@ -47,12 +47,12 @@ def serve_camera(transport: BaseTransport, config: CellConfig, camera: Camera) -
                            source=camera.source, time=time.time(), duration_s=time.monotonic() - began)
         return Response(picture.data, encoding=picture.encoding, attachment=info.model_dump_json())
 
-    transport.serve(keys.camera_capture(config.cell_id), on_capture)
+    transport.serve(keys.camera_capture(config.cell_id), on_capture, limit=REQUEST_LIMITS["part"])
 
 
 def main(config: CellConfig) -> int:
     async def run(stop: asyncio.Event) -> None:
-        transport = await open_transport(config)
+        transport = await open_transport(config, role="camera")
         try:
             async with make_camera(config, transport) as camera:
                 serve_camera(transport, config, camera)

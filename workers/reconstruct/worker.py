@@ -296,7 +296,7 @@ def main(config: CellConfig, worker_id: str | None = None, *, job: Job = reconst
         try:
             # The pool's processes fork now, before the Zenoh session has threads of its own.
             await asyncio.gather(*(loop.run_in_executor(pool, _ready) for _ in range(processes)))
-            transport = await open_transport(config)
+            transport = await open_transport(config, role="reconstruct", worker_id=worker_id)
             try:
                 async def reconstruct_in_pool(request_json: str, payload: bytes) -> tuple[str, bytes]:
                     return await loop.run_in_executor(pool, job, request_json, payload, worker_id)

@@ -16,7 +16,7 @@ import numpy as np
 from robocell.wire import keys
 from robocell.wire.backends import load_backend
 from robocell.wire.config import CellConfig
-from robocell.wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
+from robocell.wire.messages import REQUEST_LIMITS, GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
 from robocell.wire.process import open_transport, run_until_stopped
 from robocell.wire.transport import Request, RequestError, Response, Transport
 
@@ -80,9 +80,11 @@ def serve_robot(transport: Transport, config: CellConfig, backend: RobotBackend)
         state = RobotState(T_base_flange=backend.pose().tolist(), moving=moving, time=time.time())
         return Response(state.model_dump_json())
 
-    transport.serve(keys.robot_move(cell), on_move)
-    transport.serve(keys.robot_grip(cell), on_grip)
-    transport.serve(keys.robot_state(cell), on_state)
+    # Each request's size is checked before it is read (a move takes well under 1 kB).
+    limit = REQUEST_LIMITS["part"]
+    transport.serve(keys.robot_move(cell), on_move, limit=limit)
+    transport.serve(keys.robot_grip(cell), on_grip, limit=limit)
+    transport.serve(keys.robot_state(cell), on_state, limit=limit)
 
 
 def main(config: CellConfig) -> int:
@@ -90,7 +92,7 @@ def main(config: CellConfig) -> int:
         backend = make_backend(config)
         await backend.open()
         try:
-            transport = await open_transport(config)
+            transport = await open_transport(config, role="robot")
             try:
                 serve_robot(transport, config, backend)
                 transport.declare_token(keys.alive(config.cell_id, "robot"))

@@ -48,6 +48,11 @@ def write_truth(path: Path, job_id: str, scene: Sequence[SimObject]) -> None:
     finally:
         recording.flush()
         recording.disconnect()
+        # Rerun's SDK keeps every stream, and its two threads, until the last reference is gone and
+        # orphans are swept (rerun-io/rerun#2116): else two threads more for every job, for good.
+        del recording
+        from rerun_bindings import flush_and_cleanup_orphaned_recordings
+        flush_and_cleanup_orphaned_recordings()
 
 
 class TruthLog:
