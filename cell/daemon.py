@@ -58,7 +58,7 @@ log = logging.getLogger(__name__)
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _STORE_BUSY_S = 1.0         # how long a write waits for the store's lock
 #: How long a success waits for the recorder to close its recording and say whether it is whole.
-RECORDING_VERDICT_S = 15.0
+RECORDING_VERDICT_S = 20.0
 #: The most steps a job's plan may grow to: past it, the job ends with what it has, and says so.
 MAX_PLAN_STEPS = 64
 

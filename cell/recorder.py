@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 # Within what a stopping cell allows its daemon (robocell up waits 5 s, then kills): the recorder
 # is secondary, and one still importing Rerun on a busy machine must not hold the daemon up.
 _STOP_WAIT_S = 3.0
-_NICENESS = 19  # the lowest: the recording may wait, the robot may not
+_NICENESS = 10  # below the jobs: the recording may wait, the robot may not (a success waits for its close)
 _LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 #: Recordings a recorder process makes before a new one takes over (see the module's text): its
 #: leftover threads then cost at most 9 ms of processor a second (measured with 100), and starting
