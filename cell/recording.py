@@ -50,7 +50,7 @@ from wire import keys
 from core_cy.superquadric import Superquadric, mesh
 
 __all__ = ["JobRecording", "find_recording", "recording_problem", "recording_summary", "replay_command",
-           "shared_parts", "union_outline", "PART_COLOURS", "DEFAULT_VIEWER_URL"]
+           "shared_parts", "union_outline", "PART_COLOURS"]
 
 _log = logging.getLogger(__name__)
 
@@ -59,8 +59,6 @@ _OBJECT_CLASSES = rr.AnnotationContext([(0, "background", (0, 0, 0, 0)), (1, "ob
 _FLANGE_AXIS_LENGTH = 0.1  # metres
 # Rerun's level names; "WARNING" is Python's spelling of its "WARN".
 _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
-#: Where ``rerun`` (the viewer) listens for SDKs by default.
-DEFAULT_VIEWER_URL = "rerun+http://127.0.0.1:9876/proxy"
 #: The colours of a model's parts, in order (RGBA): told apart at a glance, none the silhouettes' orange.
 PART_COLOURS = ((60, 200, 90, 200), (70, 130, 250, 200), (240, 200, 40, 200), (200, 80, 220, 200),
                 (40, 210, 220, 200), (250, 110, 110, 200))

@@ -6,15 +6,23 @@ with stand-in workers (``tests.test_cell_inprocess``); recordings are read back 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import multiprocessing
 import os
 import signal
+import socket
+import subprocess
 import warnings
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import numpy as np
 from rerun.chunk import RrdReader
 
+from cell.daemon import CellDaemon
+from cell.recording import _rerun_executable
+from wire import keys
+from wire.client import AsyncCellClient
 from wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
                            ScanRequest, Superquadric)
 from workers.reconstruct.worker import ReconstructWorker
@@ -22,6 +30,7 @@ from workers.sim.scene import target_from_config
 
 from wire.fake_transport import MemoryNetwork
 
+from tests.cell_fixtures import accepts
 from tests.test_cell_inprocess import STAND_IN_SIZE, Workers, _config, daemon
 
 LIMIT_S = 240.0  # a whole scenario, on a busy machine
@@ -129,3 +138,87 @@ def test_a_recording_on_a_device_that_refuses_every_write_is_named_in_the_result
 
     asyncio.run(asyncio.wait_for(scenario(), LIMIT_S))
 
+
+
+@contextlib.asynccontextmanager
+async def _daemon_viewed(network: MemoryNetwork, config, view: str) -> AsyncIterator[AsyncCellClient]:
+    """As ``tests.test_cell_inprocess.daemon``, the daemon streaming every job to ``view``."""
+    stop = asyncio.Event()
+    session = network.session()
+    running = asyncio.create_task(CellDaemon(config, session, view=view).run(stop))
+    client = AsyncCellClient(network.session(), config.cell_id, timeout=10.0)
+    try:
+        async with asyncio.timeout(60):
+            while not await client._transport.alive(keys.alive(config.cell_id, "daemon")):
+                assert not running.done(), running.exception()
+                await asyncio.sleep(0.01)
+        yield client
+    finally:
+        stop.set()
+        await asyncio.wait_for(running, 60)
+        await session.close()
+        await client._transport.close()
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _received(path: Path, job_id: str) -> tuple[set[str], list[str]]:
+    """What a viewer saved of job ``job_id``'s recording: its entity paths and its log lines."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a viewer's saved stream may end without a footer
+        reader = RrdReader(str(path))
+        [entry] = [entry for entry in reader.recordings() if entry.recording_id == job_id]
+        entities, texts = set(), []
+        for chunk in reader.stream(store=entry):
+            entities.add(chunk.entity_path)
+            if chunk.entity_path == "/log":
+                texts += [text for [text] in chunk.to_record_batch().column("TextLog:text").to_pylist()]
+    return entities, texts
+
+
+def test_a_live_viewer_receives_every_job_whole_beside_its_recording(tmp_path):
+    """``robocell cell --view URL``: Rerun's own viewer, listening on a free port and saving what
+    it receives, gets each job as it happens, as the job's file has it."""
+    config = _config(tmp_path)
+    port = _free_port()
+    received = tmp_path / "viewer.rrd"
+    viewer = subprocess.Popen([_rerun_executable(), "--port", str(port), "--bind", "127.0.0.1", "--save",
+                               str(received)], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+
+    async def scenario() -> list:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("w")
+        try:
+            async with asyncio.timeout(60):
+                while not accepts("127.0.0.1", port):
+                    assert viewer.poll() is None, "the viewer exited"
+                    await asyncio.sleep(0.05)
+            async with _daemon_viewed(network, config, f"rerun+http://127.0.0.1:{port}/proxy") as client:
+                return [await client.scan(ScanRequest(target=target_from_config(config.sim)), timeout=60)
+                        for _ in range(2)]
+        finally:
+            await workers.close()
+
+    try:
+        results = asyncio.run(asyncio.wait_for(scenario(), LIMIT_S))
+    finally:
+        viewer.send_signal(signal.SIGINT)  # the viewer writes what it saved, and ends
+        try:
+            viewer.wait(30)
+        except subprocess.TimeoutExpired:
+            viewer.kill()
+            viewer.wait()
+    for result in results:
+        assert result.recording_error is None
+        entities, texts = _received(received, result.job_id)
+        in_file = _entities(result.recording)
+        assert {"/world/camera0/image", "/world/camera1/image", "/world/camera2/image", "/world/robot/flange",
+                "/world/fit", "/log"} <= entities
+        assert entities == in_file
+        assert texts[-1].startswith("succeeded: ")
