@@ -111,3 +111,38 @@ def test_a_recording_that_fills_the_disk_is_named_cut_short(recorder, small_disk
     with warnings.catch_warnings(), pytest.raises((RuntimeError, Warning)):
         warnings.simplefilter("error")
         list(RrdReader(str(path)).stream())  # Rerun cannot read it whole either
+
+
+def test_a_model_in_parts_is_drawn_each_part_in_its_colour_with_the_unions_outline_over_the_image(tmp_path):
+    """Two boxes side by side, seen from straight above: one mesh whose vertices take two colours,
+    and one outline around both, where a pinhole projection (computed here) puts their corners."""
+    from cell.recording import JobRecording
+    from core_cy.superquadric import Superquadric
+
+    from tests.helpers import HEIGHT, WIDTH, intrinsics
+
+    K = intrinsics()
+    T_world_cam = np.diag([1.0, -1.0, -1.0, 1.0])  # looking down -z from 1 m up
+    T_world_cam[2, 3] = 1.0
+    parts = []
+    for x in (-0.1, 0.1):
+        T = np.eye(4)
+        T[:3, 3] = [x, 0.0, 0.0]
+        parts.append(Superquadric([0.1, 0.05, 0.05], [0.1, 0.1], T))  # nearly boxes: 0.2 x 0.1 each, touching
+    path = tmp_path / "j1.rrd"
+    with JobRecording(path, "j1") as rec:
+        rec.log_view(0, b"\xff\xd8\xff\xd9", K, T_world_cam, (WIDTH, HEIGHT))
+        rec.log_parts("fit", parts)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        chunks = {chunk.entity_path: chunk.to_record_batch() for chunk in RrdReader(str(path)).stream()}
+    colours = chunks["/world/fit"].column("Mesh3D:vertex_colors").to_pylist()[0]
+    assert len(set(colours)) == 2
+    [strips] = chunks["/world/camera0/outline"].column("LineStrips2D:strips").to_pylist()
+    assert len(strips) == 1  # one outline: the union, not one per part
+    outline = np.asarray(strips[0])
+    # The union is the box |x| <= 0.2, |y| <= 0.05 at depth 0.95 (its top) to 1.05 (its bottom).
+    fx, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    half_u, half_v = fx * 0.2 / 0.95, fx * 0.05 / 0.95
+    assert np.allclose([outline[:, 0].min(), outline[:, 0].max()], [cx - half_u, cx + half_u], atol=4)
+    assert np.allclose([outline[:, 1].min(), outline[:, 1].max()], [cy - half_v, cy + half_v], atol=4)
