@@ -43,11 +43,11 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
-from core_cy.camera import Camera
-from core_cy.meshes import vertex_normals
-from core_cy.quality import projected_outline
-from wire import keys
-from core_cy.superquadric import Superquadric, mesh
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.meshes import vertex_normals
+from robocell.core_cy.quality import projected_outline
+from robocell.wire import keys
+from robocell.core_cy.superquadric import Superquadric, mesh
 
 __all__ = ["JobRecording", "find_recording", "recording_problem", "recording_summary", "replay_command",
            "shared_parts", "union_outline", "PART_COLOURS"]

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from cell.recorder import Recorder
+from robocell.cell.recorder import Recorder
 from tests.cell_fixtures import wait_until
 
 VERDICT_S = 60.0  # a recorder process imports Rerun first, at the lowest priority, on a busy machine
@@ -116,8 +116,8 @@ def test_a_recording_that_fills_the_disk_is_named_cut_short(recorder, small_disk
 def test_a_model_in_parts_is_drawn_each_part_in_its_colour_with_the_unions_outline_over_the_image(tmp_path):
     """Two boxes side by side, seen from straight above: one mesh whose vertices take two colours,
     and one outline around both, where a pinhole projection (computed here) puts their corners."""
-    from cell.recording import JobRecording
-    from core_cy.superquadric import Superquadric
+    from robocell.cell.recording import JobRecording
+    from robocell.core_cy.superquadric import Superquadric
 
     from tests.helpers import HEIGHT, WIDTH, intrinsics
 

@@ -19,16 +19,16 @@ from pathlib import Path
 import numpy as np
 from rerun.chunk import RrdReader
 
-from cell.daemon import CellDaemon
-from cell.recording import _rerun_executable
-from wire import keys
-from wire.client import AsyncCellClient
-from wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
+from robocell.cell.daemon import CellDaemon
+from robocell.cell.recording import _rerun_executable
+from robocell.wire import keys
+from robocell.wire.client import AsyncCellClient
+from robocell.wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
                            ScanRequest, Superquadric)
-from workers.reconstruct.worker import ReconstructWorker
-from workers.sim.scene import target_from_config
+from robocell.workers.reconstruct.worker import ReconstructWorker
+from robocell.workers.sim.scene import target_from_config
 
-from wire.fake_transport import MemoryNetwork
+from robocell.wire.fake_transport import MemoryNetwork
 
 from tests.cell_fixtures import accepts
 from tests.test_cell_inprocess import STAND_IN_SIZE, Workers, _config, daemon

@@ -6,8 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from robocell.up import CellProcesses
-from robocell.view import WEB, view_url
+from robocell.cli.up import CellProcesses
+from robocell.cli.view import WEB, view_url
 
 from tests.cell_fixtures import cell_config
 

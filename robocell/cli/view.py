@@ -67,7 +67,7 @@ def add_view_arguments(parser: argparse.ArgumentParser) -> None:
 
 def web_viewer_argv(web_port: int, grpc_port: int, *, bind: str = _LOOPBACK) -> list[str]:
     """The web viewer with its gRPC proxy (SDKs send to it, browsers watch), no browser opened."""
-    from cell.recording import _rerun_executable
+    from robocell.cell.recording import _rerun_executable
 
     return [_rerun_executable(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
             "--web-viewer-port", str(web_port)]
@@ -82,7 +82,7 @@ def view_url(view: str | None, grpc_port: int) -> str | None:
 
 def check_view_ports(web_port: int, grpc_port: int) -> None:
     """Raise a :class:`~wire.errors.ConfigError` naming the port and its holder, if one is taken."""
-    from wire.errors import ConfigError
+    from robocell.wire.errors import ConfigError
 
     from .up import port_holder
 
@@ -107,7 +107,7 @@ def live_viewer(view: str | None, *, web_port: int = DEFAULT_WEB_PORT,
             print(f"streaming every job to the Rerun viewer at {view} (start `rerun` to watch)", flush=True)
         yield view
         return
-    from wire.errors import ConfigError
+    from robocell.wire.errors import ConfigError
 
     from .replay import web_viewer_address
 

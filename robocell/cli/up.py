@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError
-from wire.transport import Transport
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError
+from robocell.wire.transport import Transport
 
 __all__ = ["CellProcesses", "up", "serves_sim_camera", "on_interrupt", "port_holder", "check_port_free"]
 
@@ -439,7 +439,7 @@ def _kill_group(pgid: int) -> None:
 def up(config: CellConfig, *, view: str | None = None, view_web_port: int = 9090, view_grpc_port: int = 9877) -> int:
     """Run the cell until Ctrl-C (or SIGTERM), then stop every part cleanly; ``view``: stream every
     job to that Rerun viewer's gRPC URL, or with ``"web"`` to a web viewer started as one more part
-    (``robocell.view``)."""
+    (``robocell.cli.view``)."""
     from .view import WEB, check_view_ports, view_url, web_viewer_argv
 
     if view == WEB:
