@@ -57,6 +57,8 @@ __all__ = ["CellDaemon", "MAX_PLAN_STEPS"]
 log = logging.getLogger(__name__)
 _ALIVE_QUERY_S = 2.0        # how long to ask the router whether this cell has a daemon already
 _STORE_BUSY_S = 1.0         # how long a write waits for the store's lock
+#: How long a success waits for the recorder to close its recording and say whether it is whole.
+RECORDING_VERDICT_S = 20.0
 #: The most steps a job's plan may grow to: past it, the job ends with what it has, and says so.
 MAX_PLAN_STEPS = 64
 
@@ -66,7 +68,7 @@ class CellDaemon(RequestHandlers):
     (default ``<run dir>/jobs.sqlite``), opened by ``run`` in the store's own thread."""
 
     def __init__(self, config: CellConfig, transport: BaseTransport, *, store_path: Path | None = None,
-                 clock: Callable[[], float] = time.time) -> None:
+                 clock: Callable[[], float] = time.time, view: str | None = None) -> None:
         self.config = config
         self.cell = config.cell_id
         self.run_dir = Path(config.run_dir)
@@ -74,7 +76,8 @@ class CellDaemon(RequestHandlers):
         self._store_path = store_path or self.run_dir / "jobs.sqlite"
         self._transport = transport
         self._store: JobStore | None = None
-        self._recorder = Recorder(n_points=config.reconstruct.n_points)
+        # ``view``: a Rerun viewer's gRPC URL that every job is streamed to as well (``robocell cell --view``).
+        self._recorder = Recorder(n_points=config.reconstruct.n_points, live=view)
         self._live: dict[str, JobHandle] = {}   # the jobs not yet ended, in the order they came
         self._presence = Presence(transport, self.cell)
         self._asker = Asker(transport, self._presence, config.timeouts.outage_s, self.note)
@@ -252,9 +255,7 @@ class CellDaemon(RequestHandlers):
     def record_event(self, job: Job, event: JobEvent) -> None:
         level = "ERROR" if event.lifecycle is Lifecycle.FAILED else "INFO"
         at = event.time - job.started
-        if event.lifecycle is Lifecycle.SUCCEEDED and job.reconstruction is not None:
-            reply, payload, drawn = job.reconstruction
-            self._recorder.reconstruction(job.job_id, drawn, reply.decode(), payload)
+        # (A success's recording was drawn to its end and closed before it was told: _finish_recording.)
         self._recorder.call(job.job_id, at, "log_text", f"{event.state.value}: {event.message}", level)
         if event.lifecycle.finished:
             self._recorder.close(job.job_id)
@@ -336,10 +337,28 @@ class CellDaemon(RequestHandlers):
             held = {True: "held", False: "missed", None: "closed on it"}[result.pick.held]
             message += f"; picked with grasp {result.pick.grasp}: {held}" + (", placed" if result.pick.placed else "")
         if job.recording_error is None:
+            job.recording_error = await self._finish_recording(job, message)
+        if job.recording_error is None:
             result.recording = str(self.run_dir / f"{job.job_id}.rrd")
         else:
             result.recording_error = job.recording_error
         await handle.change(message, lifecycle=Lifecycle.SUCCEEDED, result=result)
+
+    async def _finish_recording(self, job: Job, message: str) -> str | None:
+        """A success's recording drawn to its end and closed before the success is told, so that its
+        result names a recording that could not be written, or whose recorder died (issue 23): what
+        is wrong with it, or None. The success's own line comes before its event is stored, here."""
+        if job.reconstruction is not None:
+            reply, payload, drawn = job.reconstruction
+            self._recorder.reconstruction(job.job_id, drawn, reply.decode(), payload)
+        self.record(job, "log_text", f"{Lifecycle.SUCCEEDED.value}: {message}", "INFO")
+        path = self.run_dir / f"{job.job_id}.rrd"
+        try:
+            return await asyncio.wait_for(asyncio.wrap_future(self._recorder.finish(job.job_id)),
+                                          RECORDING_VERDICT_S)
+        except asyncio.TimeoutError:
+            return (f"the recorder had not closed the recording {path} {RECORDING_VERDICT_S:g} s after the job "
+                    f"ended: it may be incomplete")
 
 def _label(job: Job) -> str:
     """What the job was doing, in its error: "<what>: <reason>"."""

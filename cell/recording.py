@@ -9,10 +9,19 @@ base, z up, metres. Entities::
     world/camera{i}                  Transform3D (camera-to-world), Pinhole (RDF)
     world/camera{i}/image            EncodedImage (image/jpeg)
     world/camera{i}/silhouette       SegmentationImage (0 background, 1 object)
+    world/camera{i}/outline          LineStrips2D (the model's projected outline: the union of its parts)
     world/points/{name}              Points3D ("sphere", "carved")
-    world/{name}                     Mesh3D ("fit", "truth")
+    world/{name}                     Mesh3D ("fit": each part in its own colour; "truth")
     world/grasps/{i|chosen}          Transform3D, Boxes3D (the grippers of the planned grasps)
     log                              TextLog
+
+A recording is complete when it reads back with its footer: :meth:`JobRecording.close`
+says what is wrong with one that does not (a full disk, a file cut short, 0 bytes), and
+:func:`recording_problem` checks any file so.
+
+A recording may also stream, as it is written, to a Rerun viewer (``live``: the gRPC URL of a
+viewer, ``rerun+http://127.0.0.1:9876/proxy`` for the one ``rerun`` opens by default): a second
+stream with the same recording id, whose failures never touch the file.
 """
 
 from __future__ import annotations
@@ -20,21 +29,28 @@ from __future__ import annotations
 import logging
 import os
 import shutil
+import stat
 import sys
 import threading
 import warnings
 from pathlib import Path
 
+from collections.abc import Sequence
+
+import cv2
 import numpy as np
 import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
+from robocell.core_cy.camera import Camera
 from robocell.core_cy.meshes import vertex_normals
+from robocell.core_cy.quality import projected_outline
 from robocell.wire import keys
 from robocell.core_cy.superquadric import Superquadric, mesh
 
-__all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command", "shared_parts"]
+__all__ = ["JobRecording", "find_recording", "recording_problem", "recording_summary", "replay_command",
+           "shared_parts", "union_outline", "PART_COLOURS"]
 
 _log = logging.getLogger(__name__)
 
@@ -43,6 +59,13 @@ _OBJECT_CLASSES = rr.AnnotationContext([(0, "background", (0, 0, 0, 0)), (1, "ob
 _FLANGE_AXIS_LENGTH = 0.1  # metres
 # Rerun's level names; "WARNING" is Python's spelling of its "WARN".
 _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
+#: The colours of a model's parts, in order (RGBA): told apart at a glance, none the silhouettes' orange.
+PART_COLOURS = ((60, 200, 90, 200), (70, 130, 250, 200), (240, 200, 40, 200), (200, 80, 220, 200),
+                (40, 210, 220, 200), (250, 110, 110, 200))
+_OUTLINE_COLOUR = (255, 255, 0)
+# A recording's last write waits at most this long (a disk that hangs must not hold the recorder).
+_FLUSH_TIMEOUT_S = 30.0
+_DISCONNECT_WAIT_S = 5.0  # a live viewer that went away takes Rerun up to 5 s
 
 
 def _transform(T) -> rr.Transform3D:
@@ -69,6 +92,8 @@ class JobRecording:
         Becomes the recording id and, as ``"job <id>"``, its name.
     application_id : str
         Rerun's application id; recordings with the same one share a viewer blueprint.
+    live : str, optional
+        A Rerun viewer's gRPC URL to stream the recording to as well, as it is written.
 
     Examples
     --------
@@ -81,20 +106,32 @@ class JobRecording:
     ['TextLog']
     """
 
-    def __init__(self, path: Path, job_id: str, *, application_id: str = keys.RECORDING_APPLICATION_ID) -> None:
+    def __init__(self, path: Path, job_id: str, *, application_id: str = keys.RECORDING_APPLICATION_ID,
+                 live: str | None = None) -> None:
         self.path = Path(path)
         self.job_id = job_id
+        self.live = live
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.Lock()
         self._time = 0.0
         self._closed = False
+        self._problem: str | None = None
+        self._cameras: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}  # K, T_world_cam, (w, h)
         # Not the global recording: several jobs are recorded at once in one process.
         self._rec = rr.RecordingStream(application_id, recording_id=job_id)
         self._rec.save(self.path)
-        self._rec.send_recording_name(f"job {job_id}")
-        self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        # On "world", the annotation context applies to every silhouette below it.
-        self._rec.log("world", _OBJECT_CLASSES, static=True)
+        self._streams = [self._rec]
+        self._live: rr.RecordingStream | None = None
+        if live is not None:
+            # A stream of its own: a viewer that is gone must not fail, nor slow, the file's.
+            self._live = rr.RecordingStream(application_id, recording_id=job_id)
+            self._live.connect_grpc(live)
+            self._streams.append(self._live)
+        for stream in self._streams:
+            stream.send_recording_name(f"job {job_id}")
+            stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            # On "world", the annotation context applies to every silhouette below it.
+            stream.log("world", _OBJECT_CLASSES, static=True)
 
     def __enter__(self) -> JobRecording:
         return self
@@ -117,9 +154,10 @@ class JobRecording:
             if self._closed:
                 _log.debug("job %s: %s logged after close, dropped", self.job_id, entity)
                 return
-            self._rec.set_time(TIMELINE, duration=self._time)
-            for archetype in archetypes:
-                self._rec.log(entity, archetype)
+            for stream in self._streams:
+                stream.set_time(TIMELINE, duration=self._time)
+                for archetype in archetypes:
+                    stream.log(entity, archetype)
 
     def log_text(self, message: str, level: str = "INFO") -> None:
         """A line of the job's log; ``level`` is DEBUG, INFO, WARN(ING), ERROR or CRITICAL."""
@@ -134,6 +172,8 @@ class JobRecording:
         """A photograph with its camera: ``K`` (3, 3), ``T_world_cam`` (4, 4) camera-to-world
         in OpenCV axes, ``resolution`` (width, height) in pixels."""
         camera = f"world/camera{index}"
+        self._cameras[index] = (np.asarray(K, dtype=np.float64), np.asarray(T_world_cam, dtype=np.float64),
+                                (int(resolution[0]), int(resolution[1])))
         pinhole = rr.Pinhole(image_from_camera=np.asarray(K, dtype=np.float64), resolution=list(resolution),
                              camera_xyz=rr.ViewCoordinates.RDF)
         self._log(camera, _transform(T_world_cam), pinhole)
@@ -156,6 +196,28 @@ class JobRecording:
     def log_superquadric(self, name: str, sq: Superquadric, colour=(60, 200, 90, 200)) -> None:
         """A superquadric as a mesh, e.g. the fit as ``"fit"``."""
         self.log_mesh(name, *mesh(sq), colour=colour)
+
+    def log_parts(self, name: str, parts: Sequence[Superquadric]) -> None:
+        """A model made of parts (their union is the object) as one mesh, each part in its own colour
+        (:data:`PART_COLOURS`), and its projected outline over every view's image logged so far."""
+        if not parts:
+            raise ValueError("a model has at least one part")
+        vertices, triangles, colours = [], [], []
+        offset = 0
+        for index, part in enumerate(parts):
+            part_vertices, part_triangles = mesh(part)
+            vertices.append(part_vertices)
+            triangles.append(np.asarray(part_triangles, dtype=np.int64) + offset)
+            colours.append(np.tile(PART_COLOURS[index % len(PART_COLOURS)], (len(part_vertices), 1)))
+            offset += len(part_vertices)
+        all_vertices, all_triangles = np.concatenate(vertices), np.concatenate(triangles)
+        self._log(f"world/{name}", rr.Mesh3D(vertex_positions=all_vertices, triangle_indices=all_triangles,
+                                              vertex_normals=vertex_normals(all_vertices, all_triangles),
+                                              vertex_colors=np.concatenate(colours).astype(np.uint8)))
+        for index, (K, T_world_cam, (width, height)) in sorted(self._cameras.items()):
+            strips = union_outline(parts, K, T_world_cam, (width, height))
+            if strips:
+                self._log(f"world/camera{index}/outline", rr.LineStrips2D(strips, colors=_OUTLINE_COLOUR))
 
     def log_mesh(self, name: str, vertices, triangles, colour=(200, 200, 200, 120)) -> None:
         """A triangle mesh, vertices (V, 3) world and triangles (F, 3), e.g. ``"truth"`` in simulation."""
@@ -184,14 +246,104 @@ class JobRecording:
             entity = f"world/grasps/{'chosen' if index == chosen else index}"
             self._log(entity, _transform(T), rr.Boxes3D(centers=centres, half_sizes=halves, colors=colour))
 
-    def close(self) -> None:
-        """Flush and write the file's footer; the file is then complete. Idempotent."""
+    def close(self) -> str | None:
+        """Flush and write the file's footer. Idempotent.
+
+        Returns
+        -------
+        str or None
+            None when the file is complete (it reads back with its footer); else what is wrong
+            with it, as :func:`recording_problem` says (a failed write comes first).
+        """
         with self._lock:
             if self._closed:
-                return
+                return self._problem
             self._closed = True
-            self._rec.flush()
-            self._rec.disconnect()
+            failure = None
+            try:
+                self._rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+            except Exception as exc:  # Rerun's file writer stopped: a full disk, say
+                failure = str(exc) or type(exc).__name__
+            finally:
+                # Disconnected whatever happened (a stream left connected keeps what it was given),
+                # in a thread of its own: after a write failed midway, Rerun 0.41's disconnect never
+                # returns; the thread is then left to it.
+                for stream in self._streams:
+                    ending = threading.Thread(target=stream.disconnect, name=f"rerun-disconnect-{self.job_id}",
+                                              daemon=True)
+                    ending.start()
+                    ending.join(_DISCONNECT_WAIT_S)
+                    if ending.is_alive():
+                        _log.warning("job %s: Rerun did not close a stream of the recording in %g s: left to it",
+                                     self.job_id, _DISCONNECT_WAIT_S)
+            self._problem = recording_problem(self.path, write_failure=failure)
+            return self._problem
+
+
+def recording_problem(path, *, write_failure: str | None = None) -> str | None:
+    """What is wrong with the recording at ``path``, or None when it is complete (it reads back
+    with its footer).
+
+    ``write_failure``: the error its writer met, if any; it is named first, with the free space
+    of the disk the file is on.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     (Path(tmp) / "j1.rrd").write_bytes(b"")
+    ...     recording_problem(Path(tmp) / "j1.rrd").endswith("is empty (0 bytes)")
+    0
+    True
+    """
+    path = Path(path)
+    try:
+        status = os.stat(path)
+    except OSError as exc:
+        return f"the recording {path} is missing ({exc.strerror or exc})"
+    if write_failure is not None:
+        try:
+            free = f"; {shutil.disk_usage(path.parent).free / 1e6:.1f} MB free on its disk"
+        except OSError:
+            free = ""
+        return (f"the recording {path} could not be written ({write_failure}): it is incomplete "
+                f"({status.st_size} bytes{free})")
+    if not stat.S_ISREG(status.st_mode):
+        return f"the recording {path} is not a regular file"
+    if status.st_size == 0:
+        return f"the recording {path} is empty (0 bytes)"
+    with warnings.catch_warnings():
+        # The reader warns of a file with no footer, and reads it by a scan: here that is the fault.
+        warnings.simplefilter("error", RerunWarning)
+        try:
+            RrdReader(str(path))
+        except RerunWarning:
+            return f"the recording {path} is cut short ({status.st_size} bytes, no footer)"
+        except (RuntimeError, OSError, ValueError) as exc:
+            return f"the recording {path} cannot be read ({status.st_size} bytes): {exc}"
+    return None
+
+
+def union_outline(parts: Sequence[Superquadric], K, T_world_cam, resolution: tuple[int, int]) -> list[np.ndarray]:
+    """The outline of a union of parts projected into a view: closed pixel polylines (each (M, 2),
+    float32), the outer contours of the union of each part's convex projection, within the image."""
+    width, height = resolution
+    camera = Camera(K=K, T_world_cam=T_world_cam)
+    cover = np.zeros((height, width), np.uint8)
+    for part in parts:
+        uv = projected_outline(part, camera)
+        if len(uv) < 3 or not np.all(np.isfinite(uv)):
+            continue
+        uv = np.clip(uv, -4.0 * max(width, height), 4.0 * max(width, height))  # far off-image stays drawable
+        hull = cv2.convexHull(np.round(uv).astype(np.int32))
+        cv2.fillConvexPoly(cover, hull, 1)
+    contours, _ = cv2.findContours(cover, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    strips = []
+    for contour in contours:
+        points = contour.reshape(-1, 2).astype(np.float32)
+        if len(points) >= 2:
+            strips.append(np.vstack([points, points[:1]]))  # closed
+    return strips
 
 
 def recording_summary(path) -> dict[str, list[str]]:

@@ -41,12 +41,13 @@ def _roles_summary(config: CellConfig) -> str:
                      for cell, roles in config.zenoh.users_by_role(config.cell_id).items())
 
 
-def run_daemon(config: CellConfig) -> int:
-    """The cell daemon, with its job store in the run directory."""
+def run_daemon(config: CellConfig, *, view: str | None = None) -> int:
+    """The cell daemon, with its job store in the run directory; ``view``: a Rerun viewer's gRPC URL
+    every job is streamed to as it happens."""
     async def run(stop: asyncio.Event) -> None:
         transport = await open_transport(config, role="daemon")
         try:
-            await CellDaemon(config, transport).run(stop)
+            await CellDaemon(config, transport, view=view).run(stop)
         finally:
             await transport.close()
 

@@ -11,6 +11,7 @@ import argparse
 from robocell.wire import keys
 
 from .command import Commands
+from .view import add_view_arguments
 
 __all__ = ["register"]
 
@@ -57,13 +58,17 @@ def _worker(args: argparse.Namespace) -> int:
 def _cell(args: argparse.Namespace) -> int:
     from robocell.cell.service import run_daemon
 
-    return run_daemon(_config(args))
+    from .view import live_viewer
+
+    config = _config(args)
+    with live_viewer(args.view, web_port=args.view_web_port, grpc_port=args.view_grpc_port) as url:
+        return run_daemon(config, view=url)
 
 
 def _up(args: argparse.Namespace) -> int:
     from .up import up
 
-    return up(_config(args))
+    return up(_config(args), view=args.view, view_web_port=args.view_web_port, view_grpc_port=args.view_grpc_port)
 
 
 def register(commands: Commands) -> None:
@@ -75,6 +80,6 @@ def register(commands: Commands) -> None:
     worker.add_argument("--id", type=_worker_id, help="reconstruction worker id: letters, digits, '.', '_' "
                                                        "and '-' (default: host-pid)")
 
-    commands.add("cell", _cell, help="run the cell daemon")
-    commands.add("up", _up, help="run router, workers, daemon (and the simulated camera where the configuration "
-                                 "needs it) on this machine; Ctrl-C stops all")
+    add_view_arguments(commands.add("cell", _cell, help="run the cell daemon"))
+    add_view_arguments(commands.add("up", _up, help="run router, workers, daemon (and the simulated camera where the "
+                                                    "configuration needs it) on this machine; Ctrl-C stops all"))

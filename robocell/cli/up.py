@@ -74,8 +74,9 @@ class CellProcesses:
 
     def __init__(self, config: CellConfig, *, with_router: bool = True, reconstructors: int = 1,
                  robot: bool = True, camera: bool = True, sim_camera: bool | None = None,
-                 daemon: bool = True) -> None:
-        """Which parts run as children; ``sim_camera`` defaults to :func:`serves_sim_camera`.
+                 daemon: bool = True, view: str | None = None) -> None:
+        """Which parts run as children; ``sim_camera`` defaults to :func:`serves_sim_camera`;
+        ``view``: the Rerun viewer's gRPC URL the daemon streams every job to (``cell --view``).
 
         Leaving parts out lets a caller (a test, say) run them itself, in-process.
         """
@@ -104,7 +105,9 @@ class CellProcesses:
             children.append(_Child(f"reconstruct-{index}", [*command, "worker", "reconstruct", "--id", worker_id],
                                    keys.reconstructor_alive(worker_id), f"reconstruction worker {worker_id}"))
         if daemon:
-            children.append(_Child("daemon", [*command, "cell"], keys.alive(cell, "daemon"), f"daemon of cell {cell}"))
+            watched = ["--view", view] if view is not None else []
+            children.append(_Child("daemon", [*command, "cell", *watched], keys.alive(cell, "daemon"),
+                                   f"daemon of cell {cell}" + (f", streaming the jobs to {view}" if view else "")))
         self.children = children
         self._environment: dict[str, str] = {}
         self._stopping: asyncio.Future | None = None
@@ -445,11 +448,19 @@ def _kill_group(pgid: int) -> None:
         pass
 
 
-def up(config: CellConfig) -> int:
-    """Run the cell until Ctrl-C (or SIGTERM), then stop every part cleanly."""
+def up(config: CellConfig, *, view: str | None = None, view_web_port: int = 9090, view_grpc_port: int = 9877) -> int:
+    """Run the cell until Ctrl-C (or SIGTERM), then stop every part cleanly; ``view``: stream every
+    job to that Rerun viewer's gRPC URL, or with ``"web"`` to a web viewer started as one more part
+    (``robocell.cli.view``)."""
+    from .view import WEB, check_view_ports, view_url, web_viewer_argv
+
+    if view == WEB:
+        check_view_ports(view_web_port, view_grpc_port)
 
     async def run() -> int:
-        cell = CellProcesses(config, reconstructors=1)
+        cell = CellProcesses(config, reconstructors=1, view=view_url(view, view_grpc_port))
+        if view == WEB:
+            cell.add_child("viewer", web_viewer_argv(view_web_port, view_grpc_port))
         for part in cell.describe():
             print(f"starting {part}", flush=True)
         cells.append(cell)
@@ -480,6 +491,11 @@ def up(config: CellConfig) -> int:
             starting.result()
             print(f"cell {config.cell_id} is up: router {config.zenoh.router}, run directory "
                   f"{config.run_dir}, logs in {cell.log_dir}. Ctrl-C stops it.", flush=True)
+            if view == WEB:
+                from .replay import web_viewer_address
+
+                print(f"watch the jobs live: open {web_viewer_address('127.0.0.1', view_web_port, view_grpc_port)}",
+                      flush=True)
             exited = asyncio.ensure_future(cell.wait())
             await asyncio.wait({stopped, exited}, return_when=asyncio.FIRST_COMPLETED)
             if exited.done():
