@@ -268,14 +268,24 @@ class JobRecording:
                 # Disconnected whatever happened (a stream left connected keeps what it was given),
                 # in a thread of its own: after a write failed midway, Rerun 0.41's disconnect never
                 # returns; the thread is then left to it.
+                ended = True
                 for stream in self._streams:
                     ending = threading.Thread(target=stream.disconnect, name=f"rerun-disconnect-{self.job_id}",
                                               daemon=True)
                     ending.start()
                     ending.join(_DISCONNECT_WAIT_S)
                     if ending.is_alive():
+                        ended = False
                         _log.warning("job %s: Rerun did not close a stream of the recording in %g s: left to it",
                                      self.job_id, _DISCONNECT_WAIT_S)
+                # Rerun's SDK keeps every stream, and its two threads, until the last reference is gone
+                # and orphans are swept (rerun-io/rerun#2116): else two threads more for every job.
+                # Not after a failed write: the sweep then waits on the writer that never ends.
+                self._streams.clear()
+                del self._rec
+                if ended and failure is None:
+                    from rerun_bindings import flush_and_cleanup_orphaned_recordings
+                    flush_and_cleanup_orphaned_recordings()
             self._problem = recording_problem(self.path, write_failure=failure)
             return self._problem
 
