@@ -231,8 +231,9 @@ class RunningCell:
         """Submit a job and hold it in flight at ``worker_id``, the only reconstruction worker the
         daemon knows (the test stops or has not started the others: the job can go nowhere else);
         the job's id, once the worker has it. It stays there until :meth:`release`."""
-        members = {r.worker for r in self.status().reconstructors}
-        assert members == {worker_id}, f"put_job_on({worker_id!r}) needs it alone in the pool, not {members}"
+        # The daemon hears of a worker stopped a moment after the router does: wait for its view.
+        wait_until(lambda: {r.worker for r in self.status().reconstructors} == {worker_id}, timeout=JOB_TIMEOUT_S,
+                   interval=0.02, what=f"{worker_id} alone in the daemon's pool")
         self.hold(worker_id)
         job_id = self.submit(label=f"for {worker_id}").job_id
         prefix = f"{self.config.cell_id}/{job_id}/"
