@@ -29,7 +29,8 @@ HEARTBEAT_S = 1.0
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover",
+    # A snapshot may take seconds on a loaded machine: this file is about the reconstruction pool.
+    config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover", camera={"timeout_s": 15.0},
                          timeouts={"heartbeat_s": HEARTBEAT_S, "reconstruct_s": 20.0, "outage_s": 5.0},
                          reconstruct={"max_attempts": 3})
     # The victim alone at first: the first test's job can go nowhere else. The others join there.
