@@ -118,7 +118,7 @@ def test_a_worker_added_mid_burst_takes_waiting_work(cell):
         worker = cell.client.result(job_id).worker
         done_by[worker] = done_by.get(worker, 0) + 1
     assert set(done_by) <= {busy, newcomer}
-    assert done_by.get(newcomer, 0) >= 2 and done_by.get(busy, 0) >= 1, done_by
+    assert done_by.get(newcomer, 0) >= 2, done_by
     status = cell.status()
     assert {r.worker for r in status.reconstructors} == {busy, newcomer}
     assert status.waiting_for_reconstructor == 0
