@@ -25,15 +25,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from cell.verify import MIN_VIEW_IOU, Evidence, check_answer, reduced_camera, reduced_silhouettes  # noqa: E402
-from core_cy.camera import Camera  # noqa: E402
-from core_cy.grasp import plan_grasps  # noqa: E402
-from core_cy.gripper import Gripper  # noqa: E402
-from core_cy.reconstruct import View, reconstruct  # noqa: E402
-from core_cy.segment import Segmentation  # noqa: E402
-from wire.messages import Grasp, Reconstruction, Superquadric  # noqa: E402
-from workers.sim.grasp_set import grasp_set  # noqa: E402
-from workers.sim.scans import standard_set  # noqa: E402
+from robocell.cell.verify import MIN_VIEW_IOU, Evidence, check_answer, reduced_camera, reduced_silhouettes  # noqa: E402
+from robocell.core_cy.camera import Camera  # noqa: E402
+from robocell.core_cy.grasp import plan_grasps  # noqa: E402
+from robocell.core_cy.gripper import Gripper  # noqa: E402
+from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
+from robocell.core_cy.segment import Segmentation  # noqa: E402
+from robocell.wire.messages import Grasp, Reconstruction, Superquadric  # noqa: E402
+from robocell.workers.sim.grasp_set import grasp_set  # noqa: E402
+from robocell.workers.sim.scans import standard_set  # noqa: E402
 
 PLANE = [0.0, 0.0, 1.0, 0.0]
 GRIPPER = Gripper()

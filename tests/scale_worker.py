@@ -27,8 +27,8 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from wire.config import load_config  # noqa: E402
-from workers.reconstruct import worker as reconstruct  # noqa: E402
+from robocell.wire.config import load_config  # noqa: E402
+from robocell.workers.reconstruct import worker as reconstruct  # noqa: E402
 
 
 #: The longest a job waits for its hold to be lifted: a test that forgets it does not hang the worker.

@@ -13,10 +13,10 @@ import argparse
 import numpy as np
 import pytest
 
-from robocell.sim import SHAPES, _make_object, add_arguments
-from wire.config import GripperConfig
-from workers.sim.objects import CupStack
-from workers.sim.robot import SceneGripper
+from robocell.cli.sim import SHAPES, _make_object, add_arguments
+from robocell.wire.config import GripperConfig
+from robocell.workers.sim.objects import CupStack
+from robocell.workers.sim.robot import SceneGripper
 
 GRIPPER = GripperConfig().dimensions()
 PLANE = [0.0, 0.0, 1.0, 0.0]
