@@ -34,7 +34,7 @@ from robocell.wire.transport import Reply
 
 from .job import Job, Picture
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
-from .verify import Verdict, verify_answer
+from .verify import Evidence, Verdict, check_answer, job_evidence
 
 __all__ = ["Step", "StepFailed", "Cell", "View", "Reconstruct", "parse_reply"]
 
@@ -170,7 +170,6 @@ class Reconstruct(Step):
 
     async def run(self, job: Job, cell: Cell) -> list[Step] | None:
         config = cell.config
-        attempts = config.reconstruct.max_attempts
         payload = b"".join(c.jpeg for c in job.captures)
         request = _reconstruct_request(job, config)
         # Asked at the cap too: the scan then ends saying how unsure its model is.
@@ -179,6 +178,19 @@ class Reconstruct(Step):
             request.next_view = NextViewQuery.model_validate({
                 "candidates": [{"K": config.camera.K, "T_world_cam": T.tolist()}
                                for T in camera_poses(candidates, config.T_flange_cam)]})
+        # No worker is trusted with the robot: every answer is checked against the daemon's own
+        # silhouettes of the pictures, made once per job while the first worker reconstructs.
+        evidence: asyncio.Future[Evidence] = asyncio.ensure_future(
+            asyncio.to_thread(job_evidence, request, list(job.captures), config))
+        try:
+            return await self._attempts(job, cell, request, payload, candidates, evidence)
+        finally:
+            evidence.cancel()
+
+    async def _attempts(self, job: Job, cell: Cell, request: ReconstructRequest, payload: bytes,
+                        candidates: list[np.ndarray], evidence: asyncio.Future[Evidence]) -> list[Step] | None:
+        config = cell.config
+        attempts = config.reconstruct.max_attempts
         failures: list[str] = []      # "attempt <k> on <worker>: <why>"
         tried: set[str] = set()
         sent = 0
@@ -210,8 +222,8 @@ class Reconstruct(Step):
                 raise StepFailed(answer.error or "no result", kind=answer.error_kind)
             if answer.worker != worker or answer.ticket != request.ticket:
                 verdict = Verdict(False, f"it answered as {answer.worker!r} to ticket {answer.ticket!r}")
-            else:  # no worker is trusted with the robot: its model must agree with the daemon's own pictures
-                verdict = await asyncio.to_thread(verify_answer, answer.result, request, job.captures, config)
+            else:  # its model must agree with the daemon's own pictures, its grasps with the model
+                verdict = await asyncio.to_thread(check_answer, answer.result, await evidence)
             if not verdict.ok:
                 cell.pool.refuse(worker, verdict.reason)
                 tried.add(worker)

@@ -5,7 +5,7 @@ vouch for: any session the router lets into the pool can answer (issue 23: a
 fake worker's model 8-10 times too big was stored, and its grasp drove the arm).
 The daemon holds the pictures of the job and knows its cameras, its support
 plane and its gripper, so it can check the answer cheaply before storing or
-using it (:func:`verify_reconstruction`):
+using it (:func:`check_answer`; :func:`verify_reconstruction` in one call):
 
 - **The model agrees with the pictures.** Each picture is decoded at a quarter
   of its size (``cv2.IMREAD_REDUCED_COLOR_4``: the JPEG decoder scales as it
@@ -24,13 +24,36 @@ Everything here is a pure function of bytes and arrays: no I/O, no clock. The
 daemon calls it before it stores a result; a result that fails is a failed
 attempt, sent again elsewhere (``ReconstructorPool.refuse``).
 
-Why the threshold (:data:`MIN_VIEW_IOU`, 0.3): on the simulator's scans
-(``robocell sim scans``, the standard set and the grasp set, 138 scans) the
-worst view of a correct reconstruction scores 0.49 at this scale (an L of two
-boxes, which one superquadric describes poorly; 0.70 for every other object,
-0.87-0.92 on average), and a model 8 to 10 times too big scores 0.09 at most.
-A model 1.5 times too big still scores up to 0.44: this check catches a model
-of something else, or far too big or small, not a fit that is a little off.
+When it runs. The daemon's silhouettes depend on its pictures alone, never on an
+answer, so the daemon makes them once per job (:func:`job_evidence`, an
+:class:`Evidence`), in a thread, from the moment it sends the pictures to the
+first worker: they are ready, as a rule, before any answer comes, and every
+attempt's answer is checked against the same evidence (:func:`check_answer`).
+What is left on the job's path is the answer's own part: projecting the model
+into each small silhouette, and the grasps (below). The check is the one it
+was: the same silhouettes at the same scale, the same overlap, the same
+threshold, the same grasp tests with the same samples; only when the silhouettes
+are made changed, and how the grasp test evaluates the model (each part's
+inside-outside function once for the model taken larger and smaller, as it
+scales exactly with the size, and only inside the part's box, where alone a
+point can be inside): on 240 grasps, honest and moved by 1 cm or given a wrong
+width, every verdict is the one of the former code. On the 138 scans below
+(``bench/probe_verify.py``), making the evidence costs 0.45 of the scan's
+reconstruction on average (1.24 at worst: then part of it waits on the path)
+and the check of an answer 0.08 (0.25 at worst, an answer of many grasps).
+
+Why the threshold (:data:`MIN_VIEW_IOU`, 0.3), re-measured with ``bench/probe_verify.py``
+on the simulator's scans (``robocell sim scans``, the standard set and the grasp
+set, 138 scans; each reconstructed by the real pipeline with the ``auto``
+segmentation, as a worker does): the worst view of a correct reconstruction
+scores 0.41 at this scale (a grasp-set object too big for the gripper; 0.48 for
+an L of two boxes, which one superquadric describes poorly; 0.60 or more for
+every other object, 0.85 the median), and a model 8 to 10 times too big scores
+0.18 at most (0.04 the median): none of the 138 honest fits is refused, and
+none of the 276 oversized ones passes. A model 1.5 times too big still scores
+up to 0.47 (all 138 pass): this check catches a model of something else, or far
+too big or small, not a fit that is a little off. Of the honest answers' 855
+grasps, 854 follow from their models.
 
 A grasp that does not follow from the model is dropped from the answer
 (:attr:`Verdict.grasps` lists those that do). The planner plans on the hull's
@@ -41,6 +64,7 @@ of whose grasps follows from its model is refused as a whole.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,8 +84,8 @@ from robocell.wire.messages import Grasp, Reconstruction, ReconstructRequest, Su
 
 from .job import Picture
 
-__all__ = ["Verdict", "MIN_VIEW_IOU", "REDUCTION", "verify_answer", "verify_reconstruction", "check_model",
-           "check_grasp", "reduced_silhouettes", "reduced_camera", "model_iou"]
+__all__ = ["Verdict", "Evidence", "MIN_VIEW_IOU", "REDUCTION", "job_evidence", "check_answer", "verify_answer",
+           "verify_reconstruction", "check_model", "check_grasp", "reduced_silhouettes", "reduced_camera", "model_iou"]
 
 #: The least intersection over union of the model's projection and the daemon's own silhouette,
 #: in every view, at a quarter scale.
@@ -209,16 +233,63 @@ def check_model(parts: Sequence[CoreSuperquadric], cameras: Sequence[Camera], si
     return Verdict(True, f"the model matches the pictures (overlap {min(ious):.2f} or more in every view)", ious)
 
 
-def _inside(parts: Sequence[CoreSuperquadric], points: np.ndarray) -> np.ndarray:
-    """(N,) True where a point is inside the union of the parts."""
-    inside = np.zeros(len(points), bool)
-    for part in parts:
-        inside |= inside_outside(points, part) < 1.0
-    return inside
+class _Levels:
+    """The inside-outside function of each part of a model at some points, for the model at any scale.
+
+    A superquadric's F scales with its size as ``F(x; s a) = s ** (-2 / e1) F(x; a)``, so a point is
+    inside the part ``s`` times as large where ``F(x; a) < s ** (2 / e1)``: one evaluation serves the
+    model taken larger and smaller. A point outside a part's box (``|x_i| > a_i`` in its frame) is
+    outside the part, so F is evaluated only in the box of the largest scale asked (``reach``).
+    ``points`` are in the grasp frame, ``T_world_grasp`` its pose.
+    """
+
+    def __init__(self, parts: Sequence[CoreSuperquadric], points: np.ndarray, T_world_grasp: np.ndarray,
+                 reach: float) -> None:
+        self.parts = parts
+        self.levels = []
+        for part in parts:
+            T_part_grasp = np.linalg.inv(part.T_world_object) @ T_world_grasp
+            local = points @ T_part_grasp[:3, :3].T + T_part_grasp[:3, 3]
+            near = np.all(np.abs(local) <= part.size * reach, axis=1)
+            level = np.full(len(points), np.inf)
+            if near.any():
+                level[near] = inside_outside(local[near], CoreSuperquadric(part.size, part.shape, np.eye(4)))
+            self.levels.append(level)
+
+    def inside(self, factor: float) -> np.ndarray:
+        """(N,) True where a point is inside the union of the parts taken ``factor`` times as large."""
+        inside = np.zeros(len(self.levels[0]) if self.levels else 0, bool)
+        for part, level in zip(self.parts, self.levels):
+            inside |= level < factor ** (2.0 / float(part.shape[0]))
+        return inside
 
 
-def _scaled(parts: Sequence[CoreSuperquadric], factor: float) -> list[CoreSuperquadric]:
-    return [CoreSuperquadric(part.size * factor, part.shape, part.T_world_object) for part in parts]
+@dataclass(frozen=True)
+class _Samples:
+    """Where :func:`check_grasp` samples a gripper, in the grasp frame: under the pads (a grid of
+    across x line x along, ``pads_y`` its line coordinate), where the open fingers are, and the palm."""
+
+    pads: np.ndarray
+    pads_shape: tuple[int, ...]
+    pads_y: np.ndarray
+    fingers: np.ndarray
+    palm: np.ndarray
+
+
+@functools.lru_cache(maxsize=8)
+def _samples(g: Gripper) -> _Samples:
+    half_open = g.max_opening / 2
+    t = np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness, _LINE_SAMPLES)
+    across = np.linspace(-g.finger_width / 2, g.finger_width / 2, _ACROSS_SAMPLES)
+    X, Y, Z = np.meshgrid(across, t, np.linspace(g.tip - g.pad_length, g.tip, _ALONG_SAMPLES), indexing="ij")
+    fingers = np.meshgrid(across, t[np.abs(t) >= half_open], np.linspace(g.palm, g.tip, _ALONG_SAMPLES),
+                          indexing="ij")
+    palm_x, palm_y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
+                                 np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
+                                             _ACROSS_SAMPLES + 2), indexing="ij")
+    palm = np.stack([palm_x.ravel(), palm_y.ravel(), np.full(palm_x.size, g.palm)], axis=1)
+    return _Samples(np.stack([X, Y, Z], axis=-1).reshape(-1, 3), X.shape, Y,
+                    np.stack(fingers, axis=-1).reshape(-1, 3), palm)
 
 
 def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Gripper,
@@ -240,7 +311,6 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
     T = np.asarray(grasp.T_world_grasp, dtype=np.float64)
     R, origin = T[:3, :3], T[:3, 3]
     g = gripper
-    half_open = g.max_opening / 2
     if grasp.width > g.max_opening:
         return f"its width {grasp.width:.3f} m is more than the gripper opens ({g.max_opening:.3f} m)"
     if support_plane is not None:
@@ -250,36 +320,27 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
         lowest = float((corners @ plane[:3] + plane[3]).min())
         if lowest < -_PLANE_SLACK:
             return f"a corner of the gripper would be {-lowest * 1000:.1f} mm below the support plane"
-    grown, shrunk = _scaled(parts, 1 + MODEL_SLACK), _scaled(parts, 1 - MODEL_SLACK)
-
-    def inside(model, x, y, z) -> np.ndarray:
-        local = np.stack(np.broadcast_arrays(x, y, z), axis=-1)
-        return _inside(model, local.reshape(-1, 3) @ R.T + origin).reshape(local.shape[:-1])
-
+    grown, shrunk = 1 + MODEL_SLACK, 1 - MODEL_SLACK
+    samples = _samples(g)
     # Under the pads: the contacts are where the model meets the pads' faces.
-    t = np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness, _LINE_SAMPLES)
-    across = np.linspace(-g.finger_width / 2, g.finger_width / 2, _ACROSS_SAMPLES)
-    X, Y, Z = np.meshgrid(across, t, np.linspace(g.tip - g.pad_length, g.tip, _ALONG_SAMPLES), indexing="ij")
-    met = inside(grown, X, Y, Z)
+    under_pads = _Levels(parts, samples.pads, T, grown)
+    met = under_pads.inside(grown).reshape(samples.pads_shape)
     if not met.any():
         return "the model is not between its pads"
 
     def widest(mask: np.ndarray) -> float:
         # The chord of each (across, along) column of samples: from its lowest inside sample to its highest.
+        Y = samples.pads_y
         chords = np.where(mask, Y, -np.inf).max(axis=1) - np.where(mask, Y, np.inf).min(axis=1)
         return float(chords[np.isfinite(chords)].max(initial=0.0))
 
-    most, least = widest(met), widest(inside(shrunk, X, Y, Z))
+    most, least = widest(met), widest(under_pads.inside(shrunk).reshape(samples.pads_shape))
     slack = max(_WIDTH_SHARE * grasp.width, _WIDTH_FLOOR)
     if not least - slack <= grasp.width <= most + slack:
         return f"its width {grasp.width:.3f} m is not the model's between the pads ({least:.3f}-{most:.3f} m)"
-    X, Y, Z = np.meshgrid(across, t, np.linspace(g.palm, g.tip, _ALONG_SAMPLES), indexing="ij")
-    if (inside(shrunk, X, Y, Z) & (np.abs(Y) >= half_open)).any():
+    if _Levels(parts, samples.fingers, T, shrunk).inside(shrunk).any():
         return "the open fingers would cut the model"
-    palm_x, palm_y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
-                                 np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
-                                             _ACROSS_SAMPLES + 2), indexing="ij")
-    if inside(shrunk, palm_x, palm_y, g.palm).any():
+    if _Levels(parts, samples.palm, T, shrunk).inside(shrunk).any():
         return "the palm would cut the model"
     return None
 
@@ -317,11 +378,41 @@ def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], camera
     if len(jpegs) != len(cameras):
         return Verdict(False, f"{len(jpegs)} pictures but {len(cameras)} cameras")
     try:
-        parts = [_core(part) for part in (getattr(result, "parts", None) or [result.superquadric])]
         silhouettes = reduced_silhouettes(jpegs, segmentation, cameras, support_plane)
     except (CoreError, ValueError) as exc:
         return Verdict(False, f"the answer cannot be checked: {exc}")
-    verdict = check_model(parts, cameras, silhouettes, min_iou)
+    return check_answer(result, Evidence(tuple(cameras), tuple(silhouettes), support_plane, gripper), min_iou=min_iou)
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the daemon holds of a job to check answers against, all of it its own: each picture's
+    camera at 1/:data:`REDUCTION` scale and its silhouette there (:func:`reduced_silhouettes`), the
+    support plane and the gripper (None: grasps are not checked); or, in ``problem``, why the
+    pictures cannot serve (every answer is then refused, saying so).
+
+    It depends on the pictures alone, not on any answer: the daemon makes it once per job, while the
+    first worker reconstructs (:func:`job_evidence`), and checks every attempt's answer against it.
+    """
+
+    cameras: tuple[Camera, ...]
+    silhouettes: tuple[np.ndarray, ...]
+    support_plane: Sequence[float] | None
+    gripper: Gripper | None
+    problem: str | None = None
+
+
+def check_answer(result: Reconstruction, evidence: Evidence, *, min_iou: float = MIN_VIEW_IOU) -> Verdict:
+    """Whether a worker's answer agrees with the daemon's ``evidence``: its model with the silhouettes
+    (:func:`check_model`), its grasps with the model and the gripper (:func:`check_grasp`)."""
+    if evidence.problem is not None:
+        return Verdict(False, f"the answer cannot be checked: {evidence.problem}")
+    try:
+        parts = [_core(part) for part in (getattr(result, "parts", None) or [result.superquadric])]
+    except (CoreError, ValueError) as exc:
+        return Verdict(False, f"the answer cannot be checked: {exc}")
+    gripper, support_plane = evidence.gripper, evidence.support_plane
+    verdict = check_model(parts, evidence.cameras, evidence.silhouettes, min_iou)
     if not verdict.ok or gripper is None or not result.grasps:
         return verdict
     kept, dropped = [], []
@@ -339,18 +430,24 @@ def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], camera
                    tuple(dropped))
 
 
-def verify_answer(answer: Reconstruction, request: ReconstructRequest, pictures: Sequence[Picture],
-                  config: CellConfig) -> Verdict:
-    """:func:`verify_reconstruction` of a worker's answer to ``request``, with the job's ``pictures``
-    (the daemon's own, ``job.captures``) and the cell's camera, support plane and gripper: the
-    daemon's one call, before it stores a result. Grasps are checked when the request asked for
-    them (``request.gripper``)."""
+def job_evidence(request: ReconstructRequest, pictures: Sequence[Picture], config: CellConfig) -> Evidence:
+    """The daemon's :class:`Evidence` of a job: its ``pictures`` (``job.captures``) segmented as
+    ``request`` asks, with the cell's camera, support plane and gripper (grasps are checked when the
+    request asked for them, ``request.gripper``). It never raises: a problem is kept in the evidence."""
     try:
         segmentation = core_segmentation(request.segmentation)
-        cameras = [reduced_camera(config.camera.K, picture.T_base_cam, config.camera.dist, view=view)
-                   for view, picture in enumerate(pictures)]
+        cameras = tuple(reduced_camera(config.camera.K, picture.T_base_cam, config.camera.dist, view=view)
+                        for view, picture in enumerate(pictures))
         gripper = None if request.gripper is None else Gripper.from_dict(request.gripper)
+        silhouettes = reduced_silhouettes([picture.jpeg for picture in pictures], segmentation, cameras,
+                                          request.support_plane)
     except (CoreError, ValueError) as exc:
-        return Verdict(False, f"the answer cannot be checked: {exc}")
-    return verify_reconstruction(answer, [picture.jpeg for picture in pictures], cameras, segmentation,
-                                 request.support_plane, gripper)
+        return Evidence((), (), request.support_plane, None, str(exc))
+    return Evidence(cameras, tuple(silhouettes), request.support_plane, gripper)
+
+
+def verify_answer(answer: Reconstruction, request: ReconstructRequest, pictures: Sequence[Picture],
+                  config: CellConfig) -> Verdict:
+    """:func:`check_answer` of a worker's answer to ``request`` against the :func:`job_evidence` of the
+    job's ``pictures``: the daemon's check in one call (the daemon itself makes the evidence once per job)."""
+    return check_answer(answer, job_evidence(request, pictures, config))

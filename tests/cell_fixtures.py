@@ -216,40 +216,54 @@ class RunningCell:
         self.loop.run(self.processes.start_child(name, ready_timeout=START_TIMEOUT_S), timeout=START_TIMEOUT_S + 10)
         return worker_id
 
-    def put_job_on(self, worker_id: str, *, tries: int = 4) -> str:
-        """Submit bursts of jobs until one is in flight at ``worker_id`` (a slow worker); its id.
+    def hold(self, worker_id: str) -> None:
+        """Hold the jobs of a worker of :func:`add_worker`: from now on each waits, in flight there,
+        until :meth:`release`."""
+        path = hold_file(self.processes, worker_id)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.touch()
 
-        A proven worker that is free always takes a job before a new one (cell/pool.py), so each
-        try submits as many jobs at once as the pool has slots: the proven workers fill first, and
-        the rest go to the others.
-        """
-        for _ in range(tries):
-            slots = max(1, sum(r.capacity for r in self.status().reconstructors))
-            job_ids = [self.submit(label=f"for {worker_id}").job_id for _ in range(slots)]
-            prefixes = {f"{self.config.cell_id}/{job_id}/": job_id for job_id in job_ids}
+    def release(self, worker_id: str) -> None:
+        """Let the worker's held jobs go on (see :meth:`hold`)."""
+        hold_file(self.processes, worker_id).unlink(missing_ok=True)
 
-            def placed() -> str | None:
-                for worker in self.status().reconstructors:
-                    for ticket in worker.tickets_here:
-                        job_id = next((j for p, j in prefixes.items() if ticket.startswith(p)), None)
-                        if job_id is not None and worker.worker == worker_id:
-                            return job_id
-                if all(self.client.status(j).state.finished for j in job_ids):
-                    return "elsewhere"
-                return None
+    def put_job_on(self, worker_id: str) -> str:
+        """Submit a job and hold it in flight at ``worker_id``, the only reconstruction worker the
+        daemon knows (the test stops or has not started the others: the job can go nowhere else);
+        the job's id, once the worker has it. It stays there until :meth:`release`."""
+        # The daemon hears of a worker stopped a moment after the router does: wait for its view.
+        wait_until(lambda: {r.worker for r in self.status().reconstructors} == {worker_id}, timeout=JOB_TIMEOUT_S,
+                   interval=0.02, what=f"{worker_id} alone in the daemon's pool")
+        self.hold(worker_id)
+        job_id = self.submit(label=f"for {worker_id}").job_id
+        prefix = f"{self.config.cell_id}/{job_id}/"
 
-            found = wait_until(placed, timeout=JOB_TIMEOUT_S, interval=0.02, what=f"jobs {job_ids} placed")
-            if found != "elsewhere":
-                return found
-        raise AssertionError(f"no job went to {worker_id} in {tries} tries")
+        def placed() -> bool:
+            worker = self.reconstructor(worker_id)
+            if worker is not None and any(t.startswith(prefix) for t in worker.tickets_here):
+                return True
+            status = self.client.status(job_id)
+            assert not status.state.finished, f"job {job_id} ended {status.state.value} ({status.error}) " \
+                                              f"before it reached {worker_id}"
+            return False
+
+        wait_until(placed, timeout=JOB_TIMEOUT_S, interval=0.02, what=f"job {job_id} in flight at {worker_id}")
+        return job_id
+
+
+def hold_file(processes: CellProcesses, worker_id: str) -> Path:
+    """The file whose presence holds the jobs of a worker of :func:`add_worker` (``--hold``)."""
+    return Path(processes.config.run_dir) / "holds" / worker_id
 
 
 def add_worker(processes: CellProcesses, name: str, *, delay: float = 0.0, fail: bool = False) -> str:
     """Add (not start) a reconstruction worker child running ``tests/scale_worker.py``: the real
-    worker, its jobs ``delay`` seconds longer (or failing, with ``fail``); returns its id."""
+    worker, its jobs ``delay`` seconds longer (or failing, with ``fail``), held while the test says
+    (``RunningCell.hold``); returns its id."""
     worker_id = f"{processes.config.cell_id}-{name}-{os.getpid()}"
     argv = [sys.executable, str(Path(__file__).with_name("scale_worker.py")), "--config",
-            str(processes.config_path), "--id", worker_id, "--delay", str(delay)]
+            str(processes.config_path), "--id", worker_id, "--delay", str(delay),
+            "--hold", str(hold_file(processes, worker_id))]
     if fail:
         argv.append("--fail")
     processes.add_child(name, argv, token=keys.reconstructor_alive(worker_id))

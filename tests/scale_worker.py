@@ -3,9 +3,12 @@
 The real worker (``workers.reconstruct.worker.main``: its own Zenoh session, process
 pool, heartbeat and liveliness token), whose pool processes sleep before the
 real reconstruction, so that a test can catch a job in flight and kill or
-freeze the worker under it. With ``--fail`` every job raises instead.
+freeze the worker under it. With ``--hold FILE`` a job waits, before anything
+else, as long as FILE exists (at most :data:`HOLD_LIMIT_S`): the test holds the
+worker busy, or keeps a job in flight there, for as long as it needs, without
+counting on how long anything takes. With ``--fail`` every job raises instead.
 
-    python tests/scale_worker.py --config FILE --id WORKER_ID [--delay SECONDS] [--fail]
+    python tests/scale_worker.py --config FILE --id WORKER_ID [--delay SECONDS] [--hold FILE] [--fail]
 """
 
 from __future__ import annotations
@@ -28,9 +31,19 @@ from robocell.wire.config import load_config  # noqa: E402
 from robocell.workers.reconstruct import worker as reconstruct  # noqa: E402
 
 
-def slow_reconstruct_request(delay: float, fail: bool, request_json: str, payload: bytes,
+#: The longest a job waits for its hold to be lifted: a test that forgets it does not hang the worker.
+HOLD_LIMIT_S = 120.0
+_HOLD_POLL_S = 0.02
+
+
+def slow_reconstruct_request(delay: float, hold: str | None, fail: bool, request_json: str, payload: bytes,
                              worker: str) -> tuple[str, bytes]:
-    """``reconstruct_request``, ``delay`` seconds later (in a pool process)."""
+    """``reconstruct_request``, once ``hold`` (a file) is gone and ``delay`` seconds later (in a pool process)."""
+    if hold is not None:
+        for _ in range(int(HOLD_LIMIT_S / _HOLD_POLL_S)):
+            if not os.path.exists(hold):
+                break
+            time.sleep(_HOLD_POLL_S)
     time.sleep(delay)
     if fail:
         raise RuntimeError("broken on purpose")
@@ -42,10 +55,11 @@ def main() -> int:
     parser.add_argument("--config", required=True)
     parser.add_argument("--id", required=True)
     parser.add_argument("--delay", type=float, default=0.0)
+    parser.add_argument("--hold", help="a file: each job waits while it exists")
     parser.add_argument("--fail", action="store_true")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    job = functools.partial(slow_reconstruct_request, args.delay, args.fail)
+    job = functools.partial(slow_reconstruct_request, args.delay, args.hold, args.fail)
     return reconstruct.main(load_config(args.config), args.id, job=job)
 
 

@@ -151,3 +151,34 @@ def test_the_daemons_one_call_checks_an_answer_against_its_own_pictures(scans, t
     assert verdict.ok and verdict.grasps, verdict.reason
     big = scan.answer.superquadric.model_copy(update={"size": [a * 8 for a in scan.answer.superquadric.size]})
     assert not verify_answer(scan.answer.model_copy(update={"superquadric": big}), request, pictures, config).ok
+
+
+def test_the_evidence_made_once_judges_every_attempts_answer(scans, tmp_path):
+    """As the daemon does: the job's evidence made before any answer (``job_evidence``), then each
+    attempt's answer checked against it: a lie refused, the honest answer after it passed."""
+    from robocell.cell.job import Picture
+    from robocell.cell.verify import check_answer, job_evidence
+    from robocell.wire.config import CellConfig
+    from robocell.wire.messages import CameraModel, ReconstructRequest, ReconstructView
+
+    scan = scans["box-01"]
+    poses = [c.T_world_cam for c in scan.cameras]
+    config = CellConfig.model_validate({"camera": {"backend": "sim", "K": scan.K.tolist()}, "run_dir": str(tmp_path)})
+    pictures = [Picture(jpeg, np.eye(4), pose) for jpeg, pose in zip(scan.jpegs, poses)]
+    request = ReconstructRequest(job_id="j", views=[ReconstructView(camera=CameraModel(K=scan.K.tolist()),
+                                                                    T_world_cam=pose.tolist(), length=len(jpeg))
+                                                    for jpeg, pose in zip(scan.jpegs, poses)],
+                                 support_plane=config.support_plane, gripper=config.gripper.dimensions())
+    evidence = job_evidence(request, pictures, config)
+    assert evidence.problem is None and len(evidence.silhouettes) == len(scan.jpegs)
+    big = scan.answer.superquadric.model_copy(update={"size": [a * 8 for a in scan.answer.superquadric.size]})
+    refused = check_answer(scan.answer.model_copy(update={"superquadric": big}), evidence)
+    assert not refused.ok and refused.reason.startswith("the model does not match the pictures")
+    forged = [_moved(g, [0.0, 0.2, 0.0]) for g in scan.answer.grasps]
+    assert not check_answer(scan.answer.model_copy(update={"grasps": forged}), evidence).ok
+    honest = check_answer(scan.answer, evidence)
+    assert honest.ok and honest.grasps, honest.reason
+    # Pictures the daemon cannot read: every answer is refused, saying why.
+    broken = job_evidence(request, [pictures[0], Picture(b"not a jpeg", np.eye(4), poses[1]), pictures[2]], config)
+    verdict = check_answer(scan.answer, broken)
+    assert not verdict.ok and verdict.reason == "the answer cannot be checked: view 1: the picture cannot be decoded"

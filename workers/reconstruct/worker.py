@@ -307,6 +307,10 @@ def main(config: CellConfig, worker_id: str | None = None, *, job: Job = reconst
             finally:
                 await transport.close()
         finally:
-            pool.shutdown(wait=False, cancel_futures=True)
+            # Waiting for the pool's manager thread: without it, Python's exit hook for process pools
+            # may write to the pool's wake-up pipe after that thread closed it, and logs a traceback
+            # (OSError: Bad file descriptor). A job in flight ends first (``robocell up`` kills a child
+            # that takes too long to stop).
+            pool.shutdown(wait=True, cancel_futures=True)
 
     return run_until_stopped(run, "reconstruction worker")

@@ -8,7 +8,8 @@ with the planner's own checks would only measure that the planner agrees
 with itself.
 
 The object is a union of superquadric parts (``truth.json``: one superquadric,
-or ``{"parts": [...]}``). The gripper (DESIGN.md §3) in the grasp frame:
+or ``{"parts": [...]}``), or, for a cup stack or a lumpy figure, the object itself
+(:class:`Solid`: the simulator's own level function of it, :func:`solids_from_truth`). The gripper (DESIGN.md §3) in the grasp frame:
 z approach, y closing, x = y × z; pads' centre at the origin; fingertips at
 ``z = pad_length/2``, palm at ``z_palm = pad_length/2 - finger_length``. Each
 finger is a box ``|x| <= finger_width/2``, ``z_palm <= z <= tip``, from the
@@ -43,11 +44,12 @@ inside-outside function.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Part", "JudgeGripper", "Verdict", "parts_from_truth", "judge", "judge_many", "inside_union", "union_iou",
+__all__ = ["Part", "Solid", "JudgeGripper", "Verdict", "parts_from_truth", "solids_from_truth", "judge", "judge_many", "inside_union", "union_iou",
            "union_silhouette_iou"]
 
 _GOLDEN = (math.sqrt(5) - 1) / 2
@@ -76,6 +78,31 @@ def parts_from_truth(truth: dict) -> list[Part]:
     if "parts" in truth:
         return [Part.from_dict(p) for p in truth["parts"]]
     return [Part.from_dict(truth)]
+
+
+@dataclass(frozen=True)
+class Solid:
+    """A true object that is no union of superquadrics (a cup stack, a lumpy figure): its level
+    function (world points (N, 3) to (N,), at most 1 exactly inside, continuous, growing outwards)
+    and the world box it lies in. :func:`judge` finds its chords by sampling each line and bisecting
+    the crossings, and its normals as the level's gradient."""
+
+    level: Callable[[np.ndarray], np.ndarray]
+    box_min: np.ndarray
+    box_max: np.ndarray
+
+
+def solids_from_truth(truth: dict) -> list[Part | Solid]:
+    """What :func:`judge` holds a grasp against, of a ``truth.json``: its superquadric parts
+    (:func:`parts_from_truth`), or for a ``cup-stack`` or a ``lumpy`` figure the object itself (a
+    :class:`Solid`, from the simulator's own description of it)."""
+    kind = truth.get("kind")
+    if kind not in ("cup-stack", "lumpy"):
+        return list(parts_from_truth(truth))
+    from .objects import CupStack, LumpyFigure
+
+    obj = CupStack.from_truth(truth) if kind == "cup-stack" else LumpyFigure.from_truth(truth)
+    return [Solid(obj.level, np.asarray(truth["bbox_min"], float), np.asarray(truth["bbox_max"], float))]
 
 
 @dataclass(frozen=True)
@@ -128,8 +155,11 @@ def _gauge(q: np.ndarray, shape: np.ndarray) -> np.ndarray:
     return (xy ** (e2 / e1) + a[..., 2] ** (2 / e1)) ** (e1 / 2)
 
 
-def _normal(q: np.ndarray, part: Part) -> np.ndarray:
-    """World unit outward normals at points q (N, 3) given in the part's scaled frame."""
+def _normal(q: np.ndarray, part: Part | Solid) -> np.ndarray:
+    """World unit outward normals at points q (N, 3) given in the part's scaled frame (a
+    :class:`Solid`'s: in the world, as its chords give them)."""
+    if isinstance(part, Solid):
+        return _solid_normal(q, part)
     e1, e2 = part.shape
     a = np.abs(q)
     xy = a[:, 0] ** (2 / e2) + a[:, 1] ** (2 / e2)
@@ -142,13 +172,15 @@ def _normal(q: np.ndarray, part: Part) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def _chords(origins: np.ndarray, direction: np.ndarray, part: Part):
+def _chords(origins: np.ndarray, direction: np.ndarray, part: Part | Solid):
     """Where lines ``origins + t * direction`` (N lines, one direction each) enter and leave a part.
 
-    Returns t_in, t_out (N,) with NaN where a line misses, and the scaled-frame points
-    of entry and exit. The gauge is convex along a line: its minimum by golden section,
-    then each crossing of 1 by bisection.
+    Returns t_in, t_out (N,) with NaN where a line misses, and q0, v: the line's point at t is
+    ``q0 + t v``, in the part's scaled frame (a :class:`Solid`'s: the world). The gauge is convex
+    along a line: its minimum by golden section, then each crossing of 1 by bisection.
     """
+    if isinstance(part, Solid):
+        return _solid_chords(origins, direction, part)
     R, t = part.T_world_part[:3, :3], part.T_world_part[:3, 3]
     q0 = (origins - t) @ R / part.size
     v = (direction @ R) / part.size
@@ -193,18 +225,81 @@ def _chords(origins: np.ndarray, direction: np.ndarray, part: Part):
     return t_in, t_out, q0, v
 
 
+#: Samples along a line through a :class:`Solid`'s box: a piece of it thinner than the box's
+#: diagonal over this many is missed.
+_SOLID_SAMPLES = 257
+#: The step (metres) of a :class:`Solid`'s level's central differences.
+_NORMAL_STEP = 1e-5
+
+
+def _solid_chords(origins: np.ndarray, direction: np.ndarray, solid: Solid):
+    """A :class:`Solid`'s chords: from the first point of each line inside it to the last one (what
+    lies between the two, for an object that is not convex, counts as the object)."""
+    o, d = np.asarray(origins, float), np.asarray(direction, float)
+    n = len(o)
+    t_in, t_out = np.full(n, np.nan), np.full(n, np.nan)
+    # The stretch of each line inside the box (slabs), the box grown by a hair for what touches it.
+    lo_box, hi_box = solid.box_min - 1e-6, solid.box_max + 1e-6
+    within = (o >= lo_box) & (o <= hi_box)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe = np.where(d == 0, 1.0, d)
+        t1, t2 = (lo_box - o) / safe, (hi_box - o) / safe
+    near = np.where(d == 0, np.where(within, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
+    far = np.where(d == 0, np.where(within, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
+    crossing = np.flatnonzero(near < far)
+    if not len(crossing):
+        return t_in, t_out, o, d
+    ts = near[crossing, None] + (far - near)[crossing, None] * np.linspace(0.0, 1.0, _SOLID_SAMPLES)
+    oc, dc = o[crossing], d[crossing]
+
+    def inside(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return solid.level(oc[rows] + t[:, None] * dc[rows]) <= 1.0
+
+    rows = np.repeat(np.arange(len(crossing)), _SOLID_SAMPLES)
+    found = inside(rows, ts.ravel()).reshape(ts.shape)
+    hit = np.flatnonzero(found.any(axis=1))
+    if not len(hit):
+        return t_in, t_out, o, d
+    first = found[hit].argmax(axis=1)
+    last = _SOLID_SAMPLES - 1 - found[hit][:, ::-1].argmax(axis=1)
+
+    def crossing_at(inner_index: np.ndarray, step: int) -> np.ndarray:
+        inner = ts[hit, inner_index]
+        outer = ts[hit, np.clip(inner_index + step, 0, _SOLID_SAMPLES - 1)]
+        for _ in range(_ITERATIONS):
+            middle = (inner + outer) / 2
+            is_inside = inside(hit, middle)
+            inner, outer = np.where(is_inside, middle, inner), np.where(is_inside, outer, middle)
+        return (inner + outer) / 2
+
+    t_in[crossing[hit]], t_out[crossing[hit]] = crossing_at(first, -1), crossing_at(last, 1)
+    return t_in, t_out, o, d
+
+
+def _solid_normal(points: np.ndarray, solid: Solid) -> np.ndarray:
+    """World unit outward normals of a :class:`Solid` at world points (N, 3): its level's gradient."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    gradient = np.empty_like(points)
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = _NORMAL_STEP
+        gradient[:, axis] = solid.level(points + step) - solid.level(points - step)
+    length = np.linalg.norm(gradient, axis=1, keepdims=True)
+    return gradient / np.where(length > 0, length, 1.0)
+
+
 def _grid(lo: float, hi: float, n: int) -> np.ndarray:
     return np.linspace(lo, hi, n)
 
 
-def judge(T_world_grasp, parts: list[Part], gripper: JudgeGripper, support_plane=None, *,
+def judge(T_world_grasp, parts: list[Part] | list[Part | Solid], gripper: JudgeGripper, support_plane=None, *,
           mu: float = 0.5, compliance: float | None = None, contacts: str = "patch") -> Verdict:
     """Judge one grasp against the true object; see the module docstring for the test.
 
     Parameters
     ----------
     T_world_grasp : (4, 4) array_like, grasp-to-world.
-    parts : list of Part, the true object (their union).
+    parts : list of Part, the true object (their union); or of Solid (``solids_from_truth``).
     gripper : JudgeGripper
     support_plane : (4,) array_like or None, ``n . x + d >= 0`` is free space.
     mu : float, friction coefficient.
@@ -307,7 +402,7 @@ def judge(T_world_grasp, parts: list[Part], gripper: JudgeGripper, support_plane
     return Verdict(True, "holds", width)
 
 
-def _centre_line_contacts(origin, y_axis, parts: list[Part], half_open: float):
+def _centre_line_contacts(origin, y_axis, parts, half_open: float):
     """Where the line through the pads' centres enters and leaves the object between the jaws:
     (c1, n1, c2, n2) on the +y and -y sides, or None if it misses."""
     top, bottom = None, None  # (t, scaled point, part) where the line leaves (+y) and enters (-y)

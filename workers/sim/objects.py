@@ -288,6 +288,26 @@ class CupStack:
             out |= r <= np.nan_to_num(self._cup_radius(P[:, 2], base, up), nan=-1.0)
         return out
 
+    def level(self, points_world: ArrayLike) -> NDArray[np.float64]:
+        """A level function of the stack: at most 1 exactly where :meth:`inside` holds, continuous,
+        growing outwards (its gradient on the surface is the outward normal's direction). Per cup:
+        the larger of the radius over the cup's radius at that height and how far along the cup's
+        axis from its middle (1 at both ends); the stack's is the smaller of its cups'."""
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        r = np.linalg.norm(P[:, :2] - self.position_xy, axis=1)
+        out = np.full(len(P), np.inf)
+        for base, up in self._cups:
+            s = (P[:, 2] - base) * up / self.h
+            radius = np.maximum(self.rb + (self.rt - self.rb) * s, 1e-9)
+            out = np.minimum(out, np.maximum(r / radius, np.abs(2 * s - 1)))
+        return out
+
+    @classmethod
+    def from_truth(cls, truth: dict[str, Any]) -> CupStack:
+        """The stack a :meth:`truth` describes."""
+        return cls(truth["position_xy"], truth["bottom_radius"], truth["top_radius"], truth["height"],
+                   truth["top_inverted"], truth["nest_offset"])
+
     def _cone(self, base: float, up: float, n_seg: int = 72, n_rings: int = 8) -> Mesh:
         """One closed cup: a side of ``n_rings`` rings plus two flat caps.
 
@@ -385,6 +405,21 @@ class LumpyFigure:
         dist = np.linalg.norm(q, axis=1)
         d = q / np.where(dist > 0, dist, 1.0)[:, None]
         return (dist <= self._radius(d)) & (P[:, 2] >= 0.0)
+
+    def level(self, points_world: ArrayLike) -> NDArray[np.float64]:
+        """A level function of the figure: at most 1 exactly where :meth:`inside` holds, continuous,
+        growing outwards: the larger of the distance from the centre over the surface's in that
+        direction, and the depth below the table over the centre's height (plus 1)."""
+        P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        q = P - self.centre
+        dist = np.linalg.norm(q, axis=1)
+        d = q / np.where(dist > 0, dist, 1.0)[:, None]
+        return np.maximum(dist / self._radius(d), 1.0 - P[:, 2] / self.centre[2])
+
+    @classmethod
+    def from_truth(cls, truth: dict[str, Any]) -> LumpyFigure:
+        """The figure a :meth:`truth` describes (its waves follow from its seed)."""
+        return cls(truth["centre"][:2], truth["radii"], truth["seed"], truth["amplitude"])
 
     def mesh(self) -> Mesh:
         if self._mesh is None:

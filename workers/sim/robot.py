@@ -17,7 +17,7 @@ from robocell.wire.backends import SimRobotConfig
 from robocell.wire.config import CellConfig
 from robocell.workers.robot.backend import Grip, ProgressCallback, RobotBackend
 
-from .judge import JudgeGripper, Part, judge, parts_from_truth
+from .judge import JudgeGripper, Part, Solid, judge, solids_from_truth
 
 __all__ = ["SimRobot", "SceneGripper"]
 
@@ -37,7 +37,7 @@ class SceneGripper:
 
     def __init__(self, truth: list[dict], gripper: dict, *, T_flange_grasp=None, support_plane=None,
                  friction: float = 0.5) -> None:
-        self._parts: list[Part] = [part for obj in truth for part in parts_from_truth(obj)]
+        self._parts: list[Part | Solid] = [part for obj in truth for part in solids_from_truth(obj)]
         self._gripper = JudgeGripper.from_dict(gripper)
         self._flange_grasp = np.eye(4) if T_flange_grasp is None else np.asarray(T_flange_grasp, dtype=np.float64)
         self._plane = support_plane
