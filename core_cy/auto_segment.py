@@ -684,9 +684,9 @@ _KEPT_BY_CUT = 0.5
 
 
 def _with_pieces_beside(region: np.ndarray, differs: np.ndarray) -> np.ndarray:
-    """``region`` and the pieces of ``differs`` beside it (within a third of its size), within their
-    convex outline: a print's band of the table's own colour splits an object's evidence in two, and
-    the piece at the aim alone loses the rest."""
+    """``region`` and the pieces of ``differs`` beside it (within a third of its size): a print's
+    band of the table's own colour splits an object's evidence in two, and the piece at the aim alone
+    loses the rest."""
     x, y, w, h = cv2.boundingRect(region)
     reach = max(2, int(round(_BESIDE * max(w, h))))
     grown = cv2.dilate(region, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
@@ -694,10 +694,7 @@ def _with_pieces_beside(region: np.ndarray, differs: np.ndarray) -> np.ndarray:
     touching = np.zeros(count, bool)
     touching[np.unique(labels[grown > 0])] = True
     touching[0] = False
-    near = np.where(touching[labels], 255, 0).astype(np.uint8)
-    hull = cv2.convexHull(cv2.findNonZero(near))
-    return cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
-                           cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=2))
+    return np.where(touching[labels], 255, 0).astype(np.uint8)
 
 
 #: Pieces that stand out within this share of the region's size from it are of the same object.
