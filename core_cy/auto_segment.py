@@ -654,7 +654,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     differs[hidden] = 0
     joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
     region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
-    if region is None or cv2.countNonZero(cv2.bitwise_and(region, differs)) < 12:
+    # A pixel is hidden only where the other views' first look saw something stand in front of its
+    # table point: on an empty table, or with a shadow alone, nothing is hidden. An object of the
+    # table's colour may be all hidden and hardly differ where the others see it.
+    if region is None or cv2.countNonZero(region) < 12 or not cv2.countNonZero(cv2.bitwise_and(region, differs)):
         raise SilhouetteError(_NOTHING, view=view.index)
     if view.background is not None:
         # Against the empty workspace what differs is the object, but in pieces where its print or its
@@ -665,7 +668,37 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         hull = cv2.convexHull(cv2.findNonZero(near))
         region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
                                  cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
-    return _graph_cut(view, region, score), score
+    else:
+        region = _with_pieces_beside(region, differs)
+    cut = _graph_cut(view, region, score)
+    standing_out = cv2.bitwise_and(region, differs)
+    if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
+        # The colour models could not tell object from table (an object of the table's own colour and
+        # grain): the evidence alone draws the silhouette.
+        cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
+    return cut, score
+
+
+#: A graph cut that keeps less than this share of what stands out near the aim failed to model it.
+_KEPT_BY_CUT = 0.5
+
+
+def _with_pieces_beside(region: np.ndarray, differs: np.ndarray) -> np.ndarray:
+    """``region`` and the pieces of ``differs`` beside it (within a third of its size): a print's
+    band of the table's own colour splits an object's evidence in two, and the piece at the aim alone
+    loses the rest."""
+    x, y, w, h = cv2.boundingRect(region)
+    reach = max(2, int(round(_BESIDE * max(w, h))))
+    grown = cv2.dilate(region, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    count, labels = cv2.connectedComponents(cv2.bitwise_or(differs, region), connectivity=8)
+    touching = np.zeros(count, bool)
+    touching[np.unique(labels[grown > 0])] = True
+    touching[0] = False
+    return np.where(touching[labels], 255, 0).astype(np.uint8)
+
+
+#: Pieces that stand out within this share of the region's size from it are of the same object.
+_BESIDE = 0.3
 
 
 _CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
