@@ -61,8 +61,8 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
         # The simulated camera renders each picture on this machine's CPU (a printed object, its
         # shadow, a textured table: seconds when the machine is busy), where an Axis camera answers
         # in a fraction of one.
-        camera={"timeout_s": 10.0, "retries": 1, **(camera or {})},
-        timeouts={"move_s": 10.0, "capture_s": 25.0, "reconstruct_s": 30.0, "outage_s": 1.0, **(timeouts or {})})
+        camera={"timeout_s": 20.0, "retries": 1, **(camera or {})},
+        timeouts={"move_s": 10.0, "capture_s": 45.0, "reconstruct_s": 30.0, "outage_s": 1.0, **(timeouts or {})})
 
 
 def look_away_poses(config: CellConfig) -> list[list[list[float]]]:
