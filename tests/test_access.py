@@ -162,7 +162,8 @@ class Cell:
         data["zenoh"]["roles"].update(robot=["robot1"], camera=["camera1"])
         data["robot"] = {"backend": "sim", "speed": 0.0, "rotation_speed_deg": 0.0}
         data["camera"] = {"backend": "sim"}
-        data["timeouts"] = {"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0}
+        # The simulated camera renders a printed scene: seconds on a busy machine.
+        data["timeouts"] = {"move_s": 10.0, "capture_s": 45.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0}
         path = directory / "cell.json"
         path.write_text(json.dumps(data))
         return path
