@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from core_cy.images import checked_size
-from wire.messages import BACKGROUND_POSE_TOLERANCE
+from robocell.core_cy.images import checked_size
+from robocell.wire.messages import BACKGROUND_POSE_TOLERANCE
 
 __all__ = ["Background", "Backgrounds", "pose_distance"]
 

@@ -42,8 +42,8 @@ from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from wire.config import RetentionConfig
-from wire.messages import DiskUsage, JobState
+from robocell.wire.config import RetentionConfig
+from robocell.wire.messages import DiskUsage, JobState
 
 from .backgrounds import Background, Backgrounds
 from .backgrounds import remove as remove_background

@@ -23,15 +23,15 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from core_cy.errors import CoreError
-from core_cy.plan import camera_poses
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError, LinkDown
-from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message,
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.plan import camera_poses
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError, LinkDown
+from robocell.wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message,
                            MoveReply, MoveRequest, NextViewQuery, ReconstructReply,
                            ReconstructRequest, ReconstructView, ScanResult, parse)
-from wire.transport import Reply
+from robocell.wire.transport import Reply
 
 from .backgrounds import Backgrounds
 from .job import Job, Picture

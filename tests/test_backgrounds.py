@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from cell.backgrounds import Backgrounds
-from cell.plan import job_steps, step_from_spec
-from cell.retention import apply_retention, disk_usage
-from cell.store import JobStore
-from wire.config import RetentionConfig
-from wire.messages import BACKGROUND_POSE_TOLERANCE, JobEvent, JobState, Lifecycle, PickRequest, ScanRequest
-from workers.sim.workspace import Workspace
+from robocell.cell.backgrounds import Backgrounds
+from robocell.cell.plan import job_steps, step_from_spec
+from robocell.cell.retention import apply_retention, disk_usage
+from robocell.cell.store import JobStore
+from robocell.wire.config import RetentionConfig
+from robocell.wire.messages import BACKGROUND_POSE_TOLERANCE, JobEvent, JobState, Lifecycle, PickRequest, ScanRequest
+from robocell.workers.sim.workspace import Workspace
 
 K = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
 SIZE = (64, 48)

@@ -16,12 +16,12 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
-from wire.messages import (JobState, ReconstructReply, ReconstructRequest, ScanRequest, ViewPlan)
-from workers.reconstruct.worker import reconstruct_request
-from workers.sim.render import render
-from workers.sim.scene import scene_from_config, target_from_config, truth_from_config
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
+from robocell.wire.messages import (JobState, ReconstructReply, ReconstructRequest, ScanRequest, ViewPlan)
+from robocell.workers.reconstruct.worker import reconstruct_request
+from robocell.workers.sim.render import render
+from robocell.workers.sim.scene import scene_from_config, target_from_config, truth_from_config
 
 from tests.cell_fixtures import InProcessWorker, cell_config, running_cell
 

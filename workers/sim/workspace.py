@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import threading
 
-from wire.messages import JobEvent, Lifecycle, parse
+from robocell.wire.messages import JobEvent, Lifecycle, parse
 
 from .camera import SceneCamera
 
