@@ -47,6 +47,7 @@ from .pool import ReconstructorPool
 from .presence import Presence
 from .publisher import Publisher
 from .recorder import Recorder
+from .backgrounds import Backgrounds
 from .plan import job_steps, resume
 from .requests import RequestHandlers
 from .steps import Step, StepFailed, View
@@ -85,6 +86,7 @@ class CellDaemon(RequestHandlers):
         self._publisher = Publisher(transport)
         self._lane = MotionLane()
         self.pool = ReconstructorPool(transport, heartbeat_s=config.timeouts.heartbeat_s)
+        self.backgrounds = Backgrounds(self.run_dir)
         self._background: set[asyncio.Task[Any]] = set()
         self._started = clock()
 
@@ -328,6 +330,10 @@ class CellDaemon(RequestHandlers):
     async def _succeed(self, handle: JobHandle) -> None:
         job = handle.job
         result = job.result
+        if job.request.kind == "backgrounds":  # no model: the pictures kept are what it made
+            await handle.change(f"kept {len(job.captures)} backgrounds of the empty workspace in "
+                                f"{self.backgrounds.root}", lifecycle=Lifecycle.SUCCEEDED)
+            return
         if result is None:
             raise StepFailed("the plan ended without a result")
         total = result.timings_ms.get("total", float("nan"))

@@ -131,9 +131,9 @@ class JobHandle:
         doing = job.progress if progress is True else (progress or None)
         if to.finished:
             doing = None
-        event = JobEvent(job_id=job.job_id, state=wire_state(to, doing), lifecycle=to, progress=doing,
-                         view=doing.view if doing is not None else None, message=message, time=self._clock(),
-                         result=result)
+        event = JobEvent(job_id=job.job_id, state=wire_state(to, doing), kind=job.request.kind, lifecycle=to,
+                         progress=doing, view=doing.view if doing is not None else None, message=message,
+                         time=self._clock(), result=result)
         await self._books.store(event, sync=must_sync(job.progress, to, doing), error_kind=error_kind,
                                 checkpoint=job.checkpoint(began=doing.step if doing else None) if checkpoint else None)
         job.lifecycle, job.progress = to, doing

@@ -11,11 +11,12 @@ from robocell.wire.messages import JobState, Lifecycle, ScanRequest
 
 from .job import Checkpoint, Job
 from .pick import ChooseGrasp, Gripper, PickMove
-from .steps import Reconstruct, Step, View
+from .steps import KeepBackgrounds, Reconstruct, Step, View
 
 __all__ = ["job_steps", "step_from_spec", "resume"]
 
-_STEPS: dict[str, type[Step]] = {cls.kind: cls for cls in (View, Reconstruct, ChooseGrasp, PickMove, Gripper)}
+_STEPS: dict[str, type[Step]] = {cls.kind: cls for cls in (View, Reconstruct, ChooseGrasp, PickMove, Gripper,
+                                                            KeepBackgrounds)}
 
 
 def step_from_spec(spec: dict[str, Any]) -> Step:
@@ -37,8 +38,11 @@ def step_from_spec(spec: dict[str, Any]) -> Step:
 
 
 def job_steps(request: ScanRequest, poses: list[np.ndarray]) -> list[Step]:
-    """The plan of a request: a view at each pose, a reconstruction, and its pick if it asks for one."""
+    """The plan of a request: a view at each pose, a reconstruction, and its pick if it asks for one;
+    for a request of ``kind: backgrounds``, a view at each pose and the keeping of its pictures."""
     steps: list[Step] = [View(view, pose) for view, pose in enumerate(poses)]
+    if request.kind == "backgrounds":
+        return [*steps, KeepBackgrounds()]
     steps.append(Reconstruct())
     if request.pick is None:
         return steps

@@ -11,6 +11,10 @@ in its store's thread, deletes:
 - **pictures** kept for a restart (``<run dir>/pictures/<job id>/``) of jobs
   that have ended, older than ``pictures_max_age_days`` (a job drops its own
   when it ends; these are what a crash left);
+- **backgrounds** (``<run dir>/backgrounds/``, ``cell/backgrounds.py``) older than
+  ``backgrounds_max_age_days``, then the oldest until they take at most
+  ``backgrounds_max_mb`` together (a newer background at a pose has replaced the older
+  one already);
 - **ended jobs** in the store (status, events, result) older than
   ``jobs_max_age_days``, and the oldest past ``jobs_max_count``; then the
   store's WAL is checkpointed, so that its file stays small too.
@@ -41,8 +45,11 @@ from pathlib import Path
 from robocell.wire.config import RetentionConfig
 from robocell.wire.messages import DiskUsage, JobState
 
+from .backgrounds import Background, Backgrounds
+from .backgrounds import remove as remove_background
+
 __all__ = ["RetentionReport", "FileEntry", "apply_retention", "disk_usage", "plan_recordings", "plan_pictures",
-           "GRACE_S"]
+           "plan_backgrounds", "GRACE_S"]
 
 #: A file written this recently is kept whatever the policy: it may belong to a job just ended.
 GRACE_S = 10.0
@@ -70,6 +77,8 @@ class RetentionReport:
     recording_bytes_freed: int = 0
     pictures_deleted: int = 0
     picture_bytes_freed: int = 0
+    backgrounds_deleted: int = 0
+    background_bytes_freed: int = 0
     jobs_pruned: int = 0
     store_bytes_before: int = 0
     store_bytes_after: int = 0
@@ -79,6 +88,7 @@ class RetentionReport:
         """One line for the log."""
         return (f"retention: {self.recordings_deleted} recordings ({self.recording_bytes_freed / _MB:.1f} MB), "
                 f"{self.pictures_deleted} pictures ({self.picture_bytes_freed / _MB:.1f} MB), "
+                f"{self.backgrounds_deleted} backgrounds ({self.background_bytes_freed / _MB:.1f} MB), "
                 f"{self.jobs_pruned} ended jobs deleted; store {self.store_bytes_before / _MB:.1f} -> "
                 f"{self.store_bytes_after / _MB:.1f} MB" + (f"; {len(self.errors)} errors" if self.errors else ""))
 
@@ -122,6 +132,61 @@ def plan_pictures(entries: Iterable[FileEntry], keep: Collection[str], policy: R
     """The pictures to delete: of jobs not in ``keep``, past the age limit."""
     return sorted((e for e in entries if not _kept(e, keep, now)
                    and now - e.mtime > policy.pictures_max_age_days * _DAY_S), key=lambda e: (e.mtime, e.job_id))
+
+
+def plan_backgrounds(entries: Iterable[FileEntry], policy: RetentionConfig, now: float) -> list[FileEntry]:
+    """The backgrounds to delete, oldest first: past the age limit, then the oldest while all of
+    them take more than the size limit; never one written in the last :data:`GRACE_S`. (A
+    background belongs to no job that runs: a scan reads it whole or goes without.)
+
+    >>> from pathlib import Path
+    >>> old, new = FileEntry(Path("a.jpg"), "a", 600, 0.0), FileEntry(Path("b.jpg"), "b", 600, 500.0)
+    >>> policy = RetentionConfig(backgrounds_max_mb=1000 / 1024 / 1024, backgrounds_max_age_days=1)
+    >>> [e.job_id for e in plan_backgrounds([new, old], policy, now=1000.0)]
+    ['a']
+    >>> [e.job_id for e in plan_backgrounds([new, old], policy, now=2 * 86400.0)]
+    ['a', 'b']
+    """
+    entries = sorted(entries, key=lambda e: (e.mtime, str(e.path)))
+    doomed = [e for e in entries if now - e.mtime >= GRACE_S and now - e.mtime > policy.backgrounds_max_age_days * _DAY_S]
+    chosen = {e.path for e in doomed}
+    total = sum(e.size for e in entries if e.path not in chosen)
+    for entry in entries:
+        if total <= policy.backgrounds_max_mb * _MB:
+            break
+        if entry.path in chosen or now - entry.mtime < GRACE_S:
+            continue
+        doomed.append(entry)
+        chosen.add(entry.path)
+        total -= entry.size
+    return sorted(doomed, key=lambda e: (e.mtime, str(e.path)))
+
+
+def _backgrounds(run_dir: Path) -> dict[Path, tuple[FileEntry, Background]]:
+    """Each background kept, by its picture's path: as a file entry (its picture and description
+    together), and as itself."""
+    found = {}
+    for background in Backgrounds(run_dir).all():
+        size, mtime = 0, 0.0
+        for path in (background.path, background.description):
+            with contextlib.suppress(FileNotFoundError):
+                stat = path.stat()
+                size, mtime = size + stat.st_size, max(mtime, stat.st_mtime)
+        found[background.path] = (FileEntry(background.path, background.job_id, size, mtime), background)
+    return found
+
+
+def _delete_backgrounds(doomed: list[FileEntry], kept: dict[Path, tuple[FileEntry, Background]],
+                        errors: list[str]) -> tuple[int, int]:
+    count = freed = 0
+    for entry in doomed:
+        try:
+            remove_background(kept[entry.path][1])
+        except OSError as exc:
+            errors.append(f"{entry.path}: {exc.strerror or exc}")
+            continue
+        count, freed = count + 1, freed + entry.size
+    return count, freed
 
 
 def _recordings(run_dir: Path) -> list[FileEntry]:
@@ -252,10 +317,13 @@ def apply_retention(run_dir: Path, store, policy: RetentionConfig, now: float, *
     errors: list[str] = []
     recordings, recording_bytes = _delete(plan_recordings(_recordings(run_dir), keep, policy, now), errors)
     pictures, picture_bytes = _delete(plan_pictures(_pictures(run_dir), keep, policy, now), errors)
+    kept_backgrounds = _backgrounds(run_dir)
+    backgrounds, background_bytes = _delete_backgrounds(
+        plan_backgrounds([entry for entry, _ in kept_backgrounds.values()], policy, now), kept_backgrounds, errors)
     before = _store_bytes(store.path)
     pruned = _prune_store(store.path, keep, policy, now)
-    return RetentionReport(recordings, recording_bytes, pictures, picture_bytes, pruned, before,
-                           _store_bytes(store.path), tuple(errors))
+    return RetentionReport(recordings, recording_bytes, pictures, picture_bytes, backgrounds, background_bytes,
+                           pruned, before, _store_bytes(store.path), tuple(errors))
 
 
 def disk_usage(run_dir: Path, policy: RetentionConfig, *, now: float, store_path: Path | None = None,
@@ -283,12 +351,16 @@ def disk_usage(run_dir: Path, policy: RetentionConfig, *, now: float, store_path
             db.close()
     recording_bytes = sum(e.size for e in recordings)
     picture_bytes = sum(e.size for e in pictures)
+    backgrounds = [entry for entry, _ in _backgrounds(run_dir).values()]
+    background_bytes = sum(e.size for e in backgrounds)
     store_bytes = _store_bytes(store_path)
     free = None
     with contextlib.suppress(OSError):
         free = shutil.disk_usage(run_dir).free
     return DiskUsage(recordings=recording_bytes, pictures=picture_bytes, store=store_bytes,
-                     other=max(0, total - recording_bytes - picture_bytes - store_bytes), free_on_disk=free,
+                     other=max(0, total - recording_bytes - picture_bytes - background_bytes - store_bytes),
+                     free_on_disk=free,
                      recordings_to_free=sum(e.size for e in plan_recordings(recordings, keep, policy, now)),
                      pictures_to_free=sum(e.size for e in plan_pictures(pictures, keep, policy, now)),
-                     jobs_to_prune=prunable)
+                     jobs_to_prune=prunable, backgrounds=background_bytes,
+                     backgrounds_to_free=sum(e.size for e in plan_backgrounds(backgrounds, policy, now)))

@@ -23,6 +23,7 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
+from robocell.core_cy.errors import CoreError
 from robocell.core_cy.plan import camera_poses
 from robocell.wire import keys
 from robocell.wire.config import CellConfig
@@ -32,11 +33,12 @@ from robocell.wire.messages import (CameraModel, CaptureInfo, CaptureRequest, Jo
                            ReconstructRequest, ReconstructView, ScanResult, parse)
 from robocell.wire.transport import Reply
 
+from .backgrounds import Backgrounds
 from .job import Job, Picture
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool
 from .verify import Evidence, Verdict, check_answer, job_evidence
 
-__all__ = ["Step", "StepFailed", "Cell", "View", "Reconstruct", "parse_reply"]
+__all__ = ["Step", "StepFailed", "Cell", "View", "Reconstruct", "KeepBackgrounds", "parse_reply"]
 
 
 class StepFailed(CellError):
@@ -52,6 +54,8 @@ class Cell(Protocol):
 
     config: CellConfig
     pool: ReconstructorPool
+    #: The backgrounds the cell keeps (``cell.backgrounds``).
+    backgrounds: Backgrounds
 
     def clock(self) -> float: ...
 
@@ -170,8 +174,12 @@ class Reconstruct(Step):
 
     async def run(self, job: Job, cell: Cell) -> list[Step] | None:
         config = cell.config
-        payload = b"".join(c.jpeg for c in job.captures)
-        request = _reconstruct_request(job, config)
+        backgrounds = await asyncio.to_thread(_backgrounds_of, job.captures, cell.backgrounds, config)
+        request = _reconstruct_request(job, config, [len(b) for b in backgrounds])
+        payload = b"".join(c.jpeg + b for c, b in zip(job.captures, backgrounds))
+        used = sum(1 for b in backgrounds if b)
+        if used:
+            await cell.note(job, f"with the backgrounds of {used} of its {len(backgrounds)} views", level=logging.INFO)
         # Asked at the cap too: the scan then ends saying how unsure its model is.
         candidates = cell.candidates(job) if job.request.views == "adaptive" else []
         if candidates:
@@ -267,17 +275,57 @@ class Reconstruct(Step):
         return [View(views, candidates[nxt.candidate]), Reconstruct()]
 
 
-def _reconstruct_request(job: Job, config: CellConfig) -> ReconstructRequest:
+def _backgrounds_of(captures: list[Picture], kept: Backgrounds, config: CellConfig) -> list[bytes]:
+    """Each picture's background (JPEG), where the cell keeps one taken from its pose by its camera; else b""."""
+    camera = config.camera
+    size = (int(camera.resolution[0]), int(camera.resolution[1]))
+    found = []
+    for picture in captures:
+        background = kept.find(picture.T_base_cam, K=camera.K, dist=camera.dist, size=size)
+        try:
+            found.append(background.path.read_bytes() if background is not None else b"")
+        except OSError:  # deleted by retention since it was found: the view goes without
+            found.append(b"")
+    return found
+
+
+def _reconstruct_request(job: Job, config: CellConfig, background_lengths: list[int]) -> ReconstructRequest:
     camera = CameraModel(K=config.camera.K, dist=config.camera.dist)
     settings = config.reconstruct
     options = {name: value for name in ("n_points", "inside_weight", "cauchy_scale")
                if (value := getattr(settings, name)) is not None}
-    views = [ReconstructView(camera=camera, T_world_cam=c.T_base_cam.tolist(), length=len(c.jpeg))
-             for c in job.captures]
+    views = [ReconstructView(camera=camera, T_world_cam=c.T_base_cam.tolist(), length=len(c.jpeg),
+                             background_length=length)
+             for c, length in zip(job.captures, background_lengths)]
     # The scan's own segmentation, else the cell's [scan] one; None is auto (the core's default).
     segmentation = job.request.segmentation or config.scan.segmentation
     return ReconstructRequest(job_id=job.job_id, views=views, support_plane=config.support_plane, options=options,
                               gripper=config.gripper.dimensions(), segmentation=segmentation)
+
+
+class KeepBackgrounds(Step):
+    """Keep the job's pictures as the backgrounds of their poses (a ``kind: backgrounds`` job's last
+    step): later scans from those poses send them with their views (``cell.backgrounds``)."""
+
+    kind = "keep-backgrounds"
+    activity = JobState.CAPTURING
+
+    def describe(self) -> str:
+        return "keeping the backgrounds"
+
+    async def run(self, job: Job, cell: Cell) -> None:
+        camera = cell.config.camera
+        now = time.time()
+        try:
+            for view, picture in enumerate(job.captures):
+                await asyncio.to_thread(cell.backgrounds.keep, job.job_id, view, picture.jpeg, picture.T_base_cam,
+                                        K=camera.K, dist=camera.dist, now=now)
+        except OSError as exc:
+            raise StepFailed(f"the backgrounds cannot be kept in {cell.backgrounds.root}: {exc.strerror or exc}",
+                             kind="StoreError") from None
+        except CoreError as exc:
+            raise StepFailed(f"the camera's picture is none: {exc}", kind=type(exc).__name__) from None
+        return None
 
 
 def parse_reply(model, payload, who: str):

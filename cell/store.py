@@ -356,7 +356,8 @@ def queued_status(job_id: str, request: ScanRequest, *, n_views: int, now: float
 
 def queued_event(status: JobStatus) -> JobEvent:
     """A job's first event, which :meth:`JobStore.add` stores with the job."""
-    return JobEvent(job_id=status.job_id, state=JobState.QUEUED, message="queued", time=status.created)
+    return JobEvent(job_id=status.job_id, state=JobState.QUEUED, kind=status.request.kind, message="queued",
+                    time=status.created)
 
 
 def _status(row: tuple) -> JobStatus:

@@ -10,6 +10,8 @@ all of them :class:`CellError`. A script::
     import robocell
 
     with robocell.Client("tcp/127.0.0.1:7447", cell="cell1") as cell:
+        cell.backgrounds([0.6, 0.0, 0.05])     # the workspace still empty: a background per view
+        input("put the object on the table, then press Enter")
         result = cell.scan([0.6, 0.0, 0.05])
         print(result.superquadric.size, len(result.grasps))
         picked = cell.pick([0.6, 0.0, 0.05], place=[0.6, 0.15])
@@ -29,7 +31,7 @@ import asyncio
 import threading
 from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 from robocell.wire.client import AsyncCellClient, JobFailed
 from robocell.wire.config import CellConfig, load_config
@@ -46,12 +48,12 @@ DEFAULT_JOB_TIMEOUT_S = 120.0
 
 
 def _request(target: Sequence[float] | None, poses, plan: dict | ViewPlan | None, pick: PickRequest | None,
-             label: str, request_id: str | None) -> ScanRequest:
+             label: str, request_id: str | None, kind: Literal["scan", "backgrounds"] = "scan") -> ScanRequest:
     if (target is None) == (poses is None):
         raise ValueError("give either a target point [x, y, z] or flange poses, not both")
     plan = ViewPlan.model_validate(plan) if isinstance(plan, dict) else plan
     return ScanRequest(target=None if target is None else list(target), flange_poses=poses, plan=plan, pick=pick,
-                       label=label, request_id=request_id)
+                       label=label, request_id=request_id, kind=kind)
 
 
 def _config(config: CellConfig | str | Path | None) -> CellConfig:
@@ -141,6 +143,26 @@ class AsyncClient:
         pick = PickRequest(approach_m=approach_m, lift_m=lift_m, place=None if place is None else list(place))
         request = _request(target, poses, plan, pick, label, request_id)
         return await self._client.scan(request, timeout=timeout, on_event=on_event)
+
+    async def backgrounds(self, target: Sequence[float] | None = None, *, poses: list | None = None,
+                          plan: dict | ViewPlan | None = None, label: str = "", request_id: str | None = None,
+                          timeout: float = DEFAULT_JOB_TIMEOUT_S,
+                          on_event: Callable[[JobEvent], None] | None = None) -> JobStatus:
+        """Photograph the empty workspace from the poses a scan of ``target`` (or the flange
+        ``poses``) takes, before the object is put there; the cell keeps one background per pose,
+        and later scans from those poses use them (README, "Backgrounds"). The job's final status.
+
+        Raises
+        ------
+        JobFailed, TimeoutError
+            As :meth:`scan`.
+        """
+        request = _request(target, poses, plan, None, label, request_id, kind="backgrounds")
+        status = await self.submit(request)
+        final = await self._client.wait(status.job_id, timeout=timeout, on_event=on_event)
+        if final.state is not JobState.SUCCEEDED:
+            raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}", status=final)
+        return final
 
     async def submit(self, request: ScanRequest) -> JobStatus:
         """Queue a job without waiting for it; follow it with :meth:`wait`, :meth:`events`, :meth:`status`."""
@@ -248,6 +270,10 @@ class Client:
     def pick(self, target: Sequence[float] | None = None, **options: Any) -> ScanResult:
         """As :meth:`AsyncClient.pick`."""
         return self._call(self._async.pick(target, **options))
+
+    def backgrounds(self, target: Sequence[float] | None = None, **options: Any) -> JobStatus:
+        """As :meth:`AsyncClient.backgrounds`."""
+        return self._call(self._async.backgrounds(target, **options))
 
     def submit(self, request: ScanRequest) -> JobStatus:
         return self._call(self._async.submit(request))

@@ -48,7 +48,8 @@ JOB_TIMEOUT_S = 60.0
 
 def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None = None,
                 timeouts: dict | None = None, **fields) -> CellConfig:
-    """A test cell on free local ports: an instant robot, short time-outs and few retries.
+    """A test cell on free local ports: an instant robot, short time-outs (but the camera's, which
+    renders) and few retries.
 
     ``robot``, ``camera`` and ``timeouts`` update those sections; other keyword
     arguments are top-level fields (``cell_id``, ``sim``, ``reconstruct``...).
@@ -57,8 +58,11 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
         run_dir, **{"cell_id": "test", **fields},
         robot={**({"speed": 0.0, "rotation_speed_deg": 0.0} if (robot or {}).get("backend", "sim") == "sim" else {}),
                **(robot or {})},
-        camera={"timeout_s": 3.0, "retries": 1, **(camera or {})},
-        timeouts={"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "outage_s": 1.0, **(timeouts or {})})
+        # The simulated camera renders each picture on this machine's CPU (a printed object, its
+        # shadow, a textured table: seconds when the machine is busy), where an Axis camera answers
+        # in a fraction of one.
+        camera={"timeout_s": 20.0, "retries": 1, **(camera or {})},
+        timeouts={"move_s": 10.0, "capture_s": 45.0, "reconstruct_s": 30.0, "outage_s": 1.0, **(timeouts or {})})
 
 
 def look_away_poses(config: CellConfig) -> list[list[list[float]]]:

@@ -25,9 +25,11 @@ import time
 import tomllib
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
+from robocell.cell.store import JobStore
 from robocell.cli.demo import free_port
 from tests.cell_fixtures import LoopThread, accepts, wait_until
 from tests.pki import router_tls_settings, tls_settings, write_pki
@@ -43,7 +45,9 @@ from robocell.workers.camera.worker import make_camera, serve_camera
 from robocell.workers.reconstruct.worker import ReconstructWorker, reconstruct_request
 from robocell.workers.robot.worker import serve_robot
 from robocell.workers.sim.robot import SceneGripper, SimRobot
-from robocell.workers.sim.scene import target_from_config
+from robocell.workers.sim.camera import SceneCamera
+from robocell.workers.sim.render import render
+from robocell.workers.sim.scene import scene_from_config, target_from_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 #: The users of the router's dictionary: those deploy/cell-host.toml gives roles, and one it does not.
@@ -163,7 +167,8 @@ class Cell:
         data["zenoh"]["roles"].update(robot=["robot1"], camera=["camera1"])
         data["robot"] = {"backend": "sim", "speed": 0.0, "rotation_speed_deg": 0.0}
         data["camera"] = {"backend": "sim"}
-        data["timeouts"] = {"move_s": 10.0, "capture_s": 10.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0}
+        # The simulated camera renders a printed scene: seconds on a busy machine.
+        data["timeouts"] = {"move_s": 10.0, "capture_s": 45.0, "reconstruct_s": 30.0, "worker_wait_s": 1.0}
         path = directory / "cell.json"
         path.write_text(json.dumps(data))
         return path
@@ -550,6 +555,41 @@ def test_a_client_scans_and_picks_with_every_part_on_its_own_roles_rules(cell):
     assert JobState.PICKING in {event.state for event in heard}
     assert dashboard.status(result.job_id).state is JobState.SUCCEEDED
     assert dashboard.result(result.job_id).pick == result.pick
+
+
+def test_a_client_takes_backgrounds_and_the_camera_hears_the_workspace_is_empty_on_its_roles_rules(cell):
+    """The camera role hears job events: the simulated camera, on camera1's rules alone, leaves
+    the object out while alice's backgrounds job runs, and a scan from the same poses uses them."""
+    alice = cell.client("alice")
+    taken = alice.wait(alice.submit(cell.request(kind="backgrounds")).job_id, timeout=JOB_TIMEOUT_S)
+    assert taken.state is JobState.SUCCEEDED, taken.error
+    kept = sorted((cell.config.run_dir / "backgrounds").glob(f"{taken.job_id}-*.json"))
+    assert len(kept) == taken.n_views == 3
+    camera = cell.config.camera
+    scene = SceneCamera(scene_from_config(cell.config.sim), K=camera.K, image_size=camera.resolution, dist=camera.dist,
+                        seed=cell.config.sim.seed)
+    for description in kept:
+        T = np.asarray(json.loads(description.read_text())["T_base_cam"])
+        mask = render(scene_from_config(cell.config.sim), T, camera.K, camera.dist, tuple(camera.resolution))[1] > 0
+        background = _decoded(description.with_suffix(".jpg").read_bytes())
+        empty, full = _decoded(scene.jpeg(T, empty=True)), _decoded(scene.jpeg(T, empty=False))
+        # Where the object stands, the background shows the table: as the simulator's empty
+        # workspace, within the sensor's noise, and not as its picture with the object.
+        assert np.abs(background - empty).mean(axis=2)[mask].mean() < 6, description.name
+        assert np.abs(background - full).mean(axis=2)[mask].mean() > 25, description.name
+    result = alice.scan(cell.request(label="with backgrounds"), timeout=JOB_TIMEOUT_S)
+    assert any("with the backgrounds of 3 of its 3 views" in event.message
+               for event in _events(cell, result.job_id))
+
+
+def _decoded(jpeg: bytes) -> np.ndarray:
+    return cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR).astype(np.float32)
+
+
+def _events(cell, job_id: str) -> list[JobEvent]:
+    cell.client("alice").status(job_id)     # the daemon writes what it held back
+    with JobStore(cell.config.run_dir / "jobs.sqlite") as store:
+        return store.events(job_id)
 
 
 def test_a_client_cannot_pose_as_the_robot(cell):

@@ -298,6 +298,19 @@ def test_replay_web_prints_the_address_that_opens_the_recording_and_ctrl_c_or_ki
     assert process.returncode == 0 and "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
 
 
+def test_background_takes_the_views_of_a_scan_and_checks_its_poses_first(tmp_path, capsys):
+    """``robocell background`` is a scan's views without the scan: the same --target or --poses,
+    the same one-line error for a bad poses file, no --pick."""
+    (tmp_path / "one-pose.json").write_text(json.dumps([np.eye(4).tolist()]))
+    assert main(["background", "--poses", str(tmp_path / "one-pose.json")]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == (f"robocell background: {tmp_path / 'one-pose.json'}: flange_poses: List should have "
+                                 f"at least 2 items after validation, not 1\n")
+    with pytest.raises(SystemExit):
+        main(["background", "--target", "0.6", "0", "0.05", "--pick"])
+    assert "unrecognized arguments: --pick" in capsys.readouterr().err
+
+
 def test_scan_place_goes_with_pick(capsys):
     """Checked before anything is sent."""
     assert main(["scan", "--target", "0.6", "0", "0.05", "--place", "0.6", "0.2"]) == 2
@@ -353,11 +366,11 @@ def test_camera_probe_logs_no_library_chatter(tmp_path):
     pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])
     with SimCameraServer(scene_from_config(SimConfig()), K=default_K(size), image_size=size,
                          pose_provider=lambda: pose) as camera:
-        # A generous timeout per request: the simulated camera renders each snapshot, slowly on a loaded machine.
-        probe = ["camera", "probe", camera.url, "--timeout", "30"]
-        quiet = subprocess.run([sys.executable, "-m", "robocell", *probe], capture_output=True, text=True, timeout=300)
+        # A printed scene renders for seconds on a busy machine: the probe waits for it.
+        probe = ["camera", "probe", camera.url, "--timeout", "30", "--resolution", "320x240"]
+        quiet = subprocess.run([sys.executable, "-m", "robocell", *probe], capture_output=True, text=True, timeout=120)
         verbose = subprocess.run([sys.executable, "-m", "robocell", "-v", *probe], capture_output=True, text=True,
-                                 timeout=300)
+                                 timeout=120)
     assert quiet.returncode == 0, quiet.stderr
     assert "snapshot     ok" in quiet.stdout
     assert quiet.stderr == ""

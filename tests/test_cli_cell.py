@@ -81,7 +81,7 @@ def test_jobs_into_a_reader_that_stops_early_says_nothing(router, tmp_path):
 
 
 @pytest.mark.parametrize("argv", [["jobs"], ["status"], ["job", "j1"], ["cancel", "j1"],
-                                  ["scan", "--target", "0.6", "0", "0.05"]])
+                                  ["scan", "--target", "0.6", "0", "0.05"], ["background", "--target", "0.6", "0", "0.05"]])
 def test_a_cell_without_a_daemon_is_named(router, tmp_path, argv, capsys):
     assert main(["--config", str(_config(tmp_path, router, "empty")), *argv]) == 1
     assert capsys.readouterr().err == f"robocell {argv[0]}: no cell daemon is running for cell empty at {router}\n"

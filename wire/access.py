@@ -17,7 +17,8 @@ daemon         the cell daemon: serve the job keys, publish events, ask the robo
                its workers
 robot          the robot worker: serve move, gripper and state, publish the state
 camera         the camera worker: serve capture, read the robot's state (the simulated
-               camera renders from it)
+               camera renders from it) and hear the jobs' events (the simulated camera
+               empties its workspace while a job takes backgrounds)
 reconstruct    a reconstruction worker: serve the pool's keys, announce itself and beat,
                each only under its own worker id, which is its Zenoh user name
 =============  =====================================================================
@@ -121,8 +122,10 @@ def permissions(role: str, cell: str, worker: str = "*") -> list[tuple[str, str]
         return [("serve", keys.robot_move(cell)), ("serve", keys.robot_grip(cell)), ("serve", keys.robot_state(cell)),
                 ("publish", keys.robot_state(cell)), ("announce", keys.alive(cell, "robot"))]
     if role == "camera":
+        # The simulated camera follows the jobs' events too: it empties its workspace while a job
+        # takes backgrounds, and logs its truth into each job's recording.
         return [("serve", keys.camera_capture(cell)), ("query", keys.robot_state(cell)),
-                ("announce", keys.alive(cell, "camera"))]
+                ("subscribe", keys.events(cell, "*")), ("announce", keys.alive(cell, "camera"))]
     if role == "reconstruct":
         if worker != "*" and not keys.WORKER_ID.fullmatch(worker):
             raise ValueError(f"reconstruct user {worker!r} is no worker id: its user name must be letters, digits, "

@@ -202,7 +202,8 @@ class Timeouts(Section):
 
 class RetentionConfig(Section):
     """How much of the run directory the cell keeps (``cell/retention.py``), applied while it runs:
-    recordings, pictures left by jobs that ended, and ended jobs in the store, by age and by size.
+    recordings, pictures left by jobs that ended, backgrounds, and ended jobs in the store, by age
+    and by size.
     A job that has not ended keeps everything."""
 
     #: Recordings (``<run dir>/<job id>.rrd``) older than this are deleted.
@@ -215,6 +216,11 @@ class RetentionConfig(Section):
     jobs_max_age_days: Annotated[float, Field(gt=0)] = 90.0
     #: At most this many ended jobs stay in the store; the oldest leave first.
     jobs_max_count: Annotated[int, Field(ge=1)] = 100_000
+    #: Backgrounds (``<run dir>/backgrounds/``, ``robocell background``) older than this are deleted:
+    #: the light of a room drifts, and an old background no longer shows the workspace as it is.
+    backgrounds_max_age_days: Annotated[float, Field(gt=0)] = 7.0
+    #: The backgrounds together take at most this much; the oldest go first.
+    backgrounds_max_mb: Annotated[float, Field(gt=0)] = 256.0
     #: How often the daemon applies it, seconds.
     interval_s: Annotated[float, Field(gt=0)] = 600.0
 

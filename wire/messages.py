@@ -26,7 +26,7 @@ __all__ = [
     "Blob",
     "ReconstructRequest", "Reconstruction", "ReconstructReply", "WorkerLoad", "ReconstructorStatus",
     "FailedJob", "CellStatus", "parse", "field_errors", "POINTS_ENCODING", "parse_request", "RequestTooLarge",
-    "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES", "DiskUsage",
+    "REQUEST_LIMITS", "CancelRequest", "PickDecision", "JOB_TOKEN_BYTES", "DiskUsage", "BACKGROUND_POSE_TOLERANCE",
 ]
 
 #: The version this robocell writes. Version 2 added a job's ``lifecycle`` and ``progress`` (see
@@ -34,6 +34,11 @@ __all__ = [
 SCHEMA_VERSION: Literal[2] = 2
 #: The most views a scan may ask for, as poses or as a plan.
 MAX_VIEWS = 16
+#: How close a view's camera pose must be to a kept background's (metres, degrees) for the
+#: background to be used: about a pixel at the object (600 px focal length, 0.5 m away, a pixel
+#: is 0.8 mm across and 0.1 degree turns the image by 1 px). A robot returns to a taught pose
+#: far closer (a KUKA arm within 0.05 mm); the planned poses of a target are the same numbers.
+BACKGROUND_POSE_TOLERANCE = (0.001, 0.1)
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
     problem = rigid_error(matrix)
     if problem is not None:
@@ -202,6 +207,12 @@ class ScanRequest(ClientRequest):
 
     ``flange_poses`` are flange-to-base transforms in the robot base frame. ``request_id``,
     chosen by the client, makes submitting idempotent.
+
+    ``kind: backgrounds`` takes no model: the robot goes to the same poses (the target's
+    planned views, or the flange poses), and the camera photographs the empty workspace
+    at each (the object not yet there). The cell keeps one background per pose; a later
+    scan whose view stands at a pose within :data:`BACKGROUND_POSE_TOLERANCE` of one sends
+    it as that view's ``background`` to the reconstruction (README, "Backgrounds").
     """
 
     request_id: Annotated[StrictStr, Field(min_length=1, max_length=128)] | None = None
@@ -217,6 +228,9 @@ class ScanRequest(ClientRequest):
     #: sure, until it is sure or it has ``max_views`` views (needs ``target``: the views look at it).
     views: Literal["planned", "adaptive"] = "planned"
     max_views: Annotated[StrictInt, Field(ge=2, le=MAX_VIEWS)] = 6
+    #: ``"scan"`` models the object; ``"backgrounds"`` photographs the empty workspace at the scan's
+    #: poses, for later scans at those poses.
+    kind: Literal["scan", "backgrounds"] = "scan"
 
     @model_validator(mode="after")
     def _one_kind_of_views(self) -> "ScanRequest":
@@ -230,6 +244,9 @@ class ScanRequest(ClientRequest):
             raise ValueError("plan goes with target")
         if self.views == "adaptive" and self.target is None:
             raise ValueError("views: adaptive goes with target (the next views look at it)")
+        if self.kind == "backgrounds" and (self.pick is not None or self.views == "adaptive"):
+            raise ValueError("kind: backgrounds photographs the empty workspace: it takes no pick and no "
+                             "adaptive views")
         return self
 
 
@@ -387,6 +404,8 @@ class JobEvent(Message):
     job_id: str
     #: As in :class:`JobStatus`: ``lifecycle``, or while it runs ``progress.activity``.
     state: JobState
+    #: The job's ``ScanRequest.kind``: a listener tells a scan from the taking of backgrounds.
+    kind: Literal["scan", "backgrounds"] = "scan"
     lifecycle: Lifecycle = Lifecycle.QUEUED
     progress: Progress | None = None
     view: int | None = None
@@ -500,10 +519,14 @@ class ReconstructView(BaseModel):
     camera: CameraModel
     T_world_cam: Pose
     length: Annotated[int, Field(ge=1)]   # bytes of this view's JPEG in the payload
+    #: Bytes of this view's background (the empty workspace from the same pose, a JPEG), right
+    #: after its picture in the payload; 0: the view has none.
+    background_length: Annotated[int, Field(ge=0)] = 0
 
 
 class ReconstructRequest(Message):
-    """The attachment of a reconstruction query; the payload is the views' JPEGs, concatenated."""
+    """The attachment of a reconstruction query; the payload is the views' JPEGs, concatenated, each
+    followed by its background's where it has one (``ReconstructView.background_length``)."""
 
     job_id: str
     views: Annotated[list[ReconstructView], Field(min_length=2)]
@@ -638,6 +661,8 @@ class DiskUsage(BaseModel):
     recordings_to_free: int = 0
     pictures_to_free: int = 0
     jobs_to_prune: int = 0
+    backgrounds: int = 0        # the backgrounds kept for later scans (``<run dir>/backgrounds``)
+    backgrounds_to_free: int = 0
 
 
 class CellStatus(Message):

@@ -76,7 +76,9 @@ async def _demo(run_dir: Path, cells: list) -> int:
     from .jobs import print_event
     from .up import _STOP_WAIT_S, CellProcesses, on_interrupt
 
-    config = local_config(run_dir)
+    # The simulated camera renders each picture on this machine's CPU (a printed box, its shadow, an
+    # oak table): seconds on a busy machine, where an Axis camera answers in a fraction of one.
+    config = local_config(run_dir, camera={"timeout_s": 15.0, "retries": 1}, timeouts={"capture_s": 40.0})
     truth = Superquadric.from_dict(truth_from_config(config.sim))
     target = truth.T_world_object[:3, 3]
     print(f"starting a simulated cell in {run_dir} (a {config.sim.shape} on the table at "

@@ -1,4 +1,4 @@
-"""``robocell scan``, ``jobs``, ``job``, ``status`` and ``cancel``: the cell from a shell."""
+"""``robocell scan``, ``background``, ``jobs``, ``job``, ``status`` and ``cancel``: the cell from a shell."""
 
 from __future__ import annotations
 
@@ -43,6 +43,22 @@ def register(commands: Commands) -> None:
     scan.add_argument("--no-wait", action="store_true", help="print the job id and return")
     scan.add_argument("--json", action="store_true",
                       help="print the result as one JSON document (the progress goes to stderr)")
+
+    background = commands.add(
+        "background", _command(_scan, _background_request),
+        help="before the object is put there, photograph the empty workspace from a scan's poses: later "
+             "scans from those poses use the pictures as their views' backgrounds")
+    where = background.add_mutually_exclusive_group(required=True)
+    where.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                       help="the point the later scan looks at, robot base frame, metres (its views from the "
+                            "configured plan)")
+    where.add_argument("--poses", metavar="FILE", help=_POSES_SHAPE)
+    background.add_argument("--label", default="", help="free text stored with the job")
+    background.add_argument("--request-id", help="client-chosen id: submitting it again returns the same job")
+    background.add_argument("--timeout", type=float, default=300.0, help="seconds to wait (default %(default)s)")
+    background.add_argument("--no-wait", action="store_true", help="print the job id and return")
+    background.add_argument("--json", action="store_true",
+                            help="print the job's final JobStatus as JSON (the progress goes to stderr)")
 
     jobs = commands.add("jobs", _command(_jobs, _job_states), help="list the cell's jobs, newest first")
     jobs.add_argument("--state", action="append", metavar="STATE",
@@ -120,11 +136,12 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
 
     from robocell.wire.messages import PickRequest, ScanRequest, field_errors
 
-    if args.place is not None and not args.pick:
+    kind = getattr(args, "kind", "scan")
+    if kind == "scan" and args.place is not None and not args.pick:
         raise ValueError("--place goes with --pick")
-    pick = PickRequest(place=args.place) if args.pick else None
+    pick = PickRequest(place=args.place) if kind == "scan" and args.pick else None
     if args.poses is None:
-        return ScanRequest(target=args.target, label=args.label, request_id=args.request_id, pick=pick)
+        return ScanRequest(target=args.target, label=args.label, request_id=args.request_id, pick=pick, kind=kind)
     try:
         with open(args.poses, encoding="utf-8") as file:
             poses = json.load(file)
@@ -138,11 +155,17 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
         got = "not an array of numbers" if shape is None else f"an array of shape {shape}"
         raise ValueError(f"{args.poses}: expected {_POSES_SHAPE}, got {got}")
     try:
-        return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id, pick=pick)
+        return ScanRequest(flange_poses=poses, label=args.label, request_id=args.request_id, pick=pick, kind=kind)
     except ValidationError as exc:
         first = field_errors(exc, at_most=1).split("; ")[0]
         others = len(exc.errors()) - 1
         raise ValueError(f"{args.poses}: {first}{f' (and {others} more)' if others else ''}") from None
+
+
+def _background_request(args: argparse.Namespace) -> ScanRequest:
+    """A request of ``kind: backgrounds``: the views of a scan, of the empty workspace."""
+    args.kind = "backgrounds"
+    return _scan_request(args)
 
 
 async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
@@ -202,13 +225,13 @@ async def _watch(client: AsyncCellClient, args: argparse.Namespace, job_id: str,
                 return _INTERRUPTED
             final = waiting.result()
             if cancelling.done() and not cancelling.cancelled() and isinstance(cancelling.exception(), CellError):
-                print(f"robocell scan: the cancel was refused: {cancelling.exception()}", file=sys.stderr)
+                print(f"robocell {args.command}: the cancel was refused: {cancelling.exception()}", file=sys.stderr)
             print(f"job {final.job_id} {final.state.value}" + (f": {final.error}" if final.error else ""),
                   file=sys.stderr, flush=True)
             return _INTERRUPTED
         final = waiting.result()
     except TimeoutError:
-        print(f"robocell scan: job {job_id} is not finished after {args.timeout:g} s: it goes on; "
+        print(f"robocell {args.command}: job {job_id} is not finished after {args.timeout:g} s: it goes on; "
               f"watch it with robocell job {job_id}, cancel it with robocell cancel {job_id}", file=sys.stderr)
         return 1
     finally:
@@ -221,6 +244,12 @@ async def _watch(client: AsyncCellClient, args: argparse.Namespace, job_id: str,
         if args.json:
             print(final.model_dump_json())
         return 1
+    if final.request.kind == "backgrounds":  # no model: the backgrounds are kept by the cell
+        if args.json:
+            print(final.model_dump_json())
+        else:
+            print(f"job {final.job_id}: {final.n_views} backgrounds kept; scans from these poses use them")
+        return 0
     result = await client.result(final.job_id)
     if args.json:
         print(json.dumps(_summary(result)))
@@ -377,10 +406,12 @@ def format_status(status: CellStatus) -> str:
     if status.disk is not None:
         disk, mb = status.disk, 1024 * 1024
         free = "" if disk.free_on_disk is None else f", {disk.free_on_disk / mb:.0f} MB free on its disk"
-        lines.append(f"disk: {(disk.recordings + disk.pictures + disk.store + disk.other) / mb:.1f} MB "
+        total = disk.recordings + disk.pictures + disk.backgrounds + disk.store + disk.other
+        to_free = disk.recordings_to_free + disk.pictures_to_free + disk.backgrounds_to_free
+        lines.append(f"disk: {total / mb:.1f} MB "
                      f"(recordings {disk.recordings / mb:.1f}, pictures {disk.pictures / mb:.1f}, "
-                     f"store {disk.store / mb:.1f}){free}; retention will free "
-                     f"{(disk.recordings_to_free + disk.pictures_to_free) / mb:.1f} MB and {disk.jobs_to_prune} jobs")
+                     f"backgrounds {disk.backgrounds / mb:.1f}, store {disk.store / mb:.1f}){free}; retention "
+                     f"will free {to_free / mb:.1f} MB and {disk.jobs_to_prune} jobs")
     if status.recent_failures:
         lines.append("recent failures:")
         for failure in status.recent_failures:

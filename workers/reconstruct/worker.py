@@ -1,7 +1,8 @@
 """The reconstruction worker: a process pool around core_cy, serving the shared pool keys.
 
 A request's attachment is a ReconstructRequest; its payload the views' JPEGs,
-concatenated in order (each view says its length). The reply's attachment is a
+concatenated in order, each followed by its background where it has one (each
+view says their lengths). The reply's attachment is a
 ReconstructReply; its payload the silhouettes (PNG) and the carved points
 (float32), as the reply describes them. Errors of the core (an empty
 silhouette, say) are answered as a ReconstructReply with ``error``, so the job
@@ -39,7 +40,7 @@ from robocell.wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer
                            ReconstructRequest, Superquadric, WorkerLoad, parse)
 from robocell.wire.transport import Request, RequestError, Response, Transport
 from robocell.core_cy.camera import Camera
-from robocell.core_cy.errors import CoreError
+from robocell.core_cy.errors import CoreError, ImageError
 from robocell.core_cy.grasp import plan_grasps
 from robocell.core_cy.gripper import Gripper
 from robocell.core_cy.images import check_calibrated_size, checked_size
@@ -70,9 +71,16 @@ def reconstruct_request(request_json: str, payload: bytes, worker: str = "") -> 
         for index, view in enumerate(request.views):
             camera = Camera(K=view.camera.K, T_world_cam=view.T_world_cam, dist=view.camera.dist, view=index)
             image = payload[offset:offset + view.length]
-            check_calibrated_size(camera, *checked_size(image, what="the picture", view=index), what="the picture")
-            views.append(View(camera, image=image))
             offset += view.length
+            size = checked_size(image, what="the picture", view=index)
+            check_calibrated_size(camera, *size, what="the picture")
+            background = None
+            if view.background_length:
+                background = payload[offset:offset + view.background_length]
+                offset += view.background_length
+                if checked_size(background, what="the background", view=index) != size:
+                    raise ImageError("the background is not the size of its picture", view=index)
+            views.append(View(camera, image=image, background=background))
         result = reconstruct(views, segmentation=core_segmentation(request.segmentation),
                              support_plane=request.support_plane, options=Options(**request.options))
     except (CoreError, ValueError) as exc:
@@ -238,7 +246,7 @@ class ReconstructWorker:
             parsed = parse(ReconstructRequest, request.attachment)
         except ValueError as exc:
             raise RequestError(str(exc)) from None
-        expected = sum(view.length for view in parsed.views)
+        expected = sum(view.length + view.background_length for view in parsed.views)
         received = len(request.payload or b"")
         if received != expected:
             raise RequestError(f"payload has {received} bytes, the views say {expected}")

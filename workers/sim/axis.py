@@ -180,6 +180,11 @@ class SimCameraServer:
         self._server: _Server | None = None
         self._thread: threading.Thread | None = None
 
+    @property
+    def scene_camera(self) -> SceneCamera:
+        """What renders the pictures (its ``object_present`` empties the workspace)."""
+        return self._camera
+
     # -- lifecycle -------------------------------------------------------------------------
 
     def start(self) -> None:

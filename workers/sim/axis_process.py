@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -25,6 +26,7 @@ from .scene import scene_from_config
 
 from .axis import SimCameraServer
 from .truth_log import TruthLog
+from .workspace import Workspace
 
 __all__ = ["main", "robot_camera_pose"]
 
@@ -65,11 +67,20 @@ def main(config: CellConfig) -> int:
     try:
         scene = scene_from_config(config.sim)
         truth = TruthLog(config.run_dir, scene)  # into each job's recording, as the simulator knows it
-        session.declare_subscriber(keys.events(config.cell_id), lambda sample: truth.heard(sample.payload.to_bytes()))
         server = SimCameraServer(
             scene, K=np.asarray(camera.K), image_size=tuple(camera.resolution),
             dist=camera.dist, pose_provider=lambda: robot_camera_pose(session, config), host=host, port=port,
             username=username, password=password, auth=camera.auth if username else None, seed=config.sim.seed)
+        # The workspace empties while backgrounds are taken; writing a truth takes a while, and holds
+        # back no event (Zenoh calls back one sample at a time).
+        workspace, writer = Workspace(server.scene_camera), ThreadPoolExecutor(1, thread_name_prefix="truth-log")
+
+        def heard(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes()
+            workspace.heard(payload)
+            writer.submit(truth.heard, payload)
+
+        session.declare_subscriber(keys.events(config.cell_id), heard)
         try:
             server.start()
         except OSError as exc:
@@ -80,6 +91,7 @@ def main(config: CellConfig) -> int:
             stop.wait()
         finally:
             server.stop()
+            writer.shutdown(wait=False, cancel_futures=True)
     finally:
         session.close()
     return 0

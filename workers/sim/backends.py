@@ -20,6 +20,7 @@ from .camera import SceneCamera, SimCamera
 from .robot import SceneGripper, SimRobot
 from .scene import scene_from_config
 from .truth_log import TruthLog, follow
+from .workspace import Workspace
 
 __all__ = ["make_robot", "make_camera"]
 
@@ -32,8 +33,9 @@ def make_robot(config: CellConfig) -> SimRobot:
 
 
 def make_camera(config: CellConfig, transport: BaseTransport) -> Camera:
-    """The simulated camera: the ``[sim]`` scene rendered from where the robot stands; it logs the
-    scene's truth into each job's recording (``workers.sim.truth_log``)."""
+    """The simulated camera: the ``[sim]`` scene rendered from where the robot stands, the workspace
+    empty while backgrounds are taken (``workers.sim.workspace``); it logs the scene's truth into
+    each job's recording (``workers.sim.truth_log``)."""
     camera = config.camera
 
     async def pose() -> np.ndarray | None:
@@ -46,8 +48,8 @@ def make_camera(config: CellConfig, transport: BaseTransport) -> Camera:
     scene = scene_from_config(config.sim)
     rendered = SceneCamera(scene, K=camera.K, image_size=camera.resolution, dist=camera.dist, seed=config.sim.seed,
                            jpeg_quality=camera.jpeg_quality)
-    truth = TruthLog(config.run_dir, scene)
-    return _TruthfulCamera(SimCamera(rendered, pose), lambda: follow(truth, transport, config.cell_id))
+    truth, workspace = TruthLog(config.run_dir, scene), Workspace(rendered)
+    return _TruthfulCamera(SimCamera(rendered, pose), lambda: follow(truth, transport, config.cell_id, workspace))
 
 
 class _TruthfulCamera(Camera):

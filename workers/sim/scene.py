@@ -25,7 +25,7 @@ __all__ = ["PRINTED_CELL_SCENE", "scene_from_config", "surroundings", "truth_fro
 #: Whether the cell's simulated object is printed, on an oak table under a lamp (True), or red on the
 #: pale table (False). It needs a segmentation that finds an object of any colour (``auto``), the
 #: default once it exists: until then the cell's scans, which name no segmentation, look for red.
-PRINTED_CELL_SCENE = False
+PRINTED_CELL_SCENE = True
 #: The look each shape of ``[sim]`` wears when printed.
 _LOOK_OF_SHAPE = {"box": "sugar-box", "cylinder": "soup-can"}
 

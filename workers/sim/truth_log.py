@@ -3,7 +3,8 @@ itself (Rerun's shared recordings: the same application id and recording id as t
 recording, ``cell.recording``, written to ``<run dir>/<job id>.truth.rrd`` beside it; the viewer
 shows the union). Neither the daemon nor its recorder know the simulator.
 
-It hears of a job from the job's first event, and logs the scene as the simulator holds it.
+It hears of a job from the job's first event, and logs the scene as the simulator holds it (not for
+a job that takes backgrounds: the workspace is empty then, ``workers.sim.workspace``).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import asyncio
 import logging
 import threading
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,6 +23,7 @@ from robocell.wire.messages import JobEvent, parse
 from robocell.wire.transport import BaseTransport
 
 from .objects import SimObject
+from .workspace import Workspace
 
 __all__ = ["TruthLog", "follow", "truth_path", "write_truth"]
 
@@ -67,9 +70,12 @@ class TruthLog:
     def heard(self, payload: bytes) -> None:
         """An event (JobEvent JSON) of the cell's: the first of a job logs its truth."""
         try:
-            job_id = parse(JobEvent, payload).job_id
+            event = parse(JobEvent, payload)
         except ValueError:
             return
+        if event.kind == "backgrounds":  # the workspace is empty while they are taken: no truth
+            return
+        job_id = event.job_id
         with self._lock:
             if job_id in self._logged:
                 return
@@ -83,11 +89,17 @@ class TruthLog:
             log.warning("job %s: the truth cannot be logged to %s: %s", job_id, path, exc)
 
 
-async def follow(truth: TruthLog, transport: BaseTransport, cell: str) -> None:
-    """Feed ``truth`` the events of ``cell``, until cancelled."""
+async def follow(truth: TruthLog, transport: BaseTransport, cell: str, workspace: Workspace | None = None) -> None:
+    """Feed ``workspace`` (at once) and ``truth`` (in a thread of its own: writing a truth takes a
+    while, and must not hold back the next event) the events of ``cell``, until cancelled."""
     events = transport.subscribe(keys.events(cell))
+    writer = ThreadPoolExecutor(1, thread_name_prefix="truth-log")
+    loop = asyncio.get_running_loop()
     try:
         async for sample in events:
-            await asyncio.to_thread(truth.heard, sample.payload)
+            if workspace is not None:
+                workspace.heard(sample.payload)
+            loop.run_in_executor(writer, truth.heard, sample.payload)
     finally:
         events.close()
+        writer.shutdown(wait=False, cancel_futures=True)
