@@ -43,7 +43,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _SEARCH_ITERATIONS, _Fitter
+from .silhouette_fit import _EXPLAINED_PX, _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
@@ -178,11 +178,12 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1)).parts
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
-        # More parts must explain more: as much as one part must pay, in as many views.
+        # More parts must explain more: as much as one part must pay, in as many views. A union of no
+        # more parts that explains so much more is a better minimum found on the way: it is kept too.
         gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
-        if len(candidate) > len(current) and gained >= _views_to_pay(len(cameras)):
+        if gained >= _views_to_pay(len(cameras)):
             current, ious, trial = candidate, candidate_ious, None
         elif trial is None and len(candidate) > len(base) and gained >= 1:
             trial = candidate  # it explains more in one view at least: not just a part cut in two
