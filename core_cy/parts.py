@@ -112,15 +112,20 @@ def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
 
 
+def _price(views: int) -> float:
+    """What a part must explain, summed over the views' silhouette IoUs: ``PART_GAIN`` in two views,
+    or as much in one that alone sees it (a dumbbell's bar, hidden behind the weights in the others)."""
+    return _views_to_pay(views) * PART_GAIN
+
+
 def _could_pay(ious) -> bool:
     """Whether a new part could pay: it can raise a view's IoU by its miss at most."""
     return int(np.sum(1.0 - np.asarray(ious) >= PART_GAIN)) >= _views_to_pay(len(ious))
 
 
 def _pays(ious, without: np.ndarray) -> np.ndarray:
-    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
-    gains = np.asarray(ious)[None, :] - without
-    return np.sum(gains >= PART_GAIN, axis=1) + np.clip(gains.mean(axis=1), 0.0, 0.999)
+    """(P,) what each part explains: the union's IoU summed over the views, less without it."""
+    return np.sum(np.asarray(ious)[None, :] - without, axis=1)
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
@@ -180,10 +185,15 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
-        # More parts must explain more: as much as one part must pay, in as many views. A union of no
-        # more parts that explains so much more is a better minimum found on the way: it is kept too.
-        gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
-        if gained >= _views_to_pay(len(cameras)):
+        # More parts must explain more: as much as one part must pay. A union of no more parts that
+        # explains as much more, its outlines nearer the edges too, is a better minimum found on the way
+        # (not the one superquadric: that is the single fit's, from its own starts).
+        gains = np.asarray(candidate_ious) - np.asarray(ious)
+        gained = int(np.sum(gains >= PART_GAIN))
+        explains_more = float(np.sum(gains)) >= _price(len(cameras))
+        if explains_more and len(candidate) <= len(current):
+            explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
+        if explains_more:
             current, ious, trial = candidate, candidate_ious, None
         elif trial is None and len(candidate) > len(base) and gained >= 1:
             trial = candidate  # it explains more in one view at least: not just a part cut in two
@@ -245,7 +255,7 @@ def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[
             return parts, ious
         pays = _pays(ious, without)
         weakest = int(np.argmin(pays))
-        if pays[weakest] >= _views_to_pay(len(cameras)):
+        if pays[weakest] >= _price(len(cameras)):
             return parts, ious
         rest = parts[:weakest] + parts[weakest + 1:]
         parts = fitter.result(fitter.descent(rest).run(_ITERATIONS)).parts
@@ -306,7 +316,21 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) ->
         far = np.ones(len(points), bool)
         far[inside] = distance[row[inside], column[inside]] > _UNEXPLAINED_PX
         outside += far
-    unexplained = points[outside >= _views_to_pay(len(cameras))]
+    # Points unexplained in two views make the surest parts; those in one view only, the parts that
+    # the other views see hidden behind the union (a dumbbell's bar behind its weights).
+    proposals: list[tuple[Superquadric, ...]] = []
+    chosen = None
+    for views in sorted({_views_to_pay(len(cameras)), 1}, reverse=True):
+        pick = outside >= views
+        if chosen is not None and np.array_equal(pick, chosen):
+            continue
+        chosen = pick
+        proposals += _grouped(parts, points[pick], plane)
+    return proposals
+
+
+def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+    """The union and one more part on each of the largest neighbourhoods of ``unexplained``."""
     if len(unexplained) < _MIN_GROUP:
         return []
     # Neighbourhoods: points within a few of their typical spacing of each other.
