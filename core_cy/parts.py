@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
@@ -334,10 +335,12 @@ def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, 
     if len(unexplained) < _MIN_GROUP:
         return []
     # Neighbourhoods: points within a few of their typical spacing of each other.
-    gaps = np.linalg.norm(unexplained[:, None] - unexplained[None], axis=2)
-    np.fill_diagonal(gaps, np.inf)
-    reach = 2.5 * float(np.median(gaps.min(axis=1)))
-    count, label = connected_components(csr_matrix(gaps <= reach), directed=False)
+    tree = cKDTree(unexplained)
+    nearest, _ = tree.query(unexplained, k=2)
+    reach = 2.5 * float(np.median(nearest[:, 1]))
+    pairs = tree.query_pairs(reach, output_type="ndarray")
+    links = csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(unexplained),) * 2)
+    count, label = connected_components(links, directed=False)
     sizes = np.bincount(label, minlength=count)
     floor = _FLOOR * np.mean([part.size for part in parts], axis=0).min() * np.ones(3)
     proposals = []
