@@ -17,16 +17,18 @@ Otherwise parts are proposed, each round from the union so far:
 - **add** a part where the silhouettes are unexplained: the hull points that
   project outside the union's outline in two views or more, grouped into
   neighbourhoods (as Liu et al.'s hierarchical EMS takes the points a part
-  cannot explain), each group giving one.
+  cannot explain), each group giving one; and the same with the points unexplained
+  in one view only (a dumbbell's bar, hidden behind its weights in the others).
 
 Every proposal is refined against the silhouettes of the union (all parts
 together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
-a few steps; the best goes on to convergence; the parts that do not pay are
+a few steps; the best goes on to convergence (and, while it leaves the silhouettes
+unexplained, the proposals left behind go on in turn); the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
-if it has more parts than before and gains ``PART_GAIN`` of IoU over the model
-before it in two views (a union whose parts all pay but that gains so in one
-view only, a dumbbell's two weights without the bar, goes one round on before
-it is given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
+if it gains ``PART_GAIN`` of IoU over the model before it in two views, with more
+parts, or with no more and a lower edge cost (a better minimum); a union whose parts all
+pay but that gains so in one view only, a dumbbell's two weights without the bar, goes one round on before
+it is given up; at most ``MAX_PARTS`` parts. Last, each part standing a little
 tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
 and a part that floats (what holds it up hidden behind it in every view) is
 taken down to the table where that explains the silhouettes as well.
@@ -113,20 +115,10 @@ def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
 
 
-def _price(views: int) -> float:
-    """What a part must explain, summed over the views' silhouette IoUs: ``PART_GAIN`` in two views,
-    or as much in one that alone sees it (a dumbbell's bar, hidden behind the weights in the others)."""
-    return _views_to_pay(views) * PART_GAIN
-
-
-def _could_pay(ious) -> bool:
-    """Whether a new part could pay: it can raise a view's IoU by its miss at most."""
-    return int(np.sum(1.0 - np.asarray(ious) >= PART_GAIN)) >= _views_to_pay(len(ious))
-
-
 def _pays(ious, without: np.ndarray) -> np.ndarray:
-    """(P,) what each part explains: the union's IoU summed over the views, less without it."""
-    return np.sum(np.asarray(ious)[None, :] - without, axis=1)
+    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
+    gains = np.asarray(ious)[None, :] - without
+    return np.sum(gains >= PART_GAIN, axis=1) + np.clip(gains.mean(axis=1), 0.0, 0.999)
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
@@ -186,12 +178,12 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
-        # More parts must explain more: as much as one part must pay. A union of no more parts that
-        # explains as much more, its outlines nearer the edges too, is a better minimum found on the way
+        # More parts must explain more: as much as one part must pay, in as many views. A union of no
+        # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
         # (not the one superquadric: that is the single fit's, from its own starts).
         gains = np.asarray(candidate_ious) - np.asarray(ious)
         gained = int(np.sum(gains >= PART_GAIN))
-        explains_more = float(np.sum(gains)) >= _price(len(cameras))
+        explains_more = gained >= _views_to_pay(len(cameras))
         if explains_more and len(candidate) <= len(current):
             explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
         if explains_more:
@@ -256,7 +248,7 @@ def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[
             return parts, ious
         pays = _pays(ious, without)
         weakest = int(np.argmin(pays))
-        if pays[weakest] >= _price(len(cameras)):
+        if pays[weakest] >= _views_to_pay(len(cameras)):
             return parts, ious
         rest = parts[:weakest] + parts[weakest + 1:]
         parts = fitter.result(fitter.descent(rest).run(_ITERATIONS)).parts
