@@ -29,9 +29,10 @@ if it gains ``PART_GAIN`` of IoU over the model before it in two views, with mor
 parts, or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
-parts. Last, each part standing a little tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
-and a part that floats (what holds it up hidden behind it in every view) is
-taken down to the table where that explains the silhouettes as well.
+parts. Last, each part standing a little tilted is tried resting on a face
+(DESIGN.md §1.12), kept where that fits better, and a part that floats (what
+holds it up hidden behind it in every view) is taken down to the table where
+that explains the silhouettes as well.
 """
 
 from __future__ import annotations
