@@ -17,8 +17,7 @@ Otherwise parts are proposed, each round from the union so far:
 - **add** a part where the silhouettes are unexplained: the hull points that
   project outside the union's outline in two views or more, grouped into
   neighbourhoods (as Liu et al.'s hierarchical EMS takes the points a part
-  cannot explain), each group giving one; and the same with the points unexplained
-  in one view only (a dumbbell's bar, hidden behind its weights in the others).
+  cannot explain), each group giving one.
 
 Every proposal is refined against the silhouettes of the union (all parts
 together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
@@ -315,17 +314,7 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) ->
         far = np.ones(len(points), bool)
         far[inside] = distance[row[inside], column[inside]] > _UNEXPLAINED_PX
         outside += far
-    # Points unexplained in two views make the surest parts; those in one view only, the parts that
-    # the other views see hidden behind the union (a dumbbell's bar behind its weights).
-    proposals: list[tuple[Superquadric, ...]] = []
-    chosen = None
-    for views in sorted({_views_to_pay(len(cameras)), 1}, reverse=True):
-        pick = outside >= views
-        if chosen is not None and np.array_equal(pick, chosen):
-            continue
-        chosen = pick
-        proposals += _grouped(parts, points[pick], plane)
-    return proposals
+    return _grouped(parts, points[outside >= _views_to_pay(len(cameras))], plane)
 
 
 def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
