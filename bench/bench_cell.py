@@ -40,17 +40,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from wire import keys  # noqa: E402
-from wire.client import AsyncCellClient  # noqa: E402
-from wire.config import CellConfig  # noqa: E402
-from robocell.demo import local_config  # noqa: E402
-from wire.messages import (CaptureInfo, CaptureRequest, JobState, MoveReply, MoveRequest, ScanRequest,  # noqa: E402
+from robocell.wire import keys  # noqa: E402
+from robocell.wire.client import AsyncCellClient  # noqa: E402
+from robocell.wire.config import CellConfig  # noqa: E402
+from robocell.cli.demo import local_config  # noqa: E402
+from robocell.wire.messages import (CaptureInfo, CaptureRequest, JobState, MoveReply, MoveRequest, ScanRequest,  # noqa: E402
                            ScanResult, parse)
-from core_cy.plan import plan_flange_poses  # noqa: E402
-from workers.sim.scene import target_from_config  # noqa: E402
-from cell.store import JobStore  # noqa: E402
-from wire.transport import Transport  # noqa: E402
-from robocell.up import CellProcesses  # noqa: E402
+from robocell.core_cy.plan import plan_flange_poses  # noqa: E402
+from robocell.workers.sim.scene import target_from_config  # noqa: E402
+from robocell.cell.store import JobStore  # noqa: E402
+from robocell.wire.transport import Transport  # noqa: E402
+from robocell.cli.up import CellProcesses  # noqa: E402
 
 
 #: Quiet before each measured job: the recorder draws the job before (its reconstruction, its

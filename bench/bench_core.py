@@ -58,16 +58,16 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.judge import Part, parts_from_truth, union_iou, union_silhouette_iou  # noqa: E402
-from workers.sim.objects import EVERYDAY  # noqa: E402
-from workers.sim.scans import BROAD_FAMILIES, broad_set, compound_set, one_sided_set, standard_set  # noqa: E402
-from core_cy.errors import CoreError  # noqa: E402
-from core_cy.quality import silhouette_iou  # noqa: E402
-from core_cy.reconstruct import Options, View, reconstruct  # noqa: E402
-from core_cy.scoring import volumetric_iou  # noqa: E402
-from core_cy.segment import mask_with_outline  # noqa: E402
-from core_cy.superquadric import Superquadric, inside_outside, start_superquadrics  # noqa: E402
+from robocell.wire.bundle import load_bundle  # noqa: E402
+from robocell.workers.sim.judge import Part, parts_from_truth, union_iou, union_silhouette_iou  # noqa: E402
+from robocell.workers.sim.objects import EVERYDAY  # noqa: E402
+from robocell.workers.sim.scans import BROAD_FAMILIES, broad_set, compound_set, one_sided_set, standard_set  # noqa: E402
+from robocell.core_cy.errors import CoreError  # noqa: E402
+from robocell.core_cy.quality import silhouette_iou  # noqa: E402
+from robocell.core_cy.reconstruct import Options, View, reconstruct  # noqa: E402
+from robocell.core_cy.scoring import volumetric_iou  # noqa: E402
+from robocell.core_cy.segment import mask_with_outline  # noqa: E402
+from robocell.core_cy.superquadric import Superquadric, inside_outside, start_superquadrics  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 STAGES = ("decode", "segment", "edges", "centroid", "carve", "start", "fit", "quality", "total")

@@ -40,14 +40,14 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from workers.sim.judge import JudgeGripper, judge, parts_from_truth  # noqa: E402
+from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth  # noqa: E402
 
-from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.grasp_set import GRASPABLE, TOO_BIG, grasp_set  # noqa: E402
-from workers.sim.objects import COMPOUNDS  # noqa: E402
-from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
-from core_cy.reconstruct import reconstruct  # noqa: E402
-from core_cy.superquadric import Superquadric, fit_superquadric  # noqa: E402
+from robocell.wire.bundle import load_bundle  # noqa: E402
+from robocell.workers.sim.grasp_set import GRASPABLE, TOO_BIG, grasp_set  # noqa: E402
+from robocell.workers.sim.objects import COMPOUNDS  # noqa: E402
+from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
+from robocell.core_cy.reconstruct import reconstruct  # noqa: E402
+from robocell.core_cy.superquadric import Superquadric, fit_superquadric  # noqa: E402
 
 GROUPS = {
     "superquadrics": ("box", "cylinder", "ellipsoid", "rounded-box", "plate", "lying-cylinder"),

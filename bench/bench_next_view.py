@@ -30,12 +30,12 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from core_cy.errors import CoreError  # noqa: E402
-from core_cy.next_view import choose_next_view  # noqa: E402
-from core_cy.reconstruct import reconstruct  # noqa: E402
-from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.judge import Part, parts_from_truth, union_iou  # noqa: E402
-from workers.sim.scans import BROAD_FAMILIES, one_sided_set  # noqa: E402
+from robocell.core_cy.errors import CoreError  # noqa: E402
+from robocell.core_cy.next_view import choose_next_view  # noqa: E402
+from robocell.core_cy.reconstruct import reconstruct  # noqa: E402
+from robocell.wire.bundle import load_bundle  # noqa: E402
+from robocell.workers.sim.judge import Part, parts_from_truth, union_iou  # noqa: E402
+from robocell.workers.sim.scans import BROAD_FAMILIES, one_sided_set  # noqa: E402
 
 #: Reconstructions that raised (their IoU counts as 0), printed at the end.
 failures: list[str] = []

@@ -30,11 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from core_cy.reconstruct import Options, reconstruct
-from wire.bundle import load_bundle
-from workers.sim.judge import Part, parts_from_truth, union_iou
-from workers.sim.objects import COMPOUNDS, compound
-from workers.sim.scans import compound_set, make_spec, standard_set
+from robocell.core_cy.reconstruct import Options, reconstruct
+from robocell.wire.bundle import load_bundle
+from robocell.workers.sim.judge import Part, parts_from_truth, union_iou
+from robocell.workers.sim.objects import COMPOUNDS, compound
+from robocell.workers.sim.scans import compound_set, make_spec, standard_set
 
 
 def _written(spec, out: Path):
@@ -56,8 +56,8 @@ def _timed(bundle, options: Options, repeat: int):
 
 _TODAY = """
 import json, sys, time
-from core_cy.reconstruct import reconstruct
-from wire.bundle import load_bundle
+from robocell.core_cy.reconstruct import reconstruct
+from robocell.wire.bundle import load_bundle
 out = {}
 for path in sys.argv[2:]:
     bundle = load_bundle(path)

@@ -21,12 +21,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from robocell.demo import local_config  # noqa: E402
-from robocell.up import CellProcesses  # noqa: E402
-from wire.client import AsyncCellClient, JobFailed  # noqa: E402
-from wire.errors import CellError  # noqa: E402
-from wire.messages import PickRequest, ScanRequest  # noqa: E402
-from workers.sim.scene import target_from_config  # noqa: E402
+from robocell.cli.demo import local_config  # noqa: E402
+from robocell.cli.up import CellProcesses  # noqa: E402
+from robocell.wire.client import AsyncCellClient, JobFailed  # noqa: E402
+from robocell.wire.errors import CellError  # noqa: E402
+from robocell.wire.messages import PickRequest, ScanRequest  # noqa: E402
+from robocell.workers.sim.scene import target_from_config  # noqa: E402
 
 MIX = ("box", "cylinder", "ellipsoid", "rounded-box", "plate", "lying-cylinder", "cups", "mug", "box-and-ball",
        "l-boxes")

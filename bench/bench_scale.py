@@ -38,18 +38,18 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from wire import keys  # noqa: E402
-from wire.client import AsyncCellClient  # noqa: E402
-from wire.config import CellConfig  # noqa: E402
-from robocell.demo import local_config  # noqa: E402
-from wire.messages import (CameraModel, JobState, ReconstructReply, ReconstructRequest,  # noqa: E402
+from robocell.wire import keys  # noqa: E402
+from robocell.wire.client import AsyncCellClient  # noqa: E402
+from robocell.wire.config import CellConfig  # noqa: E402
+from robocell.cli.demo import local_config  # noqa: E402
+from robocell.wire.messages import (CameraModel, JobState, ReconstructReply, ReconstructRequest,  # noqa: E402
                            ReconstructView, ScanRequest)
-from cell.pool import ReconstructorPool  # noqa: E402
-from workers.sim.scans import standard_set  # noqa: E402
-from workers.sim.scene import target_from_config  # noqa: E402
-from cell.store import JobStore  # noqa: E402
-from wire.transport import Transport  # noqa: E402
-from robocell.up import CellProcesses  # noqa: E402
+from robocell.cell.pool import ReconstructorPool  # noqa: E402
+from robocell.workers.sim.scans import standard_set  # noqa: E402
+from robocell.workers.sim.scene import target_from_config  # noqa: E402
+from robocell.cell.store import JobStore  # noqa: E402
+from robocell.wire.transport import Transport  # noqa: E402
+from robocell.cli.up import CellProcesses  # noqa: E402
 
 
 def _config(run_dir: Path, **fields) -> CellConfig:

@@ -50,11 +50,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_core import object_iou  # noqa: E402
 
-from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
-from core_cy.reconstruct import View, reconstruct  # noqa: E402
-from wire.bundle import load_bundle  # noqa: E402
-from workers.sim.judge import JudgeGripper, judge, parts_from_truth  # noqa: E402
-from workers.sim.scans import printed_set, standard_set  # noqa: E402
+from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
+from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
+from robocell.wire.bundle import load_bundle  # noqa: E402
+from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth  # noqa: E402
+from robocell.workers.sim.scans import printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
 SEEING = WAYS[:2]  # the ways that segment the images

@@ -39,15 +39,15 @@ import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cell.retention import apply_retention, disk_usage  # noqa: E402
-from cell.store import JobStore  # noqa: E402
-from robocell.demo import local_config  # noqa: E402
-from robocell.up import CellProcesses  # noqa: E402
-from wire.client import AsyncCellClient, JobFailed  # noqa: E402
-from wire.config import CellConfig, RetentionConfig  # noqa: E402
-from wire.errors import CellError  # noqa: E402
-from wire.messages import DiskUsage, JobState, ScanRequest, ScanResult  # noqa: E402
-from workers.sim.scene import target_from_config  # noqa: E402
+from robocell.cell.retention import apply_retention, disk_usage  # noqa: E402
+from robocell.cell.store import JobStore  # noqa: E402
+from robocell.cli.demo import local_config  # noqa: E402
+from robocell.cli.up import CellProcesses  # noqa: E402
+from robocell.wire.client import AsyncCellClient, JobFailed  # noqa: E402
+from robocell.wire.config import CellConfig, RetentionConfig  # noqa: E402
+from robocell.wire.errors import CellError  # noqa: E402
+from robocell.wire.messages import DiskUsage, JobState, ScanRequest, ScanResult  # noqa: E402
+from robocell.workers.sim.scene import target_from_config  # noqa: E402
 
 _MB = 1024 * 1024
 

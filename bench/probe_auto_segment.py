@@ -32,11 +32,11 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from core_cy.errors import CoreError  # noqa: E402
-from core_cy.reconstruct import View, reconstruct  # noqa: E402
-from core_cy.camera import Camera  # noqa: E402
-from core_cy.scoring import volumetric_iou  # noqa: E402
-from core_cy.superquadric import Superquadric  # noqa: E402
+from robocell.core_cy.errors import CoreError  # noqa: E402
+from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
+from robocell.core_cy.camera import Camera  # noqa: E402
+from robocell.core_cy.scoring import volumetric_iou  # noqa: E402
+from robocell.core_cy.superquadric import Superquadric  # noqa: E402
 from tests.seg_scenes import Scene, render_scan  # noqa: E402
 
 SCENES = {

@@ -23,14 +23,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cell.store import JobStore  # noqa: E402
-from robocell.demo import local_config  # noqa: E402
-from robocell.up import CellProcesses  # noqa: E402
-from wire.client import CellClient  # noqa: E402
-from wire.errors import TransportError  # noqa: E402
-from wire.messages import JobState, ScanRequest  # noqa: E402
-from wire.transport import Transport  # noqa: E402
-from workers.sim.scene import target_from_config  # noqa: E402
+from robocell.cell.store import JobStore  # noqa: E402
+from robocell.cli.demo import local_config  # noqa: E402
+from robocell.cli.up import CellProcesses  # noqa: E402
+from robocell.wire.client import CellClient  # noqa: E402
+from robocell.wire.errors import TransportError  # noqa: E402
+from robocell.wire.messages import JobState, ScanRequest  # noqa: E402
+from robocell.wire.transport import Transport  # noqa: E402
+from robocell.workers.sim.scene import target_from_config  # noqa: E402
 
 _STEPS = (JobState.MOVING, JobState.CAPTURING)
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Awaitable, Callable
 
-from wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, LinkDown, NoResponder,
+from robocell.wire.errors import (CameraConnectionError, CameraError, CameraTimeout, CellError, LinkDown, NoResponder,
                          RemoteError, TransportError, TransportTimeout, wire_kind)
-from wire.messages import Message
-from wire.transport import Reply, BaseTransport
+from robocell.wire.messages import Message
+from robocell.wire.transport import Reply, BaseTransport
 
 from .job import Job
 from .presence import Absent, Presence

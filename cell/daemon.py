@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from core_cy.plan import plan_flange_poses
-from core_cy.views import candidate_views
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError, ConfigError, StoreError
-from wire.messages import REQUEST_LIMITS, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest
-from wire.transport import BaseTransport
+from robocell.core_cy.plan import plan_flange_poses
+from robocell.core_cy.views import candidate_views
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError, ConfigError, StoreError
+from robocell.wire.messages import REQUEST_LIMITS, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest
+from robocell.wire.transport import BaseTransport
 
 from .asking import Asker
 from .upkeep import apply_retention_every

@@ -32,7 +32,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Protocol
 
-from wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanResult, wire_state
+from robocell.wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanResult, wire_state
 
 from .job import Checkpoint, IllegalTransition, Job, check_transition
 

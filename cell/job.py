@@ -28,8 +28,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from wire.errors import CellError
-from wire.messages import Lifecycle, Progress, ScanRequest, ScanResult
+from robocell.wire.errors import CellError
+from robocell.wire.messages import Lifecycle, Progress, ScanRequest, ScanResult
 
 if TYPE_CHECKING:
     from .steps import Step

@@ -12,7 +12,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from wire.errors import CellError
+from robocell.wire.errors import CellError
 
 __all__ = ["RunDirLock", "RunDirBusy"]
 

@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from core_cy.plan import workspace_violation
-from core_cy.views import pick_poses as _pick_poses
-from wire import keys
-from wire.config import CellConfig
-from wire.messages import GripReply, GripRequest, JobState, MoveReply, MoveRequest, PickOutcome, PickRequest
+from robocell.core_cy.plan import workspace_violation
+from robocell.core_cy.views import pick_poses as _pick_poses
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.messages import GripReply, GripRequest, JobState, MoveReply, MoveRequest, PickOutcome, PickRequest
 
 from .job import Job
 from .steps import Cell, Step, StepFailed, parse_reply

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from wire.messages import JobState, Lifecycle, ScanRequest
+from robocell.wire.messages import JobState, Lifecycle, ScanRequest
 
 from .job import Checkpoint, Job
 from .pick import ChooseGrasp, Gripper, PickMove

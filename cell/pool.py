@@ -50,10 +50,10 @@ import time
 from collections.abc import Callable, Collection
 from typing import Any
 
-from wire import keys
-from wire.errors import LinkDown, NoResponder, TransportError
-from wire.messages import ReconstructorStatus, WorkerLoad, parse
-from wire.transport import Reply, BaseTransport
+from robocell.wire import keys
+from robocell.wire.errors import LinkDown, NoResponder, TransportError
+from robocell.wire.messages import ReconstructorStatus, WorkerLoad, parse
+from robocell.wire.transport import Reply, BaseTransport
 
 from .pool_members import AttemptFailed, NoReconstructor, _attempt_error, _exception, _Waiter, _Worker
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 
-from wire.errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
-from wire.transport import Reply
+from robocell.wire.errors import CellError, NoResponder, RemoteError, TransportError, TransportTimeout
+from robocell.wire.transport import Reply
 
 __all__ = ["AttemptFailed", "NoReconstructor"]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 import logging
 
-from wire import keys
-from wire.transport import BaseTransport
+from robocell.wire import keys
+from robocell.wire.transport import BaseTransport
 
 __all__ = ["Presence", "Absent"]
 

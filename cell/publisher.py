@@ -12,8 +12,8 @@ import logging
 import queue
 import threading
 
-from wire.errors import TransportError
-from wire.transport import BaseTransport
+from robocell.wire.errors import TransportError
+from robocell.wire.transport import BaseTransport
 
 __all__ = ["Publisher"]
 

@@ -234,9 +234,9 @@ class _Drawing:
         import cv2
         import numpy as np
 
-        from core_cy.sphere import fibonacci_sphere
-        from core_cy.superquadric import Superquadric
-        from wire.messages import ReconstructReply
+        from robocell.core_cy.sphere import fibonacci_sphere
+        from robocell.core_cy.superquadric import Superquadric
+        from robocell.wire.messages import ReconstructReply
 
         answer = ReconstructReply.model_validate_json(reply_json)
         result = answer.result

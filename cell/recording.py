@@ -30,9 +30,9 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
-from core_cy.meshes import vertex_normals
-from wire import keys
-from core_cy.superquadric import Superquadric, mesh
+from robocell.core_cy.meshes import vertex_normals
+from robocell.wire import keys
+from robocell.core_cy.superquadric import Superquadric, mesh
 
 __all__ = ["JobRecording", "find_recording", "recording_summary", "replay_command", "shared_parts"]
 

@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from core_cy.plan import workspace_violation
-from wire.config import CellConfig
-from wire.errors import StoreError
-from wire.messages import (REQUEST_LIMITS, CancelRequest, CellStatus, FailedJob, JobState, JobStatus, ScanRequest,
+from robocell.core_cy.plan import workspace_violation
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import StoreError
+from robocell.wire.messages import (REQUEST_LIMITS, CancelRequest, CellStatus, FailedJob, JobState, JobStatus, ScanRequest,
                            parse_request)
-from wire.transport import Request, RequestError, Response
+from robocell.wire.transport import Request, RequestError, Response
 
 from .handle import JobHandle
 from .job import Checkpoint, IllegalTransition

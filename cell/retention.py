@@ -38,8 +38,8 @@ from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from wire.config import RetentionConfig
-from wire.messages import DiskUsage, JobState
+from robocell.wire.config import RetentionConfig
+from robocell.wire.messages import DiskUsage, JobState
 
 __all__ = ["RetentionReport", "FileEntry", "apply_retention", "disk_usage", "plan_recordings", "plan_pictures",
            "GRACE_S"]

@@ -5,10 +5,10 @@ from __future__ import annotations
 import asyncio
 import logging
 
-from wire.config import CellConfig
+from robocell.wire.config import CellConfig
 from .daemon import CellDaemon
-from wire.process import open_transport, run_until_stopped
-from wire.transport import Transport
+from robocell.wire.process import open_transport, run_until_stopped
+from robocell.wire.transport import Transport
 
 __all__ = ["run_router", "run_daemon"]
 

@@ -23,14 +23,14 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from core_cy.plan import camera_poses
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError, LinkDown
-from wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message,
+from robocell.core_cy.plan import camera_poses
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError, LinkDown
+from robocell.wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message,
                            MoveReply, MoveRequest, NextViewQuery, ReconstructReply,
                            ReconstructRequest, ReconstructView, ScanResult, parse)
-from wire.transport import Reply
+from robocell.wire.transport import Reply
 
 from .job import Job, Picture
 from .pool import AttemptFailed, NoReconstructor, ReconstructorPool

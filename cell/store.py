@@ -32,8 +32,8 @@ from typing import Any, TypeVar
 
 from pydantic import ValidationError
 
-from wire.errors import StoreError
-from wire.messages import ACTIVITIES, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest, ScanResult
+from robocell.wire.errors import StoreError
+from robocell.wire.messages import ACTIVITIES, JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanRequest, ScanResult
 
 from .store_schema import SCHEMA as _SCHEMA
 from .store_schema import SCHEMA_VERSION

@@ -23,7 +23,7 @@ import hashlib
 import hmac
 import secrets
 
-from wire.messages import JOB_TOKEN_BYTES
+from robocell.wire.messages import JOB_TOKEN_BYTES
 
 __all__ = ["JobTokenRefused", "new_token", "token_digest", "check_token"]
 

@@ -14,8 +14,8 @@ from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 
-from wire.config import RetentionConfig
-from wire.messages import DiskUsage, JobStatus
+from robocell.wire.config import RetentionConfig
+from robocell.wire.messages import DiskUsage, JobStatus
 
 from .retention import apply_retention, disk_usage
 from .store import JobStore

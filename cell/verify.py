@@ -47,16 +47,16 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from core_cy.auto_segment import auto_silhouettes
-from core_cy.camera import Camera, undistort_mask
-from core_cy.errors import CoreError
-from core_cy.gripper import Gripper
-from core_cy.segment import Segmentation, segment
-from core_cy.superquadric import Superquadric as CoreSuperquadric
-from core_cy.superquadric import inside_outside, surface_points
-from wire.bundle import core_segmentation
-from wire.config import CellConfig
-from wire.messages import Grasp, Reconstruction, ReconstructRequest, Superquadric
+from robocell.core_cy.auto_segment import auto_silhouettes
+from robocell.core_cy.camera import Camera, undistort_mask
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.gripper import Gripper
+from robocell.core_cy.segment import Segmentation, segment
+from robocell.core_cy.superquadric import Superquadric as CoreSuperquadric
+from robocell.core_cy.superquadric import inside_outside, surface_points
+from robocell.wire.bundle import core_segmentation
+from robocell.wire.config import CellConfig
+from robocell.wire.messages import Grasp, Reconstruction, ReconstructRequest, Superquadric
 
 from .job import Picture
 

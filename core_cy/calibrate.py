@@ -1,6 +1,6 @@
 """Camera calibration with a chessboard: intrinsics (K, distortion) and hand-eye (the camera on the flange).
 
-Pure functions on images already in memory; ``robocell.calibrate`` reads the
+Pure functions on images already in memory; ``robocell.cli.calibrate`` reads the
 files and writes the results into the cell's configuration.
 
 A board is given by its *inner* corners, ``(cols, rows)``, e.g. ``(9, 6)`` for a

@@ -1,6 +1,6 @@
 """robocell: graspable models of unknown objects from a robot cell.
 
-The ``robocell`` command is ``robocell.main``. For programs, the cell's Python API
+The ``robocell`` command is ``robocell.cli.main``. For programs, the cell's Python API
 (``robocell.api``)::
 
     import robocell

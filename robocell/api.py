@@ -31,10 +31,10 @@ from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-from wire.client import AsyncCellClient, JobFailed
-from wire.config import CellConfig, load_config
-from wire.errors import CellError
-from wire.messages import (CellStatus, JobEvent, JobState, JobStatus, PickRequest, ScanRequest, ScanResult,
+from robocell.wire.client import AsyncCellClient, JobFailed
+from robocell.wire.config import CellConfig, load_config
+from robocell.wire.errors import CellError
+from robocell.wire.messages import (CellStatus, JobEvent, JobState, JobStatus, PickRequest, ScanRequest, ScanResult,
                            ViewPlan)
 
 __all__ = ["Client", "AsyncClient", "JobFailed", "CellError", "ScanRequest", "ScanResult", "JobStatus",

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from tests.helpers import intrinsics, look_at, sphere_silhouette
-from core_cy.camera import Camera
+from robocell.core_cy.camera import Camera
 
 SPHERE_CENTRE = np.array([0.6, 0.0, 0.04])
 SPHERE_RADIUS = 0.04

@@ -24,18 +24,18 @@ import numpy as np
 import zenoh
 from rerun.chunk import RrdReader
 
-from wire import keys
-from wire.client import CellClient
-from wire.config import CellConfig
-from robocell.demo import free_port, local_config
-from wire.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
-from workers.sim.scene import scene_from_config, target_from_config
-from cell.store import JobStore
-from wire.transport import RequestError, Transport, session_config
-from robocell.up import CellProcesses
-from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
-from workers.sim.axis import SimCameraServer
-from workers.sim.axis_process import robot_camera_pose
+from robocell.wire import keys
+from robocell.wire.client import CellClient
+from robocell.wire.config import CellConfig
+from robocell.cli.demo import free_port, local_config
+from robocell.wire.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
+from robocell.workers.sim.scene import scene_from_config, target_from_config
+from robocell.cell.store import JobStore
+from robocell.wire.transport import RequestError, Transport, session_config
+from robocell.cli.up import CellProcesses
+from robocell.workers.reconstruct.worker import ReconstructWorker, reconstruct_request
+from robocell.workers.sim.axis import SimCameraServer
+from robocell.workers.sim.axis_process import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "LoopThread", "RunningCell", "running_cell", "InProcessSimCamera",
            "GatedReconstructor", "wait_until", "accepts", "wait_for_footer", "look_away_poses",
@@ -63,8 +63,8 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
 
 def look_away_poses(config: CellConfig) -> list[list[list[float]]]:
     """Flange poses inside the workspace whose camera sees only table: the object is out of view."""
-    from wire.messages import ViewPlan
-    from core_cy.plan import plan_flange_poses, workspace_violation
+    from robocell.wire.messages import ViewPlan
+    from robocell.core_cy.plan import plan_flange_poses, workspace_violation
 
     empty_spot = [config.sim.position[0], config.sim.position[1] + 0.4, 0.0]
     poses = plan_flange_poses(empty_spot, ViewPlan(standoff=0.3), config.T_flange_cam)

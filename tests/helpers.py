@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from core_cy.plan import look_at
-from core_cy.camera import Camera
+from robocell.core_cy.plan import look_at
+from robocell.core_cy.camera import Camera
 
 WIDTH, HEIGHT, FOCAL = 640, 480, 600.0
 

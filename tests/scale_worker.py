@@ -24,8 +24,8 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from wire.config import load_config  # noqa: E402
-from workers.reconstruct import worker as reconstruct  # noqa: E402
+from robocell.wire.config import load_config  # noqa: E402
+from robocell.workers.reconstruct import worker as reconstruct  # noqa: E402
 
 
 def slow_reconstruct_request(delay: float, fail: bool, request_json: str, payload: bytes,

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from workers.sim.scans import default_K, plan_views
+from robocell.workers.sim.scans import default_K, plan_views
 
 __all__ = ["Scene", "render_view", "render_scan"]
 

@@ -28,22 +28,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocell.demo import free_port
+from robocell.cli.demo import free_port
 from tests.cell_fixtures import LoopThread, accepts, wait_until
 from tests.pki import router_tls_settings, tls_settings, write_pki
-from wire import keys
-from wire.access import ROLES, access_control, permissions
-from wire.client import CellClient
-from wire.config import CellConfig, load_config
-from wire.errors import CellError, NoResponder
-from wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
-from wire.transport import Transport
-from workers.camera.backend import Camera
-from workers.camera.worker import make_camera, serve_camera
-from workers.reconstruct.worker import ReconstructWorker, reconstruct_request
-from workers.robot.worker import serve_robot
-from workers.sim.robot import SceneGripper, SimRobot
-from workers.sim.scene import target_from_config
+from robocell.wire import keys
+from robocell.wire.access import ROLES, access_control, permissions
+from robocell.wire.client import CellClient
+from robocell.wire.config import CellConfig, load_config
+from robocell.wire.errors import CellError, NoResponder
+from robocell.wire.messages import CaptureRequest, JobEvent, JobState, MoveRequest, PickRequest, ScanRequest, WorkerLoad
+from robocell.wire.transport import Transport
+from robocell.workers.camera.backend import Camera
+from robocell.workers.camera.worker import make_camera, serve_camera
+from robocell.workers.reconstruct.worker import ReconstructWorker, reconstruct_request
+from robocell.workers.robot.worker import serve_robot
+from robocell.workers.sim.robot import SceneGripper, SimRobot
+from robocell.workers.sim.scene import target_from_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 #: The users of the router's dictionary: those deploy/cell-host.toml gives roles, and one it does not.
@@ -339,7 +339,7 @@ def test_an_observer_reads_but_cannot_submit_or_cancel(cell):
 
 def test_a_denied_command_says_the_user_may_not_ask(cell, tmp_path, monkeypatch, capsys):
     """Zenoh drops a denied query unanswered: the command line names that reason beside a missing daemon."""
-    from robocell.main import main
+    from robocell.cli.main import main
 
     config = json.loads(cell.config_path.read_text())
     config["zenoh"]["user"] = "dashboard"

@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 import robocell
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
-from robocell.main import main
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
+from robocell.cli.main import main
 from tests.cell_fixtures import cell_config, running_cell
-from workers.sim.scene import target_from_config, truth_from_config
+from robocell.workers.sim.scene import target_from_config, truth_from_config
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_TIMEOUT_S = 120
@@ -171,7 +171,7 @@ def test_a_bag_of_a_job_has_its_pictures_and_the_flange_under_the_camera(cell, s
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    from robocell.export import TOPICS
+    from robocell.cli.export import TOPICS
     from tests.cell_fixtures import wait_for_footer
 
     wait_for_footer(scanned.recording)

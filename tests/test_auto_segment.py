@@ -10,14 +10,14 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.auto_segment import aim_point, auto_silhouettes
-from core_cy.camera import Camera
-from core_cy.errors import GeometryError, ImageError, SilhouetteError
-from core_cy.quality import silhouette_iou
-from core_cy.reconstruct import View, reconstruct
+from robocell.core_cy.auto_segment import aim_point, auto_silhouettes
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.errors import GeometryError, ImageError, SilhouetteError
+from robocell.core_cy.quality import silhouette_iou
+from robocell.core_cy.reconstruct import View, reconstruct
 from tests.seg_scenes import Scene, render_scan
-from wire.bundle import load_bundle
-from wire.errors import BundleError
+from robocell.wire.bundle import load_bundle
+from robocell.wire.errors import BundleError
 
 TABLE = [0.0, 0.0, 1.0, 0.0]
 
@@ -135,7 +135,7 @@ def test_masks_out_are_what_the_fit_used(tmp_path, scans):
     assert process.returncode == 0, process.stderr
     line = json.loads(process.stdout.splitlines()[0])
     masks = [cv2.imread(str(tmp_path / "masks" / "can" / f"mask{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(3)]
-    from core_cy.superquadric import Superquadric
+    from robocell.core_cy.superquadric import Superquadric
 
     fitted = Superquadric.from_dict(line["superquadric"])
     for camera, mask, reported, truth in zip(_cameras(cams), masks, line["silhouette_iou"], truths):
@@ -175,7 +175,7 @@ def test_a_background_keeps_what_only_looks_like_a_shadow(tmp_path):
     scenes): their faces turned from the lamp are darker than the empty laminate with about its
     chromaticity, as a shadow is. Another view that sees the same table point unhidden does not see it
     darkened alike, so they stand above the table and are kept; the cast shadow is left out."""
-    from workers.sim.scans import printed_set
+    from robocell.workers.sim.scans import printed_set
 
     specs = {spec.name: spec for spec in printed_set(0)}
     for name, least in (("laminate-mustard-bottle", 0.92), ("laminate-sugar-box-tall-box", 0.75)):

@@ -14,14 +14,14 @@ import httpx
 import numpy as np
 import pytest
 
-from wire.backends import AxisCameraConfig as CameraConfig
-from wire.config import SimConfig
-from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+from robocell.wire.backends import AxisCameraConfig as CameraConfig
+from robocell.wire.config import SimConfig
+from robocell.wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
-from workers.sim.scans import default_K, look_at, object_target
-from workers.camera.axis import AxisCamera
-from workers.sim.scene import scene_from_config
-from workers.sim.axis import SimCameraServer
+from robocell.workers.sim.scans import default_K, look_at, object_target
+from robocell.workers.camera.axis import AxisCamera
+from robocell.workers.sim.scene import scene_from_config
+from robocell.workers.sim.axis import SimCameraServer
 
 PASSWORD = "s3cret-Pa55"
 SIZE = (320, 240)  # small renders keep the tests quick

@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wire.bundle import load_bundle
-from wire.errors import BundleError
-from core_cy.segment import Segmentation
+from robocell.wire.bundle import load_bundle
+from robocell.wire.errors import BundleError
+from robocell.core_cy.segment import Segmentation
 
 from tests.bundles import edit_scan, write_sphere_bundle
 

@@ -36,8 +36,8 @@ def test_the_reconstruction_worker_checks_each_picture_against_its_calibration()
     import cv2
     import numpy as np
 
-    from wire.messages import CameraModel, ReconstructReply, ReconstructRequest, ReconstructView
-    from workers.reconstruct.worker import reconstruct_request
+    from robocell.wire.messages import CameraModel, ReconstructReply, ReconstructRequest, ReconstructView
+    from robocell.workers.reconstruct.worker import reconstruct_request
 
     small = cv2.imencode(".jpg", np.zeros((240, 320, 3), np.uint8))[1].tobytes()
     camera = CameraModel(K=[[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])

@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from robocell.calibrate import capture
-from robocell.config import write_config
-from robocell.main import build_parser
-from core_cy.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
+from robocell.cli.calibrate import capture
+from robocell.cli.config import write_config
+from robocell.cli.main import build_parser
+from robocell.core_cy.calibrate import (HAND_EYE_METHODS, board_points, calibrate_hand_eye, calibrate_intrinsics, find_corners,
                             parse_board)
-from wire.config import SimConfig, load_config
-from core_cy.errors import CalibrationError
-from wire.errors import ConfigError
-from workers.sim.scans import default_K, look_at
-from workers.sim.axis import SimCameraServer
+from robocell.wire.config import SimConfig, load_config
+from robocell.core_cy.errors import CalibrationError
+from robocell.wire.errors import ConfigError
+from robocell.workers.sim.scans import default_K, look_at
+from robocell.workers.sim.axis import SimCameraServer
 
 SIZE = (640, 480)
 K_TRUE = np.array([[820.0, 0.0, 322.5], [0.0, 818.0, 236.0], [0.0, 0.0, 1.0]])
@@ -390,7 +390,7 @@ def test_calibrate_intrinsics_in_a_subprocess(files):
 def camera():
     size = (320, 240)
     pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])
-    from workers.sim.scene import scene_from_config
+    from robocell.workers.sim.scene import scene_from_config
 
     with SimCameraServer(scene_from_config(SimConfig()), K=default_K(size), image_size=size,
                          pose_provider=lambda: pose, username="root", password=PASSWORD, auth="digest") as server:
@@ -432,10 +432,10 @@ def test_camera_probe_failures(camera, capsys, monkeypatch):
 def test_capture_then_hand_eye(tmp_path):
     """`calibrate capture` over real Zenoh on loopback, with stand-in robot and camera workers that render the
     board from where the robot went; its files then give the hand-eye transform."""
-    from wire import keys
-    from wire.config import CellConfig
-    from wire.messages import CaptureInfo, MoveReply, MoveRequest, parse
-    from wire.transport import Response, Transport
+    from robocell.wire import keys
+    from robocell.wire.config import CellConfig
+    from robocell.wire.messages import CaptureInfo, MoveReply, MoveRequest, parse
+    from robocell.wire.transport import Response, Transport
 
     from tests.cell_fixtures import free_port
 

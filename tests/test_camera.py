@@ -2,8 +2,8 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.camera import Camera, undistort_mask
-from core_cy.errors import CameraError
+from robocell.core_cy.camera import Camera, undistort_mask
+from robocell.core_cy.errors import CameraError
 
 from tests.helpers import intrinsics, look_at, sphere_silhouette
 

@@ -4,9 +4,9 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
-from core_cy.errors import GeometryError
-from core_cy.sphere import enclosing_sphere, fibonacci_sphere
+from robocell.core_cy.carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
+from robocell.core_cy.errors import GeometryError
+from robocell.core_cy.sphere import enclosing_sphere, fibonacci_sphere
 
 from tests.helpers import orthogonal_cameras, sphere_silhouette
 

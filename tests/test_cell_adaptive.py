@@ -17,11 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from core_cy.plan import workspace_violation
-from wire.messages import JobState, ReconstructRequest, ScanRequest
-import workers.reconstruct.worker as worker_module
-from workers.reconstruct.worker import reconstruct_request
-from workers.sim.scene import target_from_config
+from robocell.core_cy.plan import workspace_violation
+from robocell.wire.messages import JobState, ReconstructRequest, ScanRequest
+import robocell.workers.reconstruct.worker as worker_module
+from robocell.workers.reconstruct.worker import reconstruct_request
+from robocell.workers.sim.scene import target_from_config
 
 from tests.cell_fixtures import InProcessWorker, cell_config, running_cell, wait_until
 

@@ -15,11 +15,11 @@ import time
 
 import pytest
 
-from wire.errors import NoResponder, RemoteError, StoreError
-from wire.messages import (ACTIVITIES, POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply,
+from robocell.wire.errors import NoResponder, RemoteError, StoreError
+from robocell.wire.messages import (ACTIVITIES, POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply,
                            ReconstructRequest, Superquadric)
-from wire.transport import Transport
-from cell.store import JobStore
+from robocell.wire.transport import Transport
+from robocell.cell.store import JobStore
 
 from tests.cell_fixtures import (GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell, cell_config,
                                  running_cell, wait_until)

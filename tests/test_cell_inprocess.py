@@ -20,20 +20,20 @@ import cv2
 import numpy as np
 import pytest
 
-import cell.daemon
-import cell.requests
-from cell.daemon import CellDaemon
-from cell.store import JobStore
-from wire import keys
-from wire.client import AsyncCellClient
-from wire.errors import CellError, StoreError
-from wire.fake_transport import MemoryNetwork
-from wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
+import robocell.cell.daemon
+import robocell.cell.requests
+from robocell.cell.daemon import CellDaemon
+from robocell.cell.store import JobStore
+from robocell.wire import keys
+from robocell.wire.client import AsyncCellClient
+from robocell.wire.errors import CellError, StoreError
+from robocell.wire.fake_transport import MemoryNetwork
+from robocell.wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
                            MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
                            RobotState, ScanRequest, Superquadric)
-from wire.transport import Request, Response
-from workers.reconstruct.worker import ReconstructWorker
-from workers.sim.scene import target_from_config
+from robocell.wire.transport import Request, Response
+from robocell.workers.reconstruct.worker import ReconstructWorker
+from robocell.workers.sim.scene import target_from_config
 
 from tests.cell_fixtures import cell_config
 
@@ -400,8 +400,8 @@ def test_retention_removes_old_recordings_while_the_cell_runs(tmp_path):
 
 
 def format_status_of(disk) -> str:
-    from robocell.jobs import format_status
-    from wire.messages import CellStatus
+    from robocell.cli.jobs import format_status
+    from robocell.wire.messages import CellStatus
     status = CellStatus(cell="c", time=0.0, started=0.0, workers={}, reconstructors=[], queued=0, max_queued=1,
                         waiting_for_reconstructor=0, jobs={}, recent_failures=[], disk=disk)
     return format_status(status)

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from wire.messages import JobState
+from robocell.wire.messages import JobState
 
 from tests.cell_fixtures import cell_config, running_cell
 

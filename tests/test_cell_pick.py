@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wire.client import JobFailed
-from wire.errors import RemoteError
-from wire.messages import JobState, PickRequest, ScanRequest
-from workers.sim.scene import target_from_config
+from robocell.wire.client import JobFailed
+from robocell.wire.errors import RemoteError
+from robocell.wire.messages import JobState, PickRequest, ScanRequest
+from robocell.workers.sim.scene import target_from_config
 
-from cell.recording import recording_summary
+from robocell.cell.recording import recording_summary
 
 from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 

@@ -13,9 +13,9 @@ import time
 
 import pytest
 
-from wire.errors import RemoteError
-from wire.client import AsyncCellClient
-from wire.messages import JobEvent, JobState, PickRequest
+from robocell.wire.errors import RemoteError
+from robocell.wire.client import AsyncCellClient
+from robocell.wire.messages import JobEvent, JobState, PickRequest
 
 from tests.cell_fixtures import cell_config, running_cell, wait_for_footer, wait_until
 

@@ -20,15 +20,15 @@ import pytest
 import zenoh
 from rerun.chunk import RrdReader
 
-from wire import keys
-from wire.client import AsyncCellClient
-from wire.errors import MoveRefused, RemoteError
-from wire.messages import JobState, MoveRequest, ScanRequest
-from cell.recording import recording_summary, replay_command
-from workers.sim.scene import target_from_config, truth_from_config
-from wire.transport import Transport, session_config
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
+from robocell.wire import keys
+from robocell.wire.client import AsyncCellClient
+from robocell.wire.errors import MoveRefused, RemoteError
+from robocell.wire.messages import JobState, MoveRequest, ScanRequest
+from robocell.cell.recording import recording_summary, replay_command
+from robocell.workers.sim.scene import target_from_config, truth_from_config
+from robocell.wire.transport import Transport, session_config
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
 
 from tests.cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, wait_for_footer,
                             wait_until)

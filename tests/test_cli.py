@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
 
-from robocell.jobs import format_status
-from robocell.main import build_parser, main
-from wire.config import CellConfig, load_config
-from wire.messages import CellStatus, ReconstructorStatus
+from robocell.cli.jobs import format_status
+from robocell.cli.main import build_parser, main
+from robocell.wire.config import CellConfig, load_config
+from robocell.wire.messages import CellStatus, ReconstructorStatus
 
 from tests.bundles import edit_scan
 from tests.cell_fixtures import free_port, wait_until
@@ -230,7 +230,7 @@ def test_status_columns_line_up_with_their_headers():
 @pytest.fixture
 def recording(tmp_path):
     """A run directory with one job's recording, and the configuration that names it."""
-    from cell.recording import JobRecording
+    from robocell.cell.recording import JobRecording
 
     run_dir = tmp_path / "runs"
     with JobRecording(run_dir / "j1.rrd", "j1") as rec:
@@ -316,9 +316,9 @@ def _held_port() -> socket.socket:
 def test_up_names_the_process_that_holds_the_routers_port(tmp_path):
     import asyncio
 
-    from robocell.demo import local_config
-    from robocell.up import CellProcesses
-    from wire.errors import CellError
+    from robocell.cli.demo import local_config
+    from robocell.cli.up import CellProcesses
+    from robocell.wire.errors import CellError
 
     with _held_port() as listener:
         port = listener.getsockname()[1]
@@ -344,10 +344,10 @@ def test_replay_web_on_a_held_port_says_so_before_any_address(recording, capsys)
 
 def test_camera_probe_logs_no_library_chatter(tmp_path):
     """httpx logs each request at INFO: left out unless -v."""
-    from wire.config import SimConfig
-    from workers.sim.axis import SimCameraServer
-    from workers.sim.scans import default_K, look_at
-    from workers.sim.scene import scene_from_config
+    from robocell.wire.config import SimConfig
+    from robocell.workers.sim.axis import SimCameraServer
+    from robocell.workers.sim.scans import default_K, look_at
+    from robocell.workers.sim.scene import scene_from_config
 
     size = (320, 240)
     pose = look_at([0.85, 0.25, 0.35], [0.6, 0.0, 0.02])

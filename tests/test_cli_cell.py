@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from robocell.main import main
-from wire import keys
-from wire.messages import JobState, JobStatus, ScanRequest
-from wire.transport import Response, Transport
+from robocell.cli.main import main
+from robocell.wire import keys
+from robocell.wire.messages import JobState, JobStatus, ScanRequest
+from robocell.wire.transport import Response, Transport
 
 from tests.cell_fixtures import LoopThread, free_port
 

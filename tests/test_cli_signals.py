@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 
 from tests.cell_fixtures import cell_config, free_port, running_cell, wait_until
-from wire.messages import JobState
-from workers.sim.scene import target_from_config
+from robocell.wire.messages import JobState
+from robocell.workers.sim.scene import target_from_config
 
 #: Long enough for a loaded machine to start a cell; a test fails here instead of hanging.
 START_S = 90.0
@@ -192,7 +192,7 @@ def test_ctrl_c_on_a_foreground_cell_daemon(foreground, tmp_path):
 
 
 def test_ctrl_c_on_replay_web_ends_the_viewer(foreground, tmp_path):
-    from cell.recording import JobRecording
+    from robocell.cell.recording import JobRecording
 
     run_dir = tmp_path / "runs"
     with JobRecording(run_dir / "j1.rrd", "j1") as recording:

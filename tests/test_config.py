@@ -6,9 +6,9 @@ import re
 
 import pytest
 
-from wire.access import ROLES
-from wire.config import CellConfig, Roles, load_config
-from wire.errors import ConfigError
+from robocell.wire.access import ROLES
+from robocell.wire.config import CellConfig, Roles, load_config
+from robocell.wire.errors import ConfigError
 
 
 EVERY_SECTION = """\

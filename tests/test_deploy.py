@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from wire import keys
-from wire.config import load_config
+from robocell.wire import keys
+from robocell.wire.config import load_config
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 
@@ -67,7 +67,7 @@ def test_the_cell_host_router_gives_each_role_its_part():
 
 
 def test_a_reconstruct_user_must_be_a_worker_id():
-    from wire.access import access_control
+    from robocell.wire.access import access_control
 
     with pytest.raises(ValueError, match="reconstruct user 'recon 1' is no worker id"):
         access_control({"cell1": {"reconstruct": ["recon 1"]}})

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.camera import Camera
-from core_cy.edges import edge_samples, silhouette_outline
-from core_cy.segment import segment_with_outline
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.edges import edge_samples, silhouette_outline
+from robocell.core_cy.segment import segment_with_outline
 
 RED, TABLE = np.array([30.0, 30.0, 200.0]), np.array([150.0, 170.0, 180.0])
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core_cy.superquadric import Superquadric
-from robocell.export import TOPICS, model_from_bundle, model_from_result, write_model
-from robocell.main import main
+from robocell.core_cy.superquadric import Superquadric
+from robocell.cli.export import TOPICS, model_from_bundle, model_from_result, write_model
+from robocell.cli.main import main
 
 MM = 1e-3
 

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from core_cy.errors import CoreError, GripperError
-from core_cy.grasp import plan_grasps
-from core_cy.gripper import DEFAULT_GRIPPER, Gripper, grasps_to_json
-from core_cy.superquadric import Superquadric, inside_outside
+from robocell.core_cy.errors import CoreError, GripperError
+from robocell.core_cy.grasp import plan_grasps
+from robocell.core_cy.gripper import DEFAULT_GRIPPER, Gripper, grasps_to_json
+from robocell.core_cy.superquadric import Superquadric, inside_outside
 
 TABLE = [0.0, 0.0, 1.0, 0.0]
 DOWN = np.array([0.0, 0.0, -1.0])

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workers.sim.judge import JudgeGripper, judge, parts_from_truth
-from workers.sim.objects import SuperquadricObject
-from workers.sim.scans import make_spec
-from core_cy.gripper import DEFAULT_GRIPPER
+from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth
+from robocell.workers.sim.objects import SuperquadricObject
+from robocell.workers.sim.scans import make_spec
+from robocell.core_cy.gripper import DEFAULT_GRIPPER
 
 
 def robocell(*args):

@@ -8,11 +8,11 @@ workers/sim/judge.py, the DESIGN.md §3 "holds" test written apart from the plan
 import numpy as np
 import pytest
 
-from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
-from core_cy.reconstruct import Options, reconstruct
-from wire.bundle import load_bundle
-from workers.sim.grasp_set import grasp_set
-from workers.sim.judge import JudgeGripper, judge, parts_from_truth
+from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
+from robocell.core_cy.reconstruct import Options, reconstruct
+from robocell.wire.bundle import load_bundle
+from robocell.workers.sim.grasp_set import grasp_set
+from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth
 
 JUDGE_GRIPPER = JudgeGripper.from_dict(DEFAULT_GRIPPER.to_dict())
 

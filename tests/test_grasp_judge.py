@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from workers.sim.judge import JudgeGripper, Part, judge, parts_from_truth
+from robocell.workers.sim.judge import JudgeGripper, Part, judge, parts_from_truth
 
 GRIPPER = JudgeGripper()
 TABLE = [0.0, 0.0, 1.0, 0.0]

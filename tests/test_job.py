@@ -7,14 +7,14 @@ import asyncio
 import numpy as np
 import pytest
 
-from cell.handle import JobHandle
-from cell.job import TRANSITIONS, Checkpoint, IllegalTransition, Job
-from cell.lane import MotionLane
-from cell.pick import ChooseGrasp, Gripper, PickMove
-from cell.plan import job_steps, step_from_spec
-from cell.steps import Reconstruct, View
-from wire.errors import StoreError
-from wire.messages import JobState, Lifecycle, PickRequest, Progress, ScanRequest, ScanResult
+from robocell.cell.handle import JobHandle
+from robocell.cell.job import TRANSITIONS, Checkpoint, IllegalTransition, Job
+from robocell.cell.lane import MotionLane
+from robocell.cell.pick import ChooseGrasp, Gripper, PickMove
+from robocell.cell.plan import job_steps, step_from_spec
+from robocell.cell.steps import Reconstruct, View
+from robocell.wire.errors import StoreError
+from robocell.wire.messages import JobState, Lifecycle, PickRequest, Progress, ScanRequest, ScanResult
 
 L = Lifecycle
 REQUEST = ScanRequest(target=[0.6, 0.0, 0.05])

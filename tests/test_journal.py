@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rerun.chunk import RrdReader
 
-from cell.recorder import Recorder
+from robocell.cell.recorder import Recorder
 from tests.cell_fixtures import wait_until
 
 

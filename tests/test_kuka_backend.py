@@ -9,12 +9,12 @@ import pytest
 
 from pydantic import TypeAdapter
 
-from wire.backends import KukaConfig, KukaKvpConfig, KukaOpcConfig, Workspace
-from workers.sim.kuka import SimKuka
-from workers.robot.kuka import variables as v
-from workers.robot.kuka.backend import KukaBackend, check_move, make_client
-from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
-from workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaConnectionError,
+from robocell.wire.backends import KukaConfig, KukaKvpConfig, KukaOpcConfig, Workspace
+from robocell.workers.sim.kuka import SimKuka
+from robocell.workers.robot.kuka import variables as v
+from robocell.workers.robot.kuka.backend import KukaBackend, check_move, make_client
+from robocell.wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
+from robocell.workers.robot.kuka.errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaConnectionError,
                                        KukaError, KukaTimeout, Unreachable)
 
 PROTOCOLS = ["kvp", "opc"]

@@ -13,12 +13,12 @@ import time
 import numpy as np
 import pytest
 
-from wire.messages import JobState, PickRequest, ScanRequest
-from workers.sim.scene import target_from_config, truth_from_config
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import Superquadric
+from robocell.wire.messages import JobState, PickRequest, ScanRequest
+from robocell.workers.sim.scene import target_from_config, truth_from_config
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import Superquadric
 
-from cell.pick import pick_poses
+from robocell.cell.pick import pick_poses
 
 from tests.cell_fixtures import cell_config, free_port, running_cell
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from workers.robot.kuka.e6pos import (E6Pos, abc_from_rotation, e6pos_from_pose, format_e6pos, parse_e6axis,
+from robocell.workers.robot.kuka.e6pos import (E6Pos, abc_from_rotation, e6pos_from_pose, format_e6pos, parse_e6axis,
                                 parse_e6pos, parse_krl_struct, pose_from_e6pos, rotation_from_abc)
 
 

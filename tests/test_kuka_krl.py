@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from workers.robot.kuka import variables as v
+from robocell.workers.robot.kuka import variables as v
 
 KRL = Path(__file__).resolve().parent.parent / "krl"
 DECL = re.compile(r"^\s*DECL\s+(?:GLOBAL\s+)?(\w+)\s+(\w+)\s*=\s*(.+?)\s*$", re.IGNORECASE)

@@ -7,11 +7,11 @@ import struct
 
 import pytest
 
-from workers.sim.kuka import SimKuka
-from workers.robot.kuka import kvp
-from workers.robot.kuka.e6pos import parse_e6axis, parse_e6pos
-from workers.robot.kuka.errors import KukaConnectionError, KukaProtocolError, KukaTimeout, KukaVariableError
-from workers.robot.kuka.kvp import READ, WRITE, KvpClient, decode_request, encode_request, encode_response
+from robocell.workers.sim.kuka import SimKuka
+from robocell.workers.robot.kuka import kvp
+from robocell.workers.robot.kuka.e6pos import parse_e6axis, parse_e6pos
+from robocell.workers.robot.kuka.errors import KukaConnectionError, KukaProtocolError, KukaTimeout, KukaVariableError
+from robocell.workers.robot.kuka.kvp import READ, WRITE, KvpClient, decode_request, encode_request, encode_response
 
 
 def run(coroutine, limit: float = 20.0):

@@ -16,11 +16,11 @@ import Pyro5.serializers
 import pytest
 import serpent
 
-from workers.sim.kuka_opc import OPCError
-from workers.sim.kuka import SimKuka
-from wire.backends import SIM_OPC_SERVER
-from workers.robot.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
-from workers.robot.kuka.opc import GatewayError, OpcClient
+from robocell.workers.sim.kuka_opc import OPCError
+from robocell.workers.sim.kuka import SimKuka
+from robocell.wire.backends import SIM_OPC_SERVER
+from robocell.workers.robot.kuka.errors import KukaConnectionError, KukaTimeout, KukaVariableError
+from robocell.workers.robot.kuka.opc import GatewayError, OpcClient
 
 
 def run(coroutine, limit: float = 20.0):
@@ -77,9 +77,9 @@ def test_the_client_and_the_simulator_need_no_openopc2():
     script = textwrap.dedent(f"""
         import asyncio, sys
         sys.modules["openopc2"] = None  # any import of it now fails, installed or not
-        from workers.sim.kuka import SimKuka
-        from workers.robot.kuka.errors import KukaConnectionError
-        from workers.robot.kuka.opc import OpcClient
+        from robocell.workers.sim.kuka import SimKuka
+        from robocell.workers.robot.kuka.errors import KukaConnectionError
+        from robocell.workers.robot.kuka.opc import OpcClient
 
         async def main():
             async with SimKuka("opc") as sim:

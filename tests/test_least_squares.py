@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core_cy._least_squares_cy import bounded_step
-from core_cy.least_squares import Descent
+from robocell.core_cy._least_squares_cy import bounded_step
+from robocell.core_cy.least_squares import Descent
 
 
 def test_the_step_solves_the_damped_normal_equations_within_bounds():

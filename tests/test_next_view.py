@@ -11,17 +11,17 @@ import sys
 import numpy as np
 import pytest
 
-from core_cy.camera import Camera
-from core_cy.errors import CoreError
-from core_cy.next_view import NextView, choose_next_view
-from core_cy.reconstruct import View, reconstruct
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.next_view import NextView, choose_next_view
+from robocell.core_cy.reconstruct import View, reconstruct
 from tests.bundles import edit_scan
-from wire.bundle import MAX_CANDIDATES, load_bundle
-from wire.errors import BundleError
-from workers.sim.judge import Part, parts_from_truth, union_iou
-from workers.sim.objects import ellipsoid
-from workers.sim.render import render
-from workers.sim.scans import default_K, look_at
+from robocell.wire.bundle import MAX_CANDIDATES, load_bundle
+from robocell.wire.errors import BundleError
+from robocell.workers.sim.judge import Part, parts_from_truth, union_iou
+from robocell.workers.sim.objects import ellipsoid
+from robocell.workers.sim.render import render
+from robocell.workers.sim.scans import default_K, look_at
 
 K = default_K()
 TABLE = [0.0, 0.0, 1.0, 0.0]

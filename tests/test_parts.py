@@ -8,18 +8,18 @@ import functools
 import numpy as np
 import pytest
 
-from core_cy._silhouette_fit_cy import normal_equations
-from core_cy.camera import Camera
-from core_cy.edges import edge_samples, silhouette_outline
-from core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
-from core_cy.reconstruct import Options, View, reconstruct
-from core_cy.silhouette_fit import _Problem, _Views
-from core_cy.superquadric import Superquadric, inside_outside
-from wire.bundle import load_bundle
-from workers.sim.judge import JudgeGripper, Part, judge, parts_from_truth, union_iou
-from workers.sim.objects import CompoundObject, SuperquadricObject
-from workers.sim.render import render
-from workers.sim.scans import default_K, one_sided_set, plan_views
+from robocell.core_cy._silhouette_fit_cy import normal_equations
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.edges import edge_samples, silhouette_outline
+from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
+from robocell.core_cy.reconstruct import Options, View, reconstruct
+from robocell.core_cy.silhouette_fit import _Problem, _Views
+from robocell.core_cy.superquadric import Superquadric, inside_outside
+from robocell.wire.bundle import load_bundle
+from robocell.workers.sim.judge import JudgeGripper, Part, judge, parts_from_truth, union_iou
+from robocell.workers.sim.objects import CompoundObject, SuperquadricObject
+from robocell.workers.sim.render import render
+from robocell.workers.sim.scans import default_K, one_sided_set, plan_views
 
 TABLE = [0.0, 0.0, 1.0, 0.0]
 JUDGE_GRIPPER = JudgeGripper.from_dict(DEFAULT_GRIPPER.to_dict())

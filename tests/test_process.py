@@ -7,9 +7,9 @@ import logging
 
 import pytest
 
-from robocell.main import build_parser
-from wire.errors import TransportError
-from wire.process import run_until_stopped
+from robocell.cli.main import build_parser
+from robocell.wire.errors import TransportError
+from robocell.wire.process import run_until_stopped
 
 
 def test_an_expected_error_ends_the_process_with_one_line(caplog):

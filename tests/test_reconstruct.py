@@ -4,14 +4,14 @@ import cv2
 import numpy as np
 import pytest
 
-from wire.bundle import load_bundle
-from workers.sim.objects import box, cylinder, ellipsoid, rounded_box
-from workers.sim.scans import BROAD_FAMILIES, default_K, plan_views, write_scan
-from core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
-from core_cy.reconstruct import Options, View, reconstruct
-from core_cy.scoring import volumetric_iou
-from core_cy.segment import RED_HSV
-from core_cy.superquadric import Superquadric
+from robocell.wire.bundle import load_bundle
+from robocell.workers.sim.objects import box, cylinder, ellipsoid, rounded_box
+from robocell.workers.sim.scans import BROAD_FAMILIES, default_K, plan_views, write_scan
+from robocell.core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
+from robocell.core_cy.reconstruct import Options, View, reconstruct
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.segment import RED_HSV
+from robocell.core_cy.superquadric import Superquadric
 
 from tests.bundles import SPHERE_CENTRE, SPHERE_RADIUS, write_sphere_bundle
 

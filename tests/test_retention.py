@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from cell.retention import GRACE_S, apply_retention, disk_usage
-from cell.store import JobStore
-from wire.config import RetentionConfig, load_config
-from wire.messages import JobEvent, JobState, ScanRequest
+from robocell.cell.retention import GRACE_S, apply_retention, disk_usage
+from robocell.cell.store import JobStore
+from robocell.wire.config import RetentionConfig, load_config
+from robocell.wire.messages import JobEvent, JobState, ScanRequest
 
 DAY = 86400.0
 NOW = 1_800_000_000.0

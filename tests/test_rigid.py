@@ -4,13 +4,13 @@ accepts too, and one it refuses, every part refuses."""
 import numpy as np
 import pytest
 
-from core_cy.calibrate import _check_poses
-from core_cy.camera import Camera
-from core_cy.errors import CalibrationError, CoreError
-from core_cy.rigid import RIGID_TOLERANCE, rigid_error
-from core_cy.superquadric import Superquadric
-from wire.messages import MoveRequest
-from workers.robot.kuka.e6pos import e6pos_from_pose
+from robocell.core_cy.calibrate import _check_poses
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.errors import CalibrationError, CoreError
+from robocell.core_cy.rigid import RIGID_TOLERANCE, rigid_error
+from robocell.core_cy.superquadric import Superquadric
+from robocell.wire.messages import MoveRequest
+from robocell.workers.robot.kuka.e6pos import e6pos_from_pose
 
 K = [[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]]
 

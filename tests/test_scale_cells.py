@@ -18,11 +18,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from wire.client import CellClient
-from wire.errors import RemoteError
-from wire.messages import JobState, ScanRequest
-from workers.sim.scene import target_from_config
-from cell.store import JobStore
+from robocell.wire.client import CellClient
+from robocell.wire.errors import RemoteError
+from robocell.wire.messages import JobState, ScanRequest
+from robocell.workers.sim.scene import target_from_config
+from robocell.cell.store import JobStore
 
 from tests.cell_fixtures import RunningCell, cell_config, running_cell, wait_until
 

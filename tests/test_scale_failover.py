@@ -14,8 +14,8 @@ import signal
 
 import pytest
 
-from wire.messages import JobState
-from wire.transport import RequestError
+from robocell.wire.messages import JobState
+from robocell.wire.transport import RequestError
 
 from tests.cell_fixtures import InProcessWorker, RunningCell, cell_config, running_cell, wait_until
 

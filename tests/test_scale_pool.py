@@ -18,12 +18,12 @@ import time
 
 import pytest
 
-from wire import keys
-from wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad
-from cell.pool import AttemptFailed, NoReconstructor, ReconstructorPool
-from wire.fake_transport import MemoryNetwork
-from wire.transport import BaseTransport, Transport
-from workers.reconstruct.worker import ReconstructWorker
+from robocell.wire import keys
+from robocell.wire.messages import ReconstructReply, ReconstructRequest, WorkerLoad
+from robocell.cell.pool import AttemptFailed, NoReconstructor, ReconstructorPool
+from robocell.wire.fake_transport import MemoryNetwork
+from robocell.wire.transport import BaseTransport, Transport
+from robocell.workers.reconstruct.worker import ReconstructWorker
 
 from tests.cell_fixtures import LoopThread, free_port
 from tests.virtual_time import run_virtual

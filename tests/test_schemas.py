@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from robocell.config import README_TABLE, SCHEMA_DIR, message_schemas, message_table
+from robocell.cli.config import README_TABLE, SCHEMA_DIR, message_schemas, message_table
 
 REPO = Path(__file__).resolve().parents[1]
 REGENERATE = "out of date: run `robocell schema --write` and commit schemas/ and README.md"
@@ -53,7 +53,7 @@ def test_every_message_of_the_key_table_has_a_schema():
 ])
 def test_the_schemas_judge_messages_as_the_models_do(message, example, valid):
     jsonschema = pytest.importorskip("jsonschema")
-    from wire import messages
+    from robocell.wire import messages
 
     schema = json.loads((SCHEMA_DIR / f"{message}.json").read_text())
     errors = list(jsonschema.Draft202012Validator(schema).iter_errors(example))

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from core_cy.errors import CoreError
-from core_cy.scoring import centre_error, volumetric_iou
-from core_cy.superquadric import Superquadric, inside_outside
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.scoring import centre_error, volumetric_iou
+from robocell.core_cy.superquadric import Superquadric, inside_outside
 
 
 def pose(rotation=np.eye(3), translation=(0.0, 0.0, 0.0)) -> np.ndarray:

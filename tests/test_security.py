@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from robocell.demo import free_port
+from robocell.cli.demo import free_port
 from tests.pki import router_tls_settings, tls_settings, write_pki
-from wire.errors import CellError, TransportError
-from wire.transport import Response, Transport
+from robocell.wire.errors import CellError, TransportError
+from robocell.wire.transport import Response, Transport
 
 
 @pytest.fixture(scope="module")
@@ -92,10 +92,10 @@ def test_plain_tcp_to_a_tls_router_is_refused(pki):
 
 # --- no reconstruction worker trusted on its word (issue 23) -----------------------------------------
 
-from cell.pool import ReconstructorPool  # noqa: E402
+from robocell.cell.pool import ReconstructorPool  # noqa: E402
 from tests.test_scale_pool import network, run, send, sees, until  # noqa: E402
-from wire import keys  # noqa: E402
-from wire.messages import WorkerLoad  # noqa: E402
+from robocell.wire import keys  # noqa: E402
+from robocell.wire.messages import WorkerLoad  # noqa: E402
 
 
 def test_three_fake_tokens_that_never_answer_fail_no_job_while_a_real_worker_exists():
@@ -153,7 +153,7 @@ def test_busy_heartbeats_forged_under_a_real_workers_id_are_ignored():
 
 # --- strict types, bounded requests -------------------------------------------------------------------
 
-from wire.messages import (REQUEST_LIMITS, CaptureRequest, GripRequest, RequestTooLarge, ScanRequest,  # noqa: E402
+from robocell.wire.messages import (REQUEST_LIMITS, CaptureRequest, GripRequest, RequestTooLarge, ScanRequest,  # noqa: E402
                            parse, parse_request)
 
 
@@ -196,8 +196,8 @@ def test_a_50_mb_submit_is_refused_before_it_is_parsed():
 
 # --- a forged event does not end scan() -----------------------------------------------------------------
 
-from wire.client import AsyncCellClient  # noqa: E402
-from wire.messages import JobEvent, JobState, JobStatus, ScanResult  # noqa: E402
+from robocell.wire.client import AsyncCellClient  # noqa: E402
+from robocell.wire.messages import JobEvent, JobState, JobStatus, ScanResult  # noqa: E402
 
 _BOX = {"size": [0.02, 0.02, 0.02], "shape": [0.1, 0.1], "T_world_object": np.eye(4).tolist()}
 

@@ -2,8 +2,8 @@ import cv2
 import numpy as np
 import pytest
 
-from core_cy.errors import CoreError, ImageError, SilhouetteError
-from core_cy.segment import RED_HSV, Segmentation, segment, segment_with_outline, silhouette_from_mask
+from robocell.core_cy.errors import CoreError, ImageError, SilhouetteError
+from robocell.core_cy.segment import RED_HSV, Segmentation, segment, segment_with_outline, silhouette_from_mask
 
 
 def _hsv_image(patches, shape=(120, 160)):
@@ -73,9 +73,9 @@ def test_invalid_segmentation_is_refused(spec):
 
 def test_a_shaded_face_stays_in_the_silhouette():
     """A red box lit from one side, its far faces in shadow (V about 30), on a pale table."""
-    from workers.sim.objects import box
-    from workers.sim.render import render
-    from workers.sim.scans import default_K, look_at
+    from robocell.workers.sim.objects import box
+    from robocell.workers.sim.render import render
+    from robocell.workers.sim.scans import default_K, look_at
 
     obj = box([0.05, 0.03, 0.025], (0.6, 0.0), yaw_deg=35)
     # Looking from the side away from the light, at the shaded faces.
@@ -94,7 +94,7 @@ def test_a_shaded_face_stays_in_the_silhouette():
 def test_looking_in_a_box_first_gives_the_same_silhouette():
     """The coarse pass only saves work: a small object, an object cut by the border, and a
     speck far from the object give the same silhouette as segmenting the whole image."""
-    from core_cy.segment import _cleaned, _matches, _opened
+    from robocell.core_cy.segment import _cleaned, _matches, _opened
 
     image = _hsv_image([((120, 70, 6, 5), (2, 200, 200))])  # 6 x 5 px
     cut = _hsv_image([((0, 30, 40, 30), (2, 200, 200)), ((140, 100, 3, 3), (2, 200, 200))])

@@ -7,17 +7,17 @@ import functools
 import numpy as np
 import pytest
 
-from workers.sim.objects import SuperquadricObject
-from workers.sim.render import render
-from workers.sim.scans import default_K, plan_views
-from core_cy._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
-from core_cy.camera import Camera
-from core_cy.edges import edge_samples
-from core_cy.errors import FitError
-from core_cy.scoring import volumetric_iou
-from core_cy.segment import mask_with_outline
-from core_cy.silhouette_fit import _ETA, _OMEGA, _Problem, _Views, fit_to_silhouettes
-from core_cy.superquadric import Superquadric, surface_points
+from robocell.workers.sim.objects import SuperquadricObject
+from robocell.workers.sim.render import render
+from robocell.workers.sim.scans import default_K, plan_views
+from robocell.core_cy._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.edges import edge_samples
+from robocell.core_cy.errors import FitError
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.segment import mask_with_outline
+from robocell.core_cy.silhouette_fit import _ETA, _OMEGA, _Problem, _Views, fit_to_silhouettes
+from robocell.core_cy.superquadric import Superquadric, surface_points
 
 OBJECTS = {  # on the table at (0.6, 0), turned 25 degrees: family, half-sizes (m), lying on its side
     "box": ("box", [0.05, 0.03, 0.025], False),

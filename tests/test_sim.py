@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy.special import beta
 
-from robocell import sim as cli
-from workers.sim import objects
-from workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SuperquadricObject, vertex_normals
-from workers.sim.render import TableScene, project, render
-from workers.sim.scans import (
+from robocell.cli import sim as cli
+from robocell.workers.sim import objects
+from robocell.workers.sim.objects import FAMILIES, CupStack, LumpyFigure, SuperquadricObject, vertex_normals
+from robocell.workers.sim.render import TableScene, project, render
+from robocell.workers.sim.scans import (
     HSV_SEGMENTATION,
     default_K,
     look_at,
@@ -376,7 +376,7 @@ def test_cli_rejects_shape_options_without_shape(capsys):
 
 
 def test_broad_set():
-    from workers.sim.scans import BROAD_FAMILIES, broad_set
+    from robocell.workers.sim.scans import BROAD_FAMILIES, broad_set
 
     specs = broad_set(0, per_family=2)
     assert len(specs) == len(BROAD_FAMILIES) * 2 * 3

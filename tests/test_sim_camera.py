@@ -13,16 +13,16 @@ import httpx
 import numpy as np
 import pytest
 
-from wire.backends import AxisCameraConfig as CameraConfig
-from wire.config import SimConfig
-from wire.errors import ConfigError
-from workers.sim.objects import CupStack, LumpyFigure, SuperquadricObject
-from workers.sim.render import project
-from workers.sim.textures import PrintedObject
-from workers.sim.scans import look_at, object_target
-from workers.sim.scene import scene_from_config, truth_from_config
-from workers.sim.axis import SimCameraServer
-from workers.sim.camera import scaled_K
+from robocell.wire.backends import AxisCameraConfig as CameraConfig
+from robocell.wire.config import SimConfig
+from robocell.wire.errors import ConfigError
+from robocell.workers.sim.objects import CupStack, LumpyFigure, SuperquadricObject
+from robocell.workers.sim.render import project
+from robocell.workers.sim.textures import PrintedObject
+from robocell.workers.sim.scans import look_at, object_target
+from robocell.workers.sim.scene import scene_from_config, truth_from_config
+from robocell.workers.sim.axis import SimCameraServer
+from robocell.workers.sim.camera import scaled_K
 
 SNAPSHOT = "/axis-cgi/jpg/image.cgi"
 K = np.asarray(CameraConfig().K)  # 640x480, f = 600

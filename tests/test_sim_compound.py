@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core_cy.camera import Camera
+from robocell.core_cy.camera import Camera
 from tests.helpers import intrinsics, sphere_silhouette
-from workers.sim.judge import Part, inside_union, parts_from_truth, union_iou, union_silhouette_iou
-from workers.sim.objects import COMPOUNDS, EVERYDAY, compound
-from workers.sim.scans import compound_set, fourth_view_candidates, one_sided_set, one_sided_views
+from robocell.workers.sim.judge import Part, inside_union, parts_from_truth, union_iou, union_silhouette_iou
+from robocell.workers.sim.objects import COMPOUNDS, EVERYDAY, compound
+from robocell.workers.sim.scans import compound_set, fourth_view_candidates, one_sided_set, one_sided_views
 
 KINDS = sorted(EVERYDAY)
 
@@ -113,7 +113,7 @@ def test_union_silhouette_iou_of_a_sphere_seen_by_an_ideal_camera():
 def test_robocell_sim_writes_an_everyday_compound_with_its_parts(tmp_path, capsys):
     import json
 
-    from robocell.main import main
+    from robocell.cli.main import main
 
     assert main(["sim", "scans", "--shape", "hammer", "--out", str(tmp_path)]) == 0
     (bundle,) = [line for line in capsys.readouterr().out.splitlines() if line]

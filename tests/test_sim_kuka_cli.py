@@ -15,10 +15,10 @@ import pytest
 from pydantic import TypeAdapter
 
 from tests.cell_fixtures import free_port, wait_until
-from wire.backends import KukaConfig, Workspace
-from wire.errors import DrivesOff, EmergencyStop
-from workers.robot.kuka.backend import KukaBackend
-from workers.robot.kuka.errors import KukaConnectionError
+from robocell.wire.backends import KukaConfig, Workspace
+from robocell.wire.errors import DrivesOff, EmergencyStop
+from robocell.workers.robot.kuka.backend import KukaBackend
+from robocell.workers.robot.kuka.errors import KukaConnectionError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -111,7 +111,7 @@ def test_a_dropped_link_is_a_connection_error(tmp_path):
 
 
 def test_fault_after_without_a_fault_is_refused(capsys):
-    from robocell.main import main
+    from robocell.cli.main import main
 
     assert main(["sim", "kuka", "--fault-after", "2"]) == 2
     assert capsys.readouterr().err == "robocell sim kuka: --fault-after goes with --fault\n"

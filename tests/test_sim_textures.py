@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from wire.bundle import load_bundle
-from workers.sim.objects import SuperquadricObject, rotation_z
-from workers.sim.render import Light, TableScene, project, render, render_layers
-from workers.sim.scans import PRINTED_SCENES, default_K, look_at, printed_set, write_scan
-from workers.sim.textures import TABLE_KINDS, PrintedObject, product_look
+from robocell.wire.bundle import load_bundle
+from robocell.workers.sim.objects import SuperquadricObject, rotation_z
+from robocell.workers.sim.render import Light, TableScene, project, render, render_layers
+from robocell.workers.sim.scans import PRINTED_SCENES, default_K, look_at, printed_set, write_scan
+from robocell.workers.sim.textures import TABLE_KINDS, PrintedObject, product_look
 
 SIZE = (320, 240)
 K = default_K(SIZE, f=300.0)
@@ -290,9 +290,9 @@ def test_backgrounds_are_written_and_named(tmp_path: Path):
 
 
 def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace(monkeypatch):
-    from wire.config import SimConfig
-    from workers.sim import scene
-    from workers.sim.camera import SceneCamera
+    from robocell.wire.config import SimConfig
+    from robocell.workers.sim import scene
+    from robocell.workers.sim.camera import SceneCamera
 
     monkeypatch.setattr(scene, "PRINTED_CELL_SCENE", True)
     objects = scene.scene_from_config(SimConfig())
@@ -315,7 +315,7 @@ def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace(mo
 def test_cli_writes_backgrounds_and_knows_the_printed_set(tmp_path: Path, capsys):
     import argparse
 
-    from robocell import sim as cli
+    from robocell.cli import sim as cli
 
     parser = argparse.ArgumentParser(prog="robocell sim scans")
     cli.add_arguments(parser)

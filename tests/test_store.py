@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wire.errors import StoreError
-from wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanRequest, ScanResult
-from cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, job_id_for, lifecycle_of, queued_event, queued_status
+from robocell.wire.errors import StoreError
+from robocell.wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanRequest, ScanResult
+from robocell.cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, job_id_for, lifecycle_of, queued_event, queued_status
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -234,8 +234,8 @@ def test_sqlite_failures_become_store_errors(tmp_path):
 _WRITER = """
 import sys
 from pathlib import Path
-from wire.messages import ScanRequest
-from cell.store import JobStore
+from robocell.wire.messages import ScanRequest
+from robocell.cell.store import JobStore
 
 store = JobStore(Path(sys.argv[1]))  # never closed: this process dies by SIGKILL
 for i in range(100_000):

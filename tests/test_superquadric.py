@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from core_cy._superquadric_cy import objective
-from core_cy.errors import CoreError, FitError
-from core_cy.scoring import volumetric_iou
-from core_cy.superquadric import (
+from robocell.core_cy._superquadric_cy import objective
+from robocell.core_cy.errors import CoreError, FitError
+from robocell.core_cy.scoring import volumetric_iou
+from robocell.core_cy.superquadric import (
     Superquadric,
     _Objective,
     fit_superquadric,

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import pytest
 
-from robocell.up import CellProcesses
-from wire.client import CellClient
-from wire.config import CellConfig
-from wire.messages import JobState, ScanRequest
-from workers.sim.scene import target_from_config
+from robocell.cli.up import CellProcesses
+from robocell.wire.client import CellClient
+from robocell.wire.config import CellConfig
+from robocell.wire.messages import JobState, ScanRequest
+from robocell.workers.sim.scene import target_from_config
 
 from tests.cell_fixtures import START_TIMEOUT_S, accepts, cell_config, free_port, wait_until
 

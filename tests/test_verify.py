@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cell.verify import MIN_VIEW_IOU, check_grasp, reduced_camera, verify_reconstruction
-from core_cy.camera import Camera
-from core_cy.grasp import plan_grasps
-from core_cy.gripper import Gripper
-from core_cy.reconstruct import View, reconstruct
-from core_cy.segment import RED_HSV
-from core_cy.superquadric import Superquadric as CoreSuperquadric
-from wire.messages import Grasp, Reconstruction, Superquadric
-from workers.sim.scans import standard_set
+from robocell.cell.verify import MIN_VIEW_IOU, check_grasp, reduced_camera, verify_reconstruction
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.grasp import plan_grasps
+from robocell.core_cy.gripper import Gripper
+from robocell.core_cy.reconstruct import View, reconstruct
+from robocell.core_cy.segment import RED_HSV
+from robocell.core_cy.superquadric import Superquadric as CoreSuperquadric
+from robocell.wire.messages import Grasp, Reconstruction, Superquadric
+from robocell.workers.sim.scans import standard_set
 
 GRIPPER = Gripper()
 PLANE = [0.0, 0.0, 1.0, 0.0]
@@ -133,10 +133,10 @@ def test_pictures_that_cannot_be_decoded_fail_the_check_naming_the_view(scans):
 
 def test_the_daemons_one_call_checks_an_answer_against_its_own_pictures(scans, tmp_path):
     """``verify_answer`` as the daemon calls it: the job's pictures, the request it sent, its configuration."""
-    from cell.job import Picture
-    from cell.verify import verify_answer
-    from wire.config import CellConfig
-    from wire.messages import CameraModel, ReconstructRequest, ReconstructView
+    from robocell.cell.job import Picture
+    from robocell.cell.verify import verify_answer
+    from robocell.wire.config import CellConfig
+    from robocell.wire.messages import CameraModel, ReconstructRequest, ReconstructView
 
     scan = scans["cylinder-04"]
     K = scan.K

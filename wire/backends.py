@@ -35,10 +35,10 @@ __all__ = [
 #: What makes each backend, by part and name: ``module:function``, the function taking the cell's
 #: configuration (and, for a camera, the worker's transport). Imported only when named.
 BACKENDS: dict[tuple[str, str], str] = {
-    ("robot", "sim"): "workers.sim.backends:make_robot",
-    ("robot", "kuka"): "workers.robot.kuka.factory:make_robot",
-    ("camera", "sim"): "workers.sim.backends:make_camera",
-    ("camera", "axis"): "workers.camera.axis_factory:make_camera",
+    ("robot", "sim"): "robocell.workers.sim.backends:make_robot",
+    ("robot", "kuka"): "robocell.workers.robot.kuka.factory:make_robot",
+    ("camera", "sim"): "robocell.workers.sim.backends:make_camera",
+    ("camera", "axis"): "robocell.workers.camera.axis_factory:make_camera",
 }
 
 

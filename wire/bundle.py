@@ -23,11 +23,11 @@ from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
-from core_cy.camera import Camera
-from core_cy.errors import CoreError
-from core_cy.images import MAX_IMAGE_PIXELS, check_calibrated_size, checked_size
-from core_cy.reconstruct import View
-from core_cy.segment import AUTO, Segmentation
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.images import MAX_IMAGE_PIXELS, check_calibrated_size, checked_size
+from robocell.core_cy.reconstruct import View
+from robocell.core_cy.segment import AUTO, Segmentation
 
 from .errors import BundleError
 from .messages import field_errors

@@ -136,7 +136,7 @@ class GripperConfig(Section):
 
     @model_validator(mode="after")
     def _a_gripper(self) -> "GripperConfig":
-        from core_cy.gripper import Gripper  # the one check of a gripper's dimensions
+        from robocell.core_cy.gripper import Gripper  # the one check of a gripper's dimensions
 
         Gripper.from_dict(self.dimensions())  # a GripperError is a ValueError: named by pydantic
         return self

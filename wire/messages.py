@@ -13,7 +13,7 @@ import enum
 import math
 from typing import Annotated, Any, Literal, TypeVar
 
-from core_cy.rigid import rigid_error
+from robocell.core_cy.rigid import rigid_error
 from pydantic import (AfterValidator, BeforeValidator, BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt,
                       StrictStr, ValidationError, field_validator, model_validator)
 

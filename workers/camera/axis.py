@@ -29,14 +29,14 @@ from typing import TYPE_CHECKING, Literal
 
 import httpx
 
-from core_cy.images import jpeg_size
-from wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
+from robocell.core_cy.images import jpeg_size
+from robocell.wire.errors import (CameraAuthError, CameraConnectionError, CameraError, CameraResponseError, CameraTimeout,
                          ConfigError)
 
 from .backend import Camera, Snapshot
 
 if TYPE_CHECKING:
-    from wire.backends import AxisCameraConfig
+    from robocell.wire.backends import AxisCameraConfig
 
 __all__ = ["AxisCamera", "SNAPSHOT_PATH", "PARAM_PATH", "parse_resolutions"]
 

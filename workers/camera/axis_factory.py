@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from wire.backends import AxisCameraConfig
-from wire.config import CellConfig
-from wire.transport import BaseTransport
+from robocell.wire.backends import AxisCameraConfig
+from robocell.wire.config import CellConfig
+from robocell.wire.transport import BaseTransport
 
 from .axis import AxisCamera
 

@@ -11,12 +11,12 @@ import asyncio
 import logging
 import time
 
-from wire import keys
-from wire.backends import load_backend
-from wire.config import CellConfig
-from wire.messages import CaptureInfo
-from wire.process import open_transport, run_until_stopped
-from wire.transport import BaseTransport, Request, Response
+from robocell.wire import keys
+from robocell.wire.backends import load_backend
+from robocell.wire.config import CellConfig
+from robocell.wire.messages import CaptureInfo
+from robocell.wire.process import open_transport, run_until_stopped
+from robocell.wire.transport import BaseTransport, Request, Response
 
 from .backend import Camera
 

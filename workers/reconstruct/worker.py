@@ -31,21 +31,21 @@ from concurrent.futures import ProcessPoolExecutor
 import cv2
 import numpy as np
 
-from wire import keys
-from wire.bundle import core_segmentation
-from wire.config import CellConfig
-from wire.errors import TransportError
-from wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer, Reconstruction, ReconstructReply,
+from robocell.wire import keys
+from robocell.wire.bundle import core_segmentation
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import TransportError
+from robocell.wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer, Reconstruction, ReconstructReply,
                            ReconstructRequest, Superquadric, WorkerLoad, parse)
-from wire.transport import Request, RequestError, Response, Transport
-from core_cy.camera import Camera
-from core_cy.errors import CoreError
-from core_cy.grasp import plan_grasps
-from core_cy.gripper import Gripper
-from core_cy.images import check_calibrated_size, checked_size
-from core_cy.next_view import choose_next_view
-from core_cy.reconstruct import Options, View, reconstruct
-from wire.process import open_transport, run_until_stopped
+from robocell.wire.transport import Request, RequestError, Response, Transport
+from robocell.core_cy.camera import Camera
+from robocell.core_cy.errors import CoreError
+from robocell.core_cy.grasp import plan_grasps
+from robocell.core_cy.gripper import Gripper
+from robocell.core_cy.images import check_calibrated_size, checked_size
+from robocell.core_cy.next_view import choose_next_view
+from robocell.core_cy.reconstruct import Options, View, reconstruct
+from robocell.wire.process import open_transport, run_until_stopped
 
 __all__ = ["reconstruct_request", "ReconstructWorker", "Job", "Run", "main", "default_worker_id"]
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core_cy.plan import Workspace, workspace_violation
-from wire.errors import MoveRefused
+from robocell.core_cy.plan import Workspace, workspace_violation
+from robocell.wire.errors import MoveRefused
 
 __all__ = ["RobotBackend", "ProgressCallback", "Grip", "refuse_outside"]
 

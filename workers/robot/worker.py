@@ -13,12 +13,12 @@ import time
 
 import numpy as np
 
-from wire import keys
-from wire.backends import load_backend
-from wire.config import CellConfig
-from wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
-from wire.process import open_transport, run_until_stopped
-from wire.transport import Request, RequestError, Response, Transport
+from robocell.wire import keys
+from robocell.wire.backends import load_backend
+from robocell.wire.config import CellConfig
+from robocell.wire.messages import GripReply, GripRequest, MoveReply, MoveRequest, RobotState, parse
+from robocell.wire.process import open_transport, run_until_stopped
+from robocell.wire.transport import Request, RequestError, Response, Transport
 
 from .backend import RobotBackend, refuse_outside
 

@@ -15,11 +15,11 @@ from urllib.parse import urlsplit
 import numpy as np
 import zenoh
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import ConfigError, TransportError
-from wire.messages import RobotState
-from wire.transport import session_config
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import ConfigError, TransportError
+from robocell.wire.messages import RobotState
+from robocell.wire.transport import session_config
 
 from .scene import scene_from_config
 

@@ -9,12 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import TransportError
-from wire.messages import RobotState, parse
-from wire.transport import BaseTransport
-from workers.camera.backend import Camera, Snapshot
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import TransportError
+from robocell.wire.messages import RobotState, parse
+from robocell.wire.transport import BaseTransport
+from robocell.workers.camera.backend import Camera, Snapshot
 
 from .camera import SceneCamera, SimCamera
 from .robot import SceneGripper, SimRobot

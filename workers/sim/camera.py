@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wire.errors import CameraError
-from workers.camera.backend import Camera, Snapshot
+from robocell.wire.errors import CameraError
+from robocell.workers.camera.backend import Camera, Snapshot
 
 from .objects import SimObject
 from .render import render

@@ -34,10 +34,10 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from workers.robot.kuka import variables as v
-from wire.backends import SIM_OPC_SERVER, KukaKvpConfig, KukaOpcConfig
-from workers.robot.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
-from workers.robot.kuka.kvp import READ, WRITE, decode_request, encode_response
+from robocell.workers.robot.kuka import variables as v
+from robocell.wire.backends import SIM_OPC_SERVER, KukaKvpConfig, KukaOpcConfig
+from robocell.workers.robot.kuka.e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
+from robocell.workers.robot.kuka.kvp import READ, WRITE, decode_request, encode_response
 
 __all__ = ["SimController", "KvpServer", "OpcGateway", "SimKuka", "main"]
 

@@ -20,7 +20,7 @@ import Pyro5.callcontext
 import Pyro5.server
 from Pyro5.api import register_class_to_dict
 
-from workers.robot.kuka.variables import ALL
+from robocell.workers.robot.kuka.variables import ALL
 
 if TYPE_CHECKING:
     from .kuka import OpcGateway

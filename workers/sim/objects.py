@@ -17,7 +17,7 @@ from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-from core_cy.meshes import vertex_normals  # noqa: F401  (the one; renderers import it from here too)
+from robocell.core_cy.meshes import vertex_normals  # noqa: F401  (the one; renderers import it from here too)
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [

@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from wire.backends import SimRobotConfig
-from wire.config import CellConfig
-from workers.robot.backend import Grip, ProgressCallback, RobotBackend
+from robocell.wire.backends import SimRobotConfig
+from robocell.wire.config import CellConfig
+from robocell.workers.robot.backend import Grip, ProgressCallback, RobotBackend
 
 from .judge import JudgeGripper, Part, judge, parts_from_truth
 

@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
-from core_cy.plan import look_at  # the one look_at: camera-to-world, OpenCV axes
+from robocell.core_cy.plan import look_at  # the one look_at: camera-to-world, OpenCV axes
 from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject

@@ -12,10 +12,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from core_cy.superquadric import Superquadric
+from robocell.core_cy.superquadric import Superquadric
 
-from wire.config import SimConfig
-from wire.errors import ConfigError
+from robocell.wire.config import SimConfig
+from robocell.wire.errors import ConfigError
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
 from .render import Light, TableScene
 from .textures import PrintedObject, product_look

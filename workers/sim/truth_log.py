@@ -15,10 +15,10 @@ from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-from core_cy.meshes import vertex_normals
-from wire import keys
-from wire.messages import JobEvent, parse
-from wire.transport import BaseTransport
+from robocell.core_cy.meshes import vertex_normals
+from robocell.wire import keys
+from robocell.wire.messages import JobEvent, parse
+from robocell.wire.transport import BaseTransport
 
 from .objects import SimObject
 

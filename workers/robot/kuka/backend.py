@@ -21,12 +21,12 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from wire.backends import KukaConfig, KukaKvpConfig, Workspace
+from robocell.wire.backends import KukaConfig, KukaKvpConfig, Workspace
 
 from ..backend import Grip, RobotBackend, refuse_outside
 from . import variables as v
 from .e6pos import E6Pos, e6pos_from_pose, format_e6pos, parse_e6pos, pose_from_e6pos
-from wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
+from robocell.wire.errors import DrivesOff, EmergencyStop, MoveFailed, MoveRefused
 
 from .errors import (ControllerBusy, ControllerRefused, GripperTimeout, KukaError, KukaProtocolError, KukaTimeout,
                      Unreachable)

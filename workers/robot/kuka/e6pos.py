@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core_cy.rigid import rigid_error
+from robocell.core_cy.rigid import rigid_error
 
 __all__ = [
     "E6Pos", "E6Axis", "rotation_from_abc", "abc_from_rotation", "e6pos_from_pose", "pose_from_e6pos",

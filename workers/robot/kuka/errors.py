@@ -28,8 +28,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from wire import errors
-from wire.errors import CellError, MoveFailed, RobotError
+from robocell.wire import errors
+from robocell.wire.errors import CellError, MoveFailed, RobotError
 
 __all__ = [
     "KukaError", "KukaConnectionError", "KukaTimeout", "KukaProtocolError", "KukaVariableError", "ControllerBusy",

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from wire.backends import KukaRobotConfig
-from wire.config import CellConfig
+from robocell.wire.backends import KukaRobotConfig
+from robocell.wire.config import CellConfig
 
 from .backend import KukaBackend
 

@@ -44,8 +44,8 @@ async def probe(url: str, *, username: str | None = None, password: str | None =
     import cv2
     import numpy as np
 
-    from wire.errors import CameraError
-    from workers.camera.axis import AxisCamera
+    from robocell.wire.errors import CameraError
+    from robocell.workers.camera.axis import AxisCamera
 
     camera_args = {"username": username, "password": password, "auth": auth, "timeout_s": timeout_s,
                    "verify": verify, "retries": 0}
@@ -78,7 +78,7 @@ async def probe(url: str, *, username: str | None = None, password: str | None =
 
 
 def _probe(args: argparse.Namespace) -> int:
-    from wire.errors import ConfigError
+    from robocell.wire.errors import ConfigError
 
     password = os.environ.get(args.password_env) if args.user else None
     if args.user and password is None:

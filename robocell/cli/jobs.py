@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, TextIO
 from .command import Commands
 
 if TYPE_CHECKING:
-    from wire.client import AsyncCellClient
-    from wire.messages import CellStatus, JobEvent, ScanRequest
+    from robocell.wire.client import AsyncCellClient
+    from robocell.wire.messages import CellStatus, JobEvent, ScanRequest
 
 __all__ = ["register", "format_status", "format_result", "print_event"]
 
@@ -71,8 +71,8 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
     any connection), then ``action`` talks to the cell's daemon."""
 
     def run(args: argparse.Namespace) -> int:
-        from wire.config import load_config
-        from wire.errors import CellError, NoResponder
+        from robocell.wire.config import load_config
+        from robocell.wire.errors import CellError, NoResponder
 
         config = load_config(args.config)
         args.cell_config = config
@@ -96,7 +96,7 @@ def _command(action: Action, prepare: Callable[[argparse.Namespace], object] | N
 
 
 async def _connected(action: Action, args: argparse.Namespace, config) -> int:
-    from wire.client import AsyncCellClient
+    from robocell.wire.client import AsyncCellClient
 
     client = await AsyncCellClient.connect(config.zenoh.router, config.cell_id,
                                            settings=config.zenoh.client_settings())
@@ -115,7 +115,7 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
     import numpy as np
     from pydantic import ValidationError
 
-    from wire.messages import PickRequest, ScanRequest, field_errors
+    from robocell.wire.messages import PickRequest, ScanRequest, field_errors
 
     if args.place is not None and not args.pick:
         raise ValueError("--place goes with --pick")
@@ -144,8 +144,8 @@ def _scan_request(args: argparse.Namespace) -> ScanRequest:
 
 async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     """Submit, show the progress, print the result; Ctrl-C cancels the job (a second leaves it running)."""
-    from wire.errors import CellError
-    from wire.messages import JobState
+    from robocell.wire.errors import CellError
+    from robocell.wire.messages import JobState
 
     # Progress is for a person: with --json it goes to stderr, and stdout has the one JSON document.
     progress = sys.stderr if args.json else sys.stdout
@@ -175,8 +175,8 @@ async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
 
 async def _watch(client: AsyncCellClient, args: argparse.Namespace, job_id: str, interrupts: asyncio.Queue,
                  progress: TextIO, began: float) -> int:
-    from wire.errors import CellError
-    from wire.messages import JobState
+    from robocell.wire.errors import CellError
+    from robocell.wire.messages import JobState
 
     loop = asyncio.get_running_loop()
     heard = ["queued"]  # the job's last state, as its events told
@@ -288,7 +288,7 @@ def format_result(result, *, seconds: float | None = None) -> str:
 
 
 def _job_states(args: argparse.Namespace) -> set | None:
-    from wire.messages import JobState
+    from robocell.wire.messages import JobState
 
     known = [state.value for state in JobState]
     unknown = [state for state in args.state or [] if state not in known]
@@ -309,7 +309,7 @@ async def _jobs(client: AsyncCellClient, args: argparse.Namespace) -> int:
 
 
 async def _job(client: AsyncCellClient, args: argparse.Namespace) -> int:
-    from wire.messages import JobState
+    from robocell.wire.messages import JobState
 
     status = await client.status(args.job_id)
     document = status.model_dump(mode="json")

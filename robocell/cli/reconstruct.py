@@ -53,8 +53,8 @@ def _positive(text: str) -> int:
 
 def _gripper(path: str | None):
     """The gripper of ``--gripper``, or the built-in one; a bad file is a one-line error."""
-    from core_cy.errors import CoreError
-    from core_cy.gripper import DEFAULT_GRIPPER, Gripper
+    from robocell.core_cy.errors import CoreError
+    from robocell.core_cy.gripper import DEFAULT_GRIPPER, Gripper
 
     if path is None:
         return DEFAULT_GRIPPER
@@ -67,8 +67,8 @@ def _gripper(path: str | None):
 
 def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
     """Add DESIGN.md §3's ``grasps`` to a result line, and their time to ``timings_ms``."""
-    from core_cy.grasp import plan_grasps
-    from core_cy.gripper import grasps_to_json
+    from robocell.core_cy.grasp import plan_grasps
+    from robocell.core_cy.gripper import grasps_to_json
 
     start = time.perf_counter()
     grasps = plan_grasps(result.parts, bundle.support_plane, gripper, residual=result.residual,
@@ -94,7 +94,7 @@ def _write_masks(directory: str, scan: str, silhouettes) -> None:
 
 def _with_next_view(line: dict, result, bundle) -> dict:
     """Add ``next_view`` (core_cy.next_view) to a result line, and its time to ``timings_ms``."""
-    from core_cy.next_view import choose_next_view
+    from robocell.core_cy.next_view import choose_next_view
 
     start = time.perf_counter()
     choice = choose_next_view(result, [view.camera for view in bundle.views], bundle.candidates,
@@ -109,10 +109,10 @@ def _with_next_view(line: dict, result, bundle) -> dict:
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
-    from core_cy.errors import CoreError
-    from core_cy.reconstruct import Options, reconstruct
-    from wire.bundle import load_bundle
-    from wire.errors import BundleError
+    from robocell.core_cy.errors import CoreError
+    from robocell.core_cy.reconstruct import Options, reconstruct
+    from robocell.wire.bundle import load_bundle
+    from robocell.wire.errors import BundleError
 
     given = {"n_points": args.n_points, "inside_weight": args.inside_weight, "cauchy_scale": args.cauchy_scale}
     options = Options(**{name: value for name, value in given.items() if value is not None})

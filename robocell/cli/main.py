@@ -1,7 +1,7 @@
 """The ``robocell`` command: one entry point for every part of robocell.
 
 Each command lives in a module of this package that registers it (see
-``robocell.command``); :data:`MODULES` lists them in the order ``--help``
+``robocell.cli.command``); :data:`MODULES` lists them in the order ``--help``
 shows them.
 """
 
@@ -19,8 +19,8 @@ import logging
 import signal
 import sys
 
-from core_cy.errors import CoreError
-from wire.errors import CellError
+from robocell.core_cy.errors import CoreError
+from robocell.wire.errors import CellError
 
 from . import calibrate, camera, config, demo, export, jobs, reconstruct, replay, services, sim
 from .command import Commands
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
 def _one_line(exc: ValueError) -> str:
     from pydantic import ValidationError  # loaded already, if it raised this
 
-    from wire.messages import field_errors
+    from robocell.wire.messages import field_errors
 
     return field_errors(exc) if isinstance(exc, ValidationError) else " ".join(str(exc).split())
 

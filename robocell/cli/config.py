@@ -44,7 +44,7 @@ def message_schemas() -> dict[str, str]:
     Schema's text, by file name (``ScanRequest.json``): what ``schema --write`` writes."""
     import json
 
-    from wire import messages
+    from robocell.wire import messages
 
     models = [getattr(messages, name) for name in messages.__all__]
     found = {model.__name__: model for model in models
@@ -103,7 +103,7 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _print_config(args: argparse.Namespace) -> int:
-    from wire.config import load_config
+    from robocell.wire.config import load_config
 
     print(load_config(args.config).model_dump_json(indent=2))
     return 0
@@ -179,9 +179,9 @@ def write_config(path: str | Path, table: str, values: dict[str, Any]) -> None:
     from pydantic import ValidationError
     from tomlkit.exceptions import TOMLKitError
 
-    from wire.config import CellConfig
-    from wire.errors import ConfigError
-    from wire.messages import field_errors
+    from robocell.wire.config import CellConfig
+    from robocell.wire.errors import ConfigError
+    from robocell.wire.messages import field_errors
 
     path = Path(path)
     text = path.read_text(encoding="utf-8") if path.exists() else ""

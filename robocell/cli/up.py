@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from wire import keys
-from wire.config import CellConfig
-from wire.errors import CellError
-from wire.transport import Transport
+from robocell.wire import keys
+from robocell.wire.config import CellConfig
+from robocell.wire.errors import CellError
+from robocell.wire.transport import Transport
 
 __all__ = ["CellProcesses", "up", "serves_sim_camera", "on_interrupt", "port_holder", "check_port_free"]
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from .command import Commands
 
 if TYPE_CHECKING:
-    from wire.config import CellConfig
+    from robocell.wire.config import CellConfig
 
 __all__ = ["register", "free_port", "local_config"]
 
@@ -42,7 +42,7 @@ def local_config(run_dir: str | Path, **fields) -> CellConfig:
     ``fields`` are the configuration's other top-level fields; a section given as a dict
     is merged into the one made here (``camera={"timeout_s": 1.0}`` keeps the free port).
     """
-    from wire.config import CellConfig
+    from robocell.wire.config import CellConfig
 
     data: dict = {"run_dir": str(run_dir), "zenoh": {"router": f"tcp/127.0.0.1:{free_port()}"},
                   "camera": {"url": f"http://127.0.0.1:{free_port()}"}}
@@ -66,12 +66,12 @@ _CANCEL_WAIT_S = 3.0
 async def _demo(run_dir: Path, cells: list) -> int:
     import numpy as np
 
-    from core_cy.scoring import centre_error, volumetric_iou
-    from core_cy.superquadric import Superquadric
-    from wire.client import AsyncCellClient
-    from wire.errors import CellError
-    from wire.messages import JobState, PickRequest, ScanRequest
-    from workers.sim.scene import truth_from_config
+    from robocell.core_cy.scoring import centre_error, volumetric_iou
+    from robocell.core_cy.superquadric import Superquadric
+    from robocell.wire.client import AsyncCellClient
+    from robocell.wire.errors import CellError
+    from robocell.wire.messages import JobState, PickRequest, ScanRequest
+    from robocell.workers.sim.scene import truth_from_config
 
     from .jobs import print_event
     from .up import _STOP_WAIT_S, CellProcesses, on_interrupt

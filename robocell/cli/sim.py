@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from workers.sim.objects import COMPOUND_KINDS, FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject, compound
+from robocell.workers.sim.objects import COMPOUND_KINDS, FAMILIES, CupStack, LumpyFigure, SimObject, SuperquadricObject, compound
 
 from .command import Commands
 
@@ -100,8 +100,8 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
-    from workers.sim.grasp_set import grasp_set
-    from workers.sim.scans import broad_set, compound_set, make_spec, printed_set, standard_set
+    from robocell.workers.sim.grasp_set import grasp_set
+    from robocell.workers.sim.scans import broad_set, compound_set, make_spec, printed_set, standard_set
 
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
@@ -182,10 +182,10 @@ def add_kuka_arguments(parser: argparse.ArgumentParser) -> None:
 def _kuka(args: argparse.Namespace) -> int:
     import asyncio
 
-    from wire.config import load_config
-    from wire.process import run_until_stopped
-    from workers.sim import kuka
-    from workers.sim.robot import SceneGripper
+    from robocell.wire.config import load_config
+    from robocell.wire.process import run_until_stopped
+    from robocell.workers.sim import kuka
+    from robocell.workers.sim.robot import SceneGripper
 
     config = load_config(args.config)
     # The gripper's input confirms a hold where the configuration's [gripper] holds its [sim] object.
@@ -207,8 +207,8 @@ def _kuka(args: argparse.Namespace) -> int:
 
 
 def _camera(args: argparse.Namespace) -> int:
-    from wire.config import load_config
-    from workers.sim import axis_process
+    from robocell.wire.config import load_config
+    from robocell.workers.sim import axis_process
 
     return axis_process.main(load_config(args.config))
 

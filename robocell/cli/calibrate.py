@@ -2,7 +2,7 @@
 
 The calibration commands read image files, call :mod:`core_cy.calibrate`,
 print JSON and, with ``--write-config``, put the result into a cell
-configuration file (``robocell.config.write_config``, which keeps the file's
+configuration file (``robocell.cli.config.write_config``, which keeps the file's
 comments): ``[camera]`` ``K`` and ``dist``, or the top-level ``T_flange_cam``.
 ``capture`` moves the running cell's robot through poses and saves an image
 at each, for ``handeye``.
@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from core_cy.errors import CalibrationError
+from robocell.core_cy.errors import CalibrationError
 
 from .command import Commands
 from .config import write_config
@@ -26,7 +26,7 @@ from .config import write_config
 if TYPE_CHECKING:
     import numpy as np
 
-    from wire.config import CellConfig
+    from robocell.wire.config import CellConfig
 
 __all__ = ["register", "capture"]
 
@@ -62,8 +62,8 @@ def _report_skipped(skipped: list[str], total: int) -> None:
 
 
 def _intrinsics_command(args: argparse.Namespace) -> int:
-    from core_cy.calibrate import calibrate_intrinsics, parse_board
-    from wire.config import load_config
+    from robocell.core_cy.calibrate import calibrate_intrinsics, parse_board
+    from robocell.wire.config import load_config
 
     result = calibrate_intrinsics(_read_images(args.images), parse_board(args.board), args.square,
                                   k3=args.k3, names=args.images)
@@ -85,7 +85,7 @@ def _camera_model(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | No
     """K, dist and (if known) the image size they are for: from --K-from, else from the --config file."""
     import numpy as np
 
-    from wire.config import load_config
+    from robocell.wire.config import load_config
 
     if args.k_from:
         data = _read_json(args.k_from, "intrinsics")
@@ -101,7 +101,7 @@ def _camera_model(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | No
 
 
 def _handeye_command(args: argparse.Namespace) -> int:
-    from core_cy.calibrate import calibrate_hand_eye, parse_board
+    from robocell.core_cy.calibrate import calibrate_hand_eye, parse_board
 
     K, dist, size = _camera_model(args)
     poses = _read_json(args.poses, "poses")
@@ -162,9 +162,9 @@ async def capture(client_config: CellConfig, poses: list, out_dir: str | Path, *
     import numpy as np
     from pydantic import ValidationError
 
-    from wire import keys
-    from wire.messages import CaptureRequest, MoveReply, MoveRequest, field_errors, parse
-    from wire.transport import Transport
+    from robocell.wire import keys
+    from robocell.wire.messages import CaptureRequest, MoveReply, MoveRequest, field_errors, parse
+    from robocell.wire.transport import Transport
 
     moves = []
     for i, pose in enumerate(poses):
@@ -200,7 +200,7 @@ def _capture_command(args: argparse.Namespace) -> int:
     poses = _read_json(args.poses, "poses")
     if not isinstance(poses, list):
         raise CalibrationError(f"{args.poses}: expected a JSON list of 4x4 flange poses")
-    from wire.config import load_config
+    from robocell.wire.config import load_config
 
     config = load_config(args.config)
     images = asyncio.run(capture(config, poses, args.out, settle_s=args.settle))

@@ -63,9 +63,9 @@ def _has_display() -> bool:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from cell.recording import find_recording, replay_command
-    from wire.config import load_config
-    from wire.errors import ConfigError
+    from robocell.cell.recording import find_recording, replay_command
+    from robocell.wire.config import load_config
+    from robocell.wire.errors import ConfigError
 
     run_dir = Path(load_config(args.config).run_dir)
     path = find_recording(args.job, run_dir)

@@ -1,14 +1,14 @@
 """``robocell router``, ``worker robot|camera|reconstruct``, ``cell`` and ``up``: the cell's processes.
 
 Each runs until Ctrl-C or SIGTERM; ``up`` runs all of them at once as its
-children (``robocell.up``).
+children (``robocell.cli.up``).
 """
 
 from __future__ import annotations
 
 import argparse
 
-from wire import keys
+from robocell.wire import keys
 
 from .command import Commands
 
@@ -23,13 +23,13 @@ def _worker_id(text: str) -> str:
 
 
 def _config(args: argparse.Namespace):
-    from wire.config import load_config
+    from robocell.wire.config import load_config
 
     return load_config(args.config)
 
 
 def _router(args: argparse.Namespace) -> int:
-    from cell.service import run_router
+    from robocell.cell.service import run_router
 
     from .up import check_port_free
 
@@ -42,20 +42,20 @@ def _router(args: argparse.Namespace) -> int:
 def _worker(args: argparse.Namespace) -> int:
     config = _config(args)
     if args.kind == "robot":
-        from workers.robot import worker as robot
+        from robocell.workers.robot import worker as robot
 
         return robot.main(config)
     if args.kind == "camera":
-        from workers.camera import worker as camera
+        from robocell.workers.camera import worker as camera
 
         return camera.main(config)
-    from workers.reconstruct import worker as reconstructor
+    from robocell.workers.reconstruct import worker as reconstructor
 
     return reconstructor.main(config, args.id)
 
 
 def _cell(args: argparse.Namespace) -> int:
-    from cell.service import run_daemon
+    from robocell.cell.service import run_daemon
 
     return run_daemon(_config(args))
 

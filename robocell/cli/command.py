@@ -3,7 +3,7 @@
 Each module of this package that has commands exposes ``register(commands)``
 and adds them with :meth:`Commands.add` (a leaf: its parser, which runs
 ``run(args)``) or :meth:`Commands.group` (a word with commands below it, as
-``robocell sim scans``). ``robocell.main`` lists the modules. Every leaf also
+``robocell sim scans``). ``robocell.cli.main`` lists the modules. Every leaf also
 takes the global options (``--config``, ``-v``), before or after its name.
 
 A module imports only what building its parsers needs; whatever its commands

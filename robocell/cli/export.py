@@ -35,8 +35,8 @@ import numpy as np
 from .command import Commands
 
 if TYPE_CHECKING:
-    from core_cy.superquadric import Superquadric
-    from wire.config import CellConfig
+    from robocell.core_cy.superquadric import Superquadric
+    from robocell.wire.config import CellConfig
 
 __all__ = ["register", "FORMATS", "Model", "View", "GraspFrame", "model_from_result", "model_from_bundle",
            "model_from_job", "write_model", "part_mesh"]
@@ -113,7 +113,7 @@ def register(commands: Commands) -> None:
 # --- the model ---------------------------------------------------------------------------------
 
 def _superquadric(data: dict) -> Superquadric:
-    from core_cy.superquadric import Superquadric
+    from robocell.core_cy.superquadric import Superquadric
 
     return Superquadric(np.asarray(data["size"], float), np.asarray(data["shape"], float),
                         np.asarray(data["T_world_object"], float))
@@ -129,7 +129,7 @@ def model_from_result(name: str, result: dict) -> Model:
 
 
 def _image_size(data: bytes, view: int) -> tuple[int, int]:
-    from core_cy.images import checked_size
+    from robocell.core_cy.images import checked_size
 
     return checked_size(data, view=view)
 
@@ -142,10 +142,10 @@ def model_from_bundle(directory: str | Path, gripper_path: str | None = None) ->
     BundleError, CoreError
         A bad bundle or gripper file (the message names what is wrong).
     """
-    from core_cy.grasp import plan_grasps
-    from core_cy.gripper import grasps_to_json
-    from core_cy.reconstruct import reconstruct
-    from wire.bundle import load_bundle
+    from robocell.core_cy.grasp import plan_grasps
+    from robocell.core_cy.gripper import grasps_to_json
+    from robocell.core_cy.reconstruct import reconstruct
+    from robocell.wire.bundle import load_bundle
 
     from .reconstruct import _gripper
 
@@ -195,7 +195,7 @@ def _recorded(path: Path) -> tuple[dict[int, bytes], np.ndarray | None]:
 
 
 async def _fetch_job(job_id: str, config: CellConfig, timeout: float):
-    from wire.client import AsyncCellClient
+    from robocell.wire.client import AsyncCellClient
 
     async with await AsyncCellClient.connect(config.zenoh.router, config.cell_id,
                                              settings=config.zenoh.client_settings(), timeout=timeout) as client:
@@ -236,7 +236,7 @@ def part_mesh(part: Superquadric, *, world: bool):
     """A part's surface as a ``trimesh.Trimesh``: in the world, or in the part's own frame."""
     import trimesh
 
-    from core_cy.superquadric import Superquadric, mesh
+    from robocell.core_cy.superquadric import Superquadric, mesh
 
     placed = part if world else Superquadric(part.size, part.shape, np.eye(4))
     vertices, triangles = mesh(placed, _MESH_RINGS, _MESH_RING_POINTS)
@@ -497,7 +497,7 @@ def _is_bundle(source: str) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from wire.config import load_config
+    from robocell.wire.config import load_config
 
     out = Path(args.out) if args.out else Path(Path(args.source).resolve().name + _SUFFIX[args.format])
     if out.exists() and args.format == "rosbag":

@@ -1,0 +1,1 @@
+"""The ``robocell`` command: one module per group of subcommands (``main`` lists them)."""
