@@ -21,15 +21,17 @@ Otherwise parts are proposed, each round from the union so far:
 
 Every proposal is refined against the silhouettes of the union (all parts
 together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
-a few steps; the best goes on to convergence; the parts that do not pay are
+a few steps; the best goes on to convergence (and, while it leaves the silhouettes
+unexplained, the proposals left behind go on in turn); the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
-if it has more parts than before and gains ``PART_GAIN`` of IoU over the model
-before it in two views (a union whose parts all pay but that gains so in one
-view only, a dumbbell's two weights without the bar, goes one round on before
-it is given up); at most ``MAX_PARTS`` parts. Last, each part standing a little
-tilted is tried resting on a face (DESIGN.md §1.12), kept where that fits better,
-and a part that floats (what holds it up hidden behind it in every view) is
-taken down to the table where that explains the silhouettes as well.
+if it gains ``PART_GAIN`` of IoU over the model before it in two views, with more
+parts, or with no more and a lower edge cost (a better minimum); a union whose
+parts all pay but that gains so in one view only, a dumbbell's two weights
+without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
+parts. Last, each part standing a little tilted is tried resting on a face
+(DESIGN.md §1.12), kept where that fits better, and a part that floats (what
+holds it up hidden behind it in every view) is taken down to the table where
+that explains the silhouettes as well.
 """
 
 from __future__ import annotations
@@ -40,10 +42,11 @@ import cv2
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _SEARCH_ITERATIONS, _Fitter
+from .silhouette_fit import _EXPLAINED_PX, _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
@@ -178,11 +181,17 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1)).parts
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
         candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
-        # More parts must explain more: as much as one part must pay, in as many views.
-        gained = np.sum(np.asarray(candidate_ious) - np.asarray(ious) >= PART_GAIN)
-        if len(candidate) > len(current) and gained >= _views_to_pay(len(cameras)):
+        # More parts must explain more: as much as one part must pay, in as many views. A union of no
+        # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
+        # (not the one superquadric: that is the single fit's, from its own starts).
+        gains = np.asarray(candidate_ious) - np.asarray(ious)
+        gained = int(np.sum(gains >= PART_GAIN))
+        explains_more = gained >= _views_to_pay(len(cameras))
+        if explains_more and len(candidate) <= len(current):
+            explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
+        if explains_more:
             current, ious, trial = candidate, candidate_ious, None
         elif trial is None and len(candidate) > len(base) and gained >= 1:
             trial = candidate  # it explains more in one view at least: not just a part cut in two
@@ -305,14 +314,20 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) ->
         far = np.ones(len(points), bool)
         far[inside] = distance[row[inside], column[inside]] > _UNEXPLAINED_PX
         outside += far
-    unexplained = points[outside >= _views_to_pay(len(cameras))]
+    return _grouped(parts, points[outside >= _views_to_pay(len(cameras))], plane)
+
+
+def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+    """The union and one more part on each of the largest neighbourhoods of ``unexplained``."""
     if len(unexplained) < _MIN_GROUP:
         return []
     # Neighbourhoods: points within a few of their typical spacing of each other.
-    gaps = np.linalg.norm(unexplained[:, None] - unexplained[None], axis=2)
-    np.fill_diagonal(gaps, np.inf)
-    reach = 2.5 * float(np.median(gaps.min(axis=1)))
-    count, label = connected_components(csr_matrix(gaps <= reach), directed=False)
+    tree = cKDTree(unexplained)
+    nearest, _ = tree.query(unexplained, k=2)
+    reach = 2.5 * float(np.median(nearest[:, 1]))
+    pairs = tree.query_pairs(reach, output_type="ndarray")
+    links = csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(unexplained),) * 2)
+    count, label = connected_components(links, directed=False)
     sizes = np.bincount(label, minlength=count)
     floor = _FLOOR * np.mean([part.size for part in parts], axis=0).min() * np.ones(3)
     proposals = []

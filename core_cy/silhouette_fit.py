@@ -52,6 +52,9 @@ _SEARCH_ITERATIONS = 2
 _FINALISTS, _FINAL_ITERATIONS = 2, 6
 # Edge samples lie this close (px, RMS) to the true outline: colour edges ~0.15, binary masks ~0.3.
 _NOISE_PX = 0.5
+# A model whose outlines run farther than this (px, RMS) from the samples leaves the silhouettes
+# unexplained (the worst edges, binary masks, lie ~0.3 from the truth): the starts left behind go on.
+_EXPLAINED_PX = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,22 +212,43 @@ class _Fitter:
         problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
-    def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS) -> Descent:
+    def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
+                explained_px: float | None = None) -> Descent:
         """The start whose descent fits best: every start a few steps, the ``finalists`` best of
         them a few more, and the best of those on to convergence. Two bodies (a lying cylinder and a
-        bar) may explain the views alike after a step or two, and only a few steps on tell apart."""
+        bar) may explain the views alike after a step or two, and only a few steps on tell apart.
+
+        With ``explained_px``: while the winner's outlines stay farther than that (RMS) from the
+        samples, the silhouettes disagree with it (a bad local minimum): the starts left behind go
+        on, in the order of their cost, each a few more steps, and one that then fits better than
+        the winner goes on to convergence and wins if it ends lower (each start is tried once)."""
         alive = [self.descent(start) for start in starts]
         if len(alive) > 1:
             for descent in alive:
                 descent.run(_SEARCH_ITERATIONS)
-            alive = sorted(alive, key=lambda descent: descent.cost)[:max(1, finalists)]
-        if len(alive) > 1:
-            for descent in alive:
+            alive = sorted(alive, key=lambda descent: descent.cost)
+        chosen = alive[:max(1, finalists)]
+        if len(alive) > 1 and len(chosen) > 1:
+            for descent in chosen:
                 descent.run(_FINAL_ITERATIONS)
-        best = min(alive, key=lambda descent: descent.cost)
+        best = min(chosen, key=lambda descent: descent.cost)
         if not np.isfinite(best.cost):
             raise FitError("every start reaches behind a camera")
-        return best.run(max_iterations)
+        best.run(max_iterations)
+        if explained_px is None:
+            return best
+        for descent in alive:
+            if self.rms(best.cost) <= explained_px:
+                break
+            if descent is best or not np.isfinite(descent.cost):
+                continue
+            if descent not in chosen:
+                descent.run(_FINAL_ITERATIONS)
+            if descent.cost < best.cost:
+                descent.run(max_iterations)
+                if descent.cost < best.cost:
+                    best = descent
+        return best
 
     def rms(self, cost: float) -> float:
         return _rms(cost, self.views.count, self.loss_scale)
@@ -278,7 +302,7 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     if not starts:
         raise FitError("need at least one start")
     fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale)
-    best = fitter.best_of(starts, max_iterations)
+    best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
     # with another of its axes as z can only be reached by a jump, so try both, each going on only
     # if a few steps bring it below the best so far. Not needed where the outlines already run
