@@ -54,8 +54,11 @@ def cell_config(run_dir: Path, *, robot: dict | None = None, camera: dict | None
     ``robot``, ``camera`` and ``timeouts`` update those sections; other keyword
     arguments are top-level fields (``cell_id``, ``sim``, ``reconstruct``...).
     """
+    # Red on the pale table unless a test asks for print: a printed picture costs six times the CPU,
+    # and the cells' tests are about the cell (tests/test_cell_pick.py scans and picks a printed box).
+    sim = {"look": "red", **fields.pop("sim", {})}
     return local_config(
-        run_dir, **{"cell_id": "test", **fields},
+        run_dir, **{"cell_id": "test", "sim": sim, **fields},
         robot={**({"speed": 0.0, "rotation_speed_deg": 0.0} if (robot or {}).get("backend", "sim") == "sim" else {}),
                **(robot or {})},
         # The simulated camera renders each picture on this machine's CPU (a printed object, its

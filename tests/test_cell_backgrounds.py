@@ -44,7 +44,8 @@ class RecordingWorker:
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("backgrounds"), cell_id="bg",
-                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20})
+                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20,
+                              "look": "printed"})
     with running_cell(config, reconstructors=0) as running:
         recorder = RecordingWorker()
         worker = InProcessWorker(running.loop, running.router, "recorder", recorder.run)

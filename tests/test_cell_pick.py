@@ -26,7 +26,8 @@ PLACE = [0.55, 0.25]
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("pick"), cell_id="pick",
-                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20})
+                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20,
+                              "look": "printed"})
     with running_cell(config) as running:
         yield running
 

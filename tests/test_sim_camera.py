@@ -256,7 +256,7 @@ def test_server_arguments_are_checked():
 def test_scene_from_config(shape, kind):
     sim = SimConfig(shape=shape, size=[0.025, 0.035, 0.05], position=[0.5, 0.1])
     (obj,) = scene_from_config(sim)
-    if isinstance(obj, PrintedObject):  # scene.PRINTED_CELL_SCENE: the same object, printed
+    if isinstance(obj, PrintedObject):  # [sim] look printed: the same object, printed
         obj = obj.object
     assert isinstance(obj, kind)
     v = obj.mesh()[0]

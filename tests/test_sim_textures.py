@@ -289,13 +289,12 @@ def test_backgrounds_are_written_and_named(tmp_path: Path):
     assert np.abs(grey(view) - grey(background))[truth].mean() > 20  # no object in the background
 
 
-def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace(monkeypatch):
+def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace():
     from robocell.wire.config import SimConfig
     from robocell.workers.sim import scene
     from robocell.workers.sim.camera import SceneCamera
 
-    monkeypatch.setattr(scene, "PRINTED_CELL_SCENE", True)
-    objects = scene.scene_from_config(SimConfig())
+    objects = scene.scene_from_config(SimConfig())  # printed by default
     assert isinstance(objects[0], PrintedObject) and objects[0].look.name == "sugar-box"
     table, light = scene.surroundings(objects, 0)
     assert table.kind == "oak" and light is not None

@@ -184,6 +184,10 @@ class SimConfig(Section):
     #: family (box, cylinder, ellipsoid, rounded-box, plate, lying-cylinder, cups, mug,
     #: box-and-ball, l-boxes, too-big) drawn from ``seed``.
     grasp_scene: str | None = None
+    #: How the object and its table look: ``printed`` (a label's print, an oak table, a lamp and its
+    #: shadow: what the any-colour segmentation must find) or ``red`` (a red object on a pale table,
+    #: unlit: a sixth of the rendering's CPU, which is what the test cells use).
+    look: Literal["printed", "red"] = "printed"
 
 
 class Timeouts(Section):

@@ -24,7 +24,7 @@ _DIGITS = 12
 
 
 #: Where ``robocell schema --write`` puts the wire contract's JSON Schemas: the repository's ``schemas/``.
-SCHEMA_DIR = Path(__file__).resolve().parents[1] / "schemas"
+SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schemas"  # the repository's, beside robocell/
 
 
 def register(commands: Commands) -> None:

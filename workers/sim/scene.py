@@ -1,9 +1,9 @@
 """The simulated scene of a cell's configuration: one known object on the table.
 
-With :data:`PRINTED_CELL_SCENE` the object wears a printed look (a sugar box, a soup can,
-a random print) and stands on an oak table under one lamp that casts its shadow
-(:func:`surroundings`); without it, it is the classic red object on the pale table, unlit,
-which the red HSV segmentation finds.
+With ``[sim] look = "printed"`` (the default) the object wears a printed look (a sugar box,
+a soup can, a random print) and stands on an oak table under one lamp that casts its shadow
+(:func:`surroundings`); with ``"red"`` it is the classic red object on the pale table, unlit,
+which costs a sixth of the rendering.
 """
 
 from __future__ import annotations
@@ -20,12 +20,8 @@ from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
 from .render import Light, TableScene
 from .textures import PrintedObject, product_look
 
-__all__ = ["PRINTED_CELL_SCENE", "scene_from_config", "surroundings", "truth_from_config", "target_from_config"]
+__all__ = ["scene_from_config", "surroundings", "truth_from_config", "target_from_config"]
 
-#: Whether the cell's simulated object is printed, on an oak table under a lamp (True), or red on the
-#: pale table (False). It needs a segmentation that finds an object of any colour (``auto``), the
-#: default once it exists: until then the cell's scans, which name no segmentation, look for red.
-PRINTED_CELL_SCENE = True
 #: The look each shape of ``[sim]`` wears when printed.
 _LOOK_OF_SHAPE = {"box": "sugar-box", "cylinder": "soup-can"}
 
@@ -54,7 +50,7 @@ def scene_from_config(sim: SimConfig) -> list[SimObject]:
             obj = LumpyFigure(sim.position, sim.size, seed=sim.seed)
         else:
             obj = SuperquadricObject.on_table(sim.shape, sim.size, sim.position, sim.yaw_deg)
-        if not PRINTED_CELL_SCENE:
+        if sim.look == "red":
             return [obj]
         look_name = "printed" if sim.grasp_scene is not None else _LOOK_OF_SHAPE.get(sim.shape, "printed")
         height = float(np.ptp(obj.mesh()[0][:, 2])) / 2
