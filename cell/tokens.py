@@ -62,7 +62,7 @@ def check_token(job_id: str, presented: str | None, digest: str | None) -> None:
     >>> check_token("7", "guessed" * 4, token_digest(token))
     Traceback (most recent call last):
     ...
-    cell.tokens.JobTokenRefused: job 7: the token shown is not the job's: only the client that submitted it may do this
+    robocell.cell.tokens.JobTokenRefused: job 7: the token shown is not the job's: only the client that submitted it may do this
     """
     if digest is None:
         return

@@ -68,7 +68,7 @@ class Gripper:
     >>> Gripper.from_dict({**Gripper().to_dict(), "pad_length": 0.05})
     Traceback (most recent call last):
     ...
-    core_cy.errors.GripperError: gripper pad_length (0.05) is longer than finger_length (0.045)
+    robocell.core_cy.errors.GripperError: gripper pad_length (0.05) is longer than finger_length (0.045)
     """
 
     max_opening: float = 0.085

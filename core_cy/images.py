@@ -113,7 +113,7 @@ def checked_size(data: bytes, *, what: str = "the image", view: int | None = Non
     >>> checked_size(b"\\x89PNG\\r\\n\\x1a\\n\\x00\\x00\\x00\\x0dIHDR\\x00\\x00N\\x20\\x00\\x00N\\x20", view=2)
     Traceback (most recent call last):
     ...
-    core_cy.errors.ImageError: view 2: the image is 20000x20000 pixels (400.0 megapixels); at most 50 megapixels are decoded
+    robocell.core_cy.errors.ImageError: view 2: the image is 20000x20000 pixels (400.0 megapixels); at most 50 megapixels are decoded
     """
     size = image_size(data)
     if size is None:
@@ -153,7 +153,7 @@ def check_calibrated_size(camera: Camera, width: int, height: int, *, what: str 
     >>> check_calibrated_size(camera, 100, 100, what="mask 'mask1.png'")
     Traceback (most recent call last):
     ...
-    core_cy.errors.ImageError: view 1: mask 'mask1.png' is 100x100 pixels, but K was calibrated for about 640x480: its principal point (319.5, 239.5) must lie within 10% of the image's width and height from the centre
+    robocell.core_cy.errors.ImageError: view 1: mask 'mask1.png' is 100x100 pixels, but K was calibrated for about 640x480: its principal point (319.5, 239.5) must lie within 10% of the image's width and height from the centre
     """
     cx, cy = camera.K[0, 2], camera.K[1, 2]
     if (abs(cx - (width - 1) / 2) <= PRINCIPAL_POINT_TOLERANCE * width

@@ -155,7 +155,7 @@ def parse_request(model: type[M], payload: bytes | str | None, limit: int) -> M:
     >>> parse_request(GripRequest, b" " * 5000, 4096)
     Traceback (most recent call last):
     ...
-    wire.messages.RequestTooLarge: the GripRequest is 5000 bytes: at most 4096 are taken
+    robocell.wire.messages.RequestTooLarge: the GripRequest is 5000 bytes: at most 4096 are taken
     """
     size = 0 if payload is None else len(payload.encode() if isinstance(payload, str) else payload)
     if size > limit:
