@@ -15,8 +15,8 @@ using it (:func:`check_answer`; :func:`verify_reconstruction` in one call):
   :data:`MIN_VIEW_IOU` in every view. The worker's own silhouettes are never
   used: they are what a fake worker would forge first.
 - **Every grasp follows from the model and the gripper** (:func:`check_grasp`):
-  the pads' centre line meets the model, the model's width between the pads is
-  the width the grasp claims and fits the opening, the open fingers and the palm
+  the pads' centre line meets the model, the width the grasp claims is no less
+  than the model's between the pads and fits the opening, the open fingers and the palm
   do not cut the model, the contacts are antipodal within the friction cone, and
   no finger or palm corner lies below the support plane.
 
@@ -93,7 +93,7 @@ MIN_VIEW_IOU = 0.3
 #: The pictures are decoded at 1/REDUCTION of their size.
 REDUCTION = 4
 _SUBPIXEL_BITS = 4
-# How far the grasp's claimed width may be from the model's width between the pads: a share of
+# How far the grasp's claimed width may fall short of the model's width between the pads: a share of
 # the width, and at least this many metres (the planner's width is the widest chord under the
 # pads, sampled; ours is sampled too).
 _WIDTH_SHARE, _WIDTH_FLOOR = 0.1, 0.002
@@ -299,8 +299,8 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
     The checks, in the grasp frame (DESIGN.md §3: z the approach, y the closing
     direction, the origin between the pads): the width fits the opening; no finger or
     palm corner lies below the support plane; the model is between the pads (the
-    contacts are on it); the model's widest chord under the pads is the claimed
-    ``width``; no part of the model is where the open fingers or the palm are.
+    contacts are on it); the claimed ``width`` is no less than the model's widest chord
+    under the pads; no part of the model is where the open fingers or the palm are.
 
     The planner works on the model as the worker returned it but for what the fit
     cannot know (it sets a fit tilted by a few degrees upright; it keeps the palm clear
@@ -336,7 +336,10 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
 
     most, least = widest(met), widest(under_pads.inside(shrunk).reshape(samples.pads_shape))
     slack = max(_WIDTH_SHARE * grasp.width, _WIDTH_FLOOR)
-    if not least - slack <= grasp.width <= most + slack:
+    # Only a width below the model's is refused: the gripper opens fully before it closes, so a
+    # wider claim costs nothing, and the planner claims one where the model misses much of the
+    # silhouettes (it plans on the visual hull's box there, which this check does not know).
+    if grasp.width < least - slack:
         return f"its width {grasp.width:.3f} m is not the model's between the pads ({least:.3f}-{most:.3f} m)"
     if _Levels(parts, samples.fingers, T, shrunk).inside(shrunk).any():
         return "the open fingers would cut the model"

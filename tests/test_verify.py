@@ -116,6 +116,12 @@ def test_a_grasp_that_does_not_follow_from_the_model_is_refused(scans):
         "its width 0.200 m is more than the gripper opens")
     assert "is not the model's between the pads" in check_grasp(
         best.model_copy(update={"width": best.width * 0.5}), parts, GRIPPER, PLANE)
+    # A wider claim is no danger (the gripper opens fully before it closes): the planner makes one on
+    # the visual hull where the model misses some of the silhouettes.
+    # Here: the model taken 0.7 times as wide as the object the grasp was planned on.
+    model = scan.model
+    narrower = [CoreSuperquadric(model.size * [0.7, 0.7, 1.0], model.shape, model.T_world_object)]
+    assert check_grasp(best, narrower, GRIPPER, PLANE) is None
     # An answer whose every grasp is a lie is refused; one with a lie among good grasps loses the lie.
     forged = [_moved(g, [0.0, 0.2, 0.0]) for g in scan.answer.grasps]
     verdict = scan.verify(scan.answer.model_copy(update={"grasps": forged}))
