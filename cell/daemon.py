@@ -29,8 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from robocell.core_cy.plan import plan_flange_poses
-from robocell.core_cy.views import candidate_views
 from robocell.wire import keys
 from robocell.wire.config import CellConfig
 from robocell.wire.errors import CellError, ConfigError, StoreError
@@ -40,7 +38,7 @@ from robocell.wire.transport import BaseTransport
 from .asking import Asker
 from .upkeep import apply_retention_every
 from .handle import JobHandle
-from .job import Checkpoint, Job, Picture
+from .job import Checkpoint, Job, Picture, success_message
 from .lane import MotionLane
 from .lock import RunDirLock
 from .pool import ReconstructorPool
@@ -48,7 +46,7 @@ from .presence import Presence
 from .publisher import Publisher
 from .recorder import Recorder
 from .backgrounds import Backgrounds
-from .plan import job_steps, resume
+from .plan import flange_poses, job_steps, next_view_candidates, resume
 from .requests import RequestHandlers
 from .steps import Step, StepFailed, View
 from .store import JobStore, queued_event
@@ -235,11 +233,7 @@ class CellDaemon(RequestHandlers):
         self._jobs.keep_picture(job.job_id, len(job.captures), picture.jpeg, picture.poses())
 
     def candidates(self, job: Job) -> list[np.ndarray]:
-        request = job.request
-        assert request.target is not None, "an adaptive scan has a target"
-        standoff = (request.plan or self.config.scan.plan).standoff
-        return candidate_views(request.target, standoff, self.config.T_flange_cam, self.config.robot.workspace,
-                               taken=[picture.T_base_cam for picture in job.captures])
+        return next_view_candidates(job, self.config)
 
     # --- what a job's handle uses (cell.handle.Books) ------------------------------------------
 
@@ -263,10 +257,7 @@ class CellDaemon(RequestHandlers):
             self._recorder.close(job.job_id)
 
     def _flange_poses(self, request: ScanRequest) -> list[np.ndarray]:
-        if request.flange_poses is not None:
-            return [np.asarray(pose, dtype=np.float64) for pose in request.flange_poses]
-        plan = request.plan or self.config.scan.plan
-        return plan_flange_poses(request.target, plan, self.config.T_flange_cam)
+        return flange_poses(request, self.config)
 
     # --- running jobs --------------------------------------------------------------------------
 
@@ -336,18 +327,11 @@ class CellDaemon(RequestHandlers):
             return
         if result is None:
             raise StepFailed("the plan ended without a result")
-        total = result.timings_ms.get("total", float("nan"))
-        attempt = f" (attempt {result.attempts})" if result.attempts > 1 else ""
-        message = f"reconstructed by {result.worker} in {total:.1f} ms{attempt}"
-        if result.pick is not None:
-            held = {True: "held", False: "missed", None: "closed on it"}[result.pick.held]
-            message += f"; picked with grasp {result.pick.grasp}: {held}" + (", placed" if result.pick.placed else "")
-        if job.recording_error is None:
-            job.recording_error = await self._finish_recording(job, message)
+        message = success_message(result)
+        job.recording_error = job.recording_error or await self._finish_recording(job, message)
         if job.recording_error is None:
             result.recording = str(self.run_dir / f"{job.job_id}.rrd")
-        else:
-            result.recording_error = job.recording_error
+        result.recording_error = job.recording_error
         await handle.change(message, lifecycle=Lifecycle.SUCCEEDED, result=result)
 
     async def _finish_recording(self, job: Job, message: str) -> str | None:
@@ -358,13 +342,7 @@ class CellDaemon(RequestHandlers):
             reply, payload, drawn = job.reconstruction
             self._recorder.reconstruction(job.job_id, drawn, reply.decode(), payload)
         self.record(job, "log_text", f"{Lifecycle.SUCCEEDED.value}: {message}", "INFO")
-        path = self.run_dir / f"{job.job_id}.rrd"
-        try:
-            return await asyncio.wait_for(asyncio.wrap_future(self._recorder.finish(job.job_id)),
-                                          RECORDING_VERDICT_S)
-        except asyncio.TimeoutError:
-            return (f"the recorder had not closed the recording {path} {RECORDING_VERDICT_S:g} s after the job "
-                    f"ended: it may be incomplete")
+        return await self._recorder.verdict(job.job_id, self.run_dir / f"{job.job_id}.rrd", RECORDING_VERDICT_S)
 
 def _label(job: Job) -> str:
     """What the job was doing, in its error: "<what>: <reason>"."""

@@ -34,7 +34,7 @@ from robocell.wire.messages import Lifecycle, Progress, ScanRequest, ScanResult
 if TYPE_CHECKING:
     from .steps import Step
 
-__all__ = ["TRANSITIONS", "IllegalTransition", "Job", "Picture", "Checkpoint"]
+__all__ = ["TRANSITIONS", "IllegalTransition", "Job", "Picture", "Checkpoint", "success_message"]
 
 L = Lifecycle
 
@@ -127,3 +127,14 @@ class Job:
 
     def checkpoint(self, *, began: int | None = None) -> Checkpoint:
         return Checkpoint(plan=[step.spec() for step in self.plan], done=self.done, began=began)
+
+
+def success_message(result: ScanResult) -> str:
+    """What a success says: who reconstructed it, how long it took, and how its pick went."""
+    total = result.timings_ms.get("total", float("nan"))
+    attempt = f" (attempt {result.attempts})" if result.attempts > 1 else ""
+    message = f"reconstructed by {result.worker} in {total:.1f} ms{attempt}"
+    if result.pick is not None:
+        held = {True: "held", False: "missed", None: "closed on it"}[result.pick.held]
+        message += f"; picked with grasp {result.pick.grasp}: {held}" + (", placed" if result.pick.placed else "")
+    return message

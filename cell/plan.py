@@ -7,13 +7,16 @@ from typing import Any
 
 import numpy as np
 
+from robocell.core_cy.plan import plan_flange_poses
+from robocell.core_cy.views import candidate_views
+from robocell.wire.config import CellConfig
 from robocell.wire.messages import JobState, Lifecycle, ScanRequest
 
 from .job import Checkpoint, Job
 from .pick import ChooseGrasp, Gripper, PickMove
 from .steps import KeepBackgrounds, Reconstruct, Step, View
 
-__all__ = ["job_steps", "step_from_spec", "resume"]
+__all__ = ["job_steps", "step_from_spec", "resume", "flange_poses", "next_view_candidates"]
 
 _STEPS: dict[str, type[Step]] = {cls.kind: cls for cls in (View, Reconstruct, ChooseGrasp, PickMove, Gripper,
                                                             KeepBackgrounds)}
@@ -35,6 +38,23 @@ def step_from_spec(spec: dict[str, Any]) -> Step:
         return _STEPS[kind](**fields)
     except TypeError as exc:
         raise ValueError(f"step {kind!r} in a checkpoint: {exc}") from None
+
+
+def flange_poses(request: ScanRequest, config: CellConfig) -> list[np.ndarray]:
+    """The flange poses of a request's views: its own, else its plan's (or ``[scan]``'s) around its target."""
+    if request.flange_poses is not None:
+        return [np.asarray(pose, dtype=np.float64) for pose in request.flange_poses]
+    return plan_flange_poses(request.target, request.plan or config.scan.plan, config.T_flange_cam)
+
+
+def next_view_candidates(job: Job, config: CellConfig) -> list[np.ndarray]:
+    """The camera poses an adaptive scan may take its next view from: around its target at its plan's
+    standoff, within the robot's workspace, away from the views taken."""
+    request = job.request
+    assert request.target is not None, "an adaptive scan has a target"
+    standoff = (request.plan or config.scan.plan).standoff
+    return candidate_views(request.target, standoff, config.T_flange_cam, config.robot.workspace,
+                           taken=[picture.T_base_cam for picture in job.captures])
 
 
 def job_steps(request: ScanRequest, poses: list[np.ndarray]) -> list[Step]:

@@ -43,19 +43,19 @@ that viewer as it is written, when the viewer takes connections as the recording
 
 from __future__ import annotations
 
+import asyncio
 import concurrent.futures
 import logging
 import multiprocessing
 import multiprocessing.connection
-import os
 import queue
 import signal
-import socket
 import threading
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit
+
+from .recorder_process import run_recorder
 
 __all__ = ["Recorder"]
 
@@ -63,8 +63,6 @@ log = logging.getLogger(__name__)
 # Within what a stopping cell allows its daemon (robocell up waits 5 s, then kills): the recorder
 # is secondary, and one still importing Rerun on a busy machine must not hold the daemon up.
 _STOP_WAIT_S = 3.0
-_NICENESS = 10  # below the jobs: the recording may wait, the robot may not (a success waits for its close)
-_LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 #: Recordings a recorder process makes before a new one takes over (see the module's text): its
 #: leftover threads then cost at most 9 ms of processor a second (measured with 100), and what
 #: Rerun keeps of its closed recordings (1.1-1.6 MB of resident memory per MB logged, measured over
@@ -73,7 +71,6 @@ _LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 RECORDINGS_PER_PROCESS = 25
 _WATCH_S = 0.5          # how often the watcher looks for recorder processes started meanwhile
 _REAP_WAIT_S = 1.0
-_VIEWER_PROBE_S = 0.3   # a viewer on this machine or the next answers a connection within it
 
 
 class Recorder:
@@ -117,7 +114,7 @@ class Recorder:
         reader, writer = context.Pipe(duplex=False)
         report_reader, report_writer = context.Pipe(duplex=False)
         # The child gets only the reading end: when this process dies, it reads end-of-file.
-        process = context.Process(target=_main,
+        process = context.Process(target=run_recorder,
                                   args=(reader, report_writer, *self._arguments, logging.getLogger().level),
                                   name="robocell-recorder", daemon=True)
         process.start()
@@ -155,6 +152,15 @@ class Recorder:
             self._verdicts[job_id] = future
         self.close(job_id)
         return future
+
+    async def verdict(self, job_id: str, path: Path, within_s: float) -> str | None:
+        """:meth:`finish` awaited: None once the job's recording at ``path`` is complete, else what
+        is wrong with it; after ``within_s`` without the recorder's word, that it may be incomplete."""
+        try:
+            return await asyncio.wait_for(asyncio.wrap_future(self.finish(job_id)), within_s)
+        except asyncio.TimeoutError:
+            return (f"the recorder had not closed the recording {path} {within_s:g} s after the job ended: "
+                    f"it may be incomplete")
 
     def stop(self) -> None:
         """Let the recorder finish and close every recording; bounded in time."""
@@ -342,136 +348,3 @@ class _Child:
             self.broken = True
             if message is not None:
                 log.error("the recorder process is gone (%s)", exc)
-
-
-def _main(connection: Connection, reports: Connection, n_points: int, live: str | None, level: int) -> None:
-    """The recorder process: apply messages until told to stop, or until the daemon is gone."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C is for the daemon, which stops this process
-    logging.basicConfig(level=level or logging.INFO, format=_LOG_FORMAT)
-    # Recording is background work: on a busy machine the processes that run the jobs go first.
-    os.nice(_NICENESS)
-    from .recording import JobRecording
-
-    recordings: dict[str, JobRecording] = {}
-    unopened: dict[str, str] = {}   # why a job's recording could not be opened
-    drawing = _Drawing(n_points)
-    viewer = _Viewer(live)
-
-    def report(job_id: str, problem: str | None) -> None:
-        try:
-            reports.send((job_id, problem))
-        except OSError:  # the daemon is gone: nobody to tell
-            pass
-
-    try:
-        while True:
-            try:
-                message = connection.recv()
-            except EOFError:
-                log.warning("the daemon is gone: closing %d open recordings", len(recordings))
-                break
-            if message is None:
-                break
-            kind, job_id, at, body = message
-            try:
-                if kind == "open":
-                    try:
-                        recordings[job_id] = JobRecording(Path(body), job_id, live=viewer.url())
-                    except Exception as exc:
-                        unopened[job_id] = f"the recording {body} could not be opened: {exc}"
-                        raise
-                    continue
-                if kind == "close" and job_id in unopened:
-                    report(job_id, unopened.pop(job_id))
-                    continue
-                recording = recordings.get(job_id)
-                if recording is None:
-                    continue  # its opening failed, and was logged
-                if kind == "close":
-                    del recordings[job_id]
-                    report(job_id, recording.close())
-                    continue
-                recording.set_time(at)
-                if kind == "call":
-                    method, args, kwargs = body
-                    getattr(recording, method)(*args, **kwargs)
-                elif kind == "reconstruction":
-                    drawing.reconstruction(recording, *body)
-            except Exception as exc:  # one bad message must not cost the other jobs their recordings
-                log.exception("job %s: recording %s failed", job_id, kind)
-                if job_id in recordings:
-                    recordings[job_id].log_text(f"recording {kind} failed: {type(exc).__name__}: {exc}", "ERROR")
-    finally:
-        for job_id, recording in recordings.items():
-            report(job_id, recording.close())
-        for job_id, problem in unopened.items():
-            report(job_id, problem)
-        connection.close()
-        reports.close()
-        # Every recording is closed: Rerun's own exit handler would flush them again, and after a
-        # failed write (a full disk) it never returns, leaving the process running for ever.
-        logging.shutdown()
-        os._exit(0)
-
-
-class _Viewer:
-    """The live viewer, if any: a recording opened while it takes no connections is not streamed
-    (Rerun would retry for seconds at the recording's end, holding the other jobs' recordings up)."""
-
-    def __init__(self, url: str | None) -> None:
-        self._url = url
-        self._reachable: bool | None = None
-
-    def url(self) -> str | None:
-        if self._url is None:
-            return None
-        address = urlsplit(self._url)
-        try:
-            with socket.create_connection((address.hostname or "127.0.0.1", address.port or 9876),
-                                          timeout=_VIEWER_PROBE_S):
-                reachable = True
-        except OSError:
-            reachable = False
-        if reachable != self._reachable:
-            if reachable:
-                log.info("streaming the recordings to the viewer at %s", self._url)
-            else:
-                log.warning("no viewer takes connections at %s: the next jobs are recorded to files only, "
-                            "until one does", self._url)
-            self._reachable = reachable
-        return self._url if reachable else None
-
-
-class _Drawing:
-    """What a reconstruction looks like in a recording (in the recorder process)."""
-
-    def __init__(self, n_points: int) -> None:
-        self.n_points = n_points
-
-    def reconstruction(self, recording, reply_json: str, payload: bytes) -> None:
-        import cv2
-        import numpy as np
-
-        from robocell.core_cy.sphere import fibonacci_sphere
-        from robocell.core_cy.superquadric import Superquadric
-        from robocell.wire.messages import ReconstructReply
-
-        answer = ReconstructReply.model_validate_json(reply_json)
-        result = answer.result
-        if result is None or answer.points is None:
-            return
-        at = 0
-        for view, blob in enumerate(answer.silhouettes):
-            png = np.frombuffer(payload, np.uint8, count=blob.length, offset=at)
-            recording.log_silhouette(view, cv2.imdecode(png, cv2.IMREAD_GRAYSCALE))
-            at += blob.length
-        points = np.frombuffer(payload, "<f4", count=answer.points.length // 4, offset=at).reshape(-1, 3)
-        sphere = np.asarray(result.centre) + result.radius * fibonacci_sphere(self.n_points)
-        recording.log_points("sphere", sphere, colour=(150, 150, 150))
-        recording.log_points("carved", points.astype(np.float64))
-        if result.parts:  # each part in its colour, and the union's outline over each image
-            recording.log_parts("fit", [Superquadric.from_dict(part.model_dump()) for part in result.parts])
-        else:  # an older worker's one superquadric
-            recording.log_superquadric("fit", Superquadric.from_dict(result.superquadric.model_dump()))
-        timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result.timings_ms.items())
-        recording.log_text(f"reconstruction on {answer.worker}: {timings}")

@@ -14,7 +14,8 @@ using it (:func:`check_answer`; :func:`verify_reconstruction` in one call):
   view, and the intersection over union of projection and silhouette must reach
   :data:`MIN_VIEW_IOU` in every view. The worker's own silhouettes are never
   used: they are what a fake worker would forge first.
-- **Every grasp follows from the model and the gripper** (:func:`check_grasp`):
+- **Every grasp follows from the model and the gripper** (:func:`check_grasp`; the
+  geometry of both checks is ``robocell.core_cy.model_check``):
   the pads' centre line meets the model, the width the grasp claims is no less
   than the model's between the pads and fits the opening, the open fingers and the palm
   do not cut the model, the contacts are antipodal within the friction cone, and
@@ -64,7 +65,6 @@ of whose grasps follows from its model is refused as a whole.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -75,9 +75,9 @@ from robocell.core_cy.auto_segment import auto_silhouettes
 from robocell.core_cy.camera import Camera, undistort_mask
 from robocell.core_cy.errors import CoreError
 from robocell.core_cy.gripper import Gripper
+from robocell.core_cy.model_check import grasp_problem, model_iou
 from robocell.core_cy.segment import Segmentation, segment
 from robocell.core_cy.superquadric import Superquadric as CoreSuperquadric
-from robocell.core_cy.superquadric import inside_outside, surface_points
 from robocell.wire.bundle import core_segmentation
 from robocell.wire.config import CellConfig
 from robocell.wire.messages import Grasp, Reconstruction, ReconstructRequest, Superquadric
@@ -92,20 +92,6 @@ __all__ = ["Verdict", "Evidence", "MIN_VIEW_IOU", "REDUCTION", "job_evidence", "
 MIN_VIEW_IOU = 0.3
 #: The pictures are decoded at 1/REDUCTION of their size.
 REDUCTION = 4
-_SUBPIXEL_BITS = 4
-# How far the grasp's claimed width may fall short of the model's width between the pads: a share of
-# the width, and at least this many metres (the planner's width is the widest chord under the
-# pads, sampled; ours is sampled too).
-_WIDTH_SHARE, _WIDTH_FLOOR = 0.1, 0.002
-# Samples along the closing line, across the finger and along it.
-_LINE_SAMPLES = 241
-_ACROSS_SAMPLES, _ALONG_SAMPLES = 5, 9
-#: How much larger (where a grasp must meet the model) and smaller (where the gripper must keep
-#: clear of it) the model is taken, as a share of its sizes: see :func:`check_grasp`.
-MODEL_SLACK = 0.15
-# A corner of the gripper may lie this far (metres) below the support plane before it counts:
-# rounding of the poses on the wire, no more (the planner keeps a clearance of centimetres).
-_PLANE_SLACK = 1e-4
 
 
 @dataclass(frozen=True)
@@ -203,23 +189,6 @@ def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
     return silhouettes
 
 
-def model_iou(parts: Sequence[CoreSuperquadric], camera: Camera, silhouette: np.ndarray) -> float:
-    """Intersection over union of a silhouette and the projection of the union of ``parts``
-    (each convex: its projection is the convex hull of its projected surface)."""
-    height, width = silhouette.shape
-    covered = np.zeros((height, width), np.uint8)
-    limit = 4.0 * max(height, width)
-    for part in parts:
-        uv, depth = camera.project(surface_points(part))
-        uv = uv[depth > 0]
-        if len(uv) < 3:
-            continue
-        hull = cv2.convexHull(np.clip(uv, -limit, limit).astype(np.float32)).reshape(-1, 2)
-        cv2.fillConvexPoly(covered, np.round(hull * (1 << _SUBPIXEL_BITS)).astype(np.int32), 1,
-                           shift=_SUBPIXEL_BITS)
-    seen, projected = silhouette != 0, covered != 0
-    union = int(np.count_nonzero(seen | projected))
-    return int(np.count_nonzero(seen & projected)) / union if union else 0.0
 
 
 def check_model(parts: Sequence[CoreSuperquadric], cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray],
@@ -233,119 +202,13 @@ def check_model(parts: Sequence[CoreSuperquadric], cameras: Sequence[Camera], si
     return Verdict(True, f"the model matches the pictures (overlap {min(ious):.2f} or more in every view)", ious)
 
 
-class _Levels:
-    """The inside-outside function of each part of a model at some points, for the model at any scale.
-
-    A superquadric's F scales with its size as ``F(x; s a) = s ** (-2 / e1) F(x; a)``, so a point is
-    inside the part ``s`` times as large where ``F(x; a) < s ** (2 / e1)``: one evaluation serves the
-    model taken larger and smaller. A point outside a part's box (``|x_i| > a_i`` in its frame) is
-    outside the part, so F is evaluated only in the box of the largest scale asked (``reach``).
-    ``points`` are in the grasp frame, ``T_world_grasp`` its pose.
-    """
-
-    def __init__(self, parts: Sequence[CoreSuperquadric], points: np.ndarray, T_world_grasp: np.ndarray,
-                 reach: float) -> None:
-        self.parts = parts
-        self.levels = []
-        for part in parts:
-            T_part_grasp = np.linalg.inv(part.T_world_object) @ T_world_grasp
-            local = points @ T_part_grasp[:3, :3].T + T_part_grasp[:3, 3]
-            near = np.all(np.abs(local) <= part.size * reach, axis=1)
-            level = np.full(len(points), np.inf)
-            if near.any():
-                level[near] = inside_outside(local[near], CoreSuperquadric(part.size, part.shape, np.eye(4)))
-            self.levels.append(level)
-
-    def inside(self, factor: float) -> np.ndarray:
-        """(N,) True where a point is inside the union of the parts taken ``factor`` times as large."""
-        inside = np.zeros(len(self.levels[0]) if self.levels else 0, bool)
-        for part, level in zip(self.parts, self.levels):
-            inside |= level < factor ** (2.0 / float(part.shape[0]))
-        return inside
-
-
-@dataclass(frozen=True)
-class _Samples:
-    """Where :func:`check_grasp` samples a gripper, in the grasp frame: under the pads (a grid of
-    across x line x along, ``pads_y`` its line coordinate), where the open fingers are, and the palm."""
-
-    pads: np.ndarray
-    pads_shape: tuple[int, ...]
-    pads_y: np.ndarray
-    fingers: np.ndarray
-    palm: np.ndarray
-
-
-@functools.lru_cache(maxsize=8)
-def _samples(g: Gripper) -> _Samples:
-    half_open = g.max_opening / 2
-    t = np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness, _LINE_SAMPLES)
-    across = np.linspace(-g.finger_width / 2, g.finger_width / 2, _ACROSS_SAMPLES)
-    X, Y, Z = np.meshgrid(across, t, np.linspace(g.tip - g.pad_length, g.tip, _ALONG_SAMPLES), indexing="ij")
-    fingers = np.meshgrid(across, t[np.abs(t) >= half_open], np.linspace(g.palm, g.tip, _ALONG_SAMPLES),
-                          indexing="ij")
-    palm_x, palm_y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
-                                 np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
-                                             _ACROSS_SAMPLES + 2), indexing="ij")
-    palm = np.stack([palm_x.ravel(), palm_y.ravel(), np.full(palm_x.size, g.palm)], axis=1)
-    return _Samples(np.stack([X, Y, Z], axis=-1).reshape(-1, 3), X.shape, Y,
-                    np.stack(fingers, axis=-1).reshape(-1, 3), palm)
-
-
 def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Gripper,
                 support_plane: Sequence[float] | None) -> str | None:
-    """Why a grasp does not follow from the model and the gripper, or None when it does.
+    """Why a grasp of an answer does not follow from the model and the gripper, or None when it does
+    (:func:`robocell.core_cy.model_check.grasp_problem`)."""
+    return grasp_problem(np.asarray(grasp.T_world_grasp, dtype=np.float64), grasp.width, parts, gripper,
+                         support_plane)
 
-    The checks, in the grasp frame (DESIGN.md §3: z the approach, y the closing
-    direction, the origin between the pads): the width fits the opening; no finger or
-    palm corner lies below the support plane; the model is between the pads (the
-    contacts are on it); the claimed ``width`` is no less than the model's widest chord
-    under the pads; no part of the model is where the open fingers or the palm are.
-
-    The planner works on the model as the worker returned it but for what the fit
-    cannot know (it sets a fit tilted by a few degrees upright; it keeps the palm clear
-    of the hull), so the model is taken :data:`MODEL_SLACK` larger where the grasp must
-    meet it and as much smaller where the gripper must keep clear of it: a grasp moved
-    off the object, or too wide, or under the table is refused, the planner's own pass.
-    """
-    T = np.asarray(grasp.T_world_grasp, dtype=np.float64)
-    R, origin = T[:3, :3], T[:3, 3]
-    g = gripper
-    if grasp.width > g.max_opening:
-        return f"its width {grasp.width:.3f} m is more than the gripper opens ({g.max_opening:.3f} m)"
-    if support_plane is not None:
-        plane = np.asarray(support_plane, dtype=np.float64)
-        plane = plane / np.linalg.norm(plane[:3])
-        corners = g.corners() @ R.T + origin
-        lowest = float((corners @ plane[:3] + plane[3]).min())
-        if lowest < -_PLANE_SLACK:
-            return f"a corner of the gripper would be {-lowest * 1000:.1f} mm below the support plane"
-    grown, shrunk = 1 + MODEL_SLACK, 1 - MODEL_SLACK
-    samples = _samples(g)
-    # Under the pads: the contacts are where the model meets the pads' faces.
-    under_pads = _Levels(parts, samples.pads, T, grown)
-    met = under_pads.inside(grown).reshape(samples.pads_shape)
-    if not met.any():
-        return "the model is not between its pads"
-
-    def widest(mask: np.ndarray) -> float:
-        # The chord of each (across, along) column of samples: from its lowest inside sample to its highest.
-        Y = samples.pads_y
-        chords = np.where(mask, Y, -np.inf).max(axis=1) - np.where(mask, Y, np.inf).min(axis=1)
-        return float(chords[np.isfinite(chords)].max(initial=0.0))
-
-    most, least = widest(met), widest(under_pads.inside(shrunk).reshape(samples.pads_shape))
-    slack = max(_WIDTH_SHARE * grasp.width, _WIDTH_FLOOR)
-    # Only a width below the model's is refused: the gripper opens fully before it closes, so a
-    # wider claim costs nothing, and the planner claims one where the model misses much of the
-    # silhouettes (it plans on the visual hull's box there, which this check does not know).
-    if grasp.width < least - slack:
-        return f"its width {grasp.width:.3f} m is not the model's between the pads ({least:.3f}-{most:.3f} m)"
-    if _Levels(parts, samples.fingers, T, shrunk).inside(shrunk).any():
-        return "the open fingers would cut the model"
-    if _Levels(parts, samples.palm, T, shrunk).inside(shrunk).any():
-        return "the palm would cut the model"
-    return None
 
 
 def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], cameras: Sequence[Camera],

@@ -16,7 +16,7 @@ from robocell.wire.errors import RemoteError
 from robocell.wire.messages import JobState, PickRequest, ScanRequest
 from robocell.workers.sim.scene import target_from_config
 
-from robocell.cell.recording import recording_summary
+from robocell.cell.recording_files import recording_summary
 
 from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
 

@@ -24,7 +24,7 @@ from robocell.wire import keys
 from robocell.wire.client import AsyncCellClient
 from robocell.wire.errors import MoveRefused, RemoteError
 from robocell.wire.messages import JobState, MoveRequest, ScanRequest
-from robocell.cell.recording import recording_summary, replay_command
+from robocell.cell.recording_files import recording_summary, replay_command
 from robocell.workers.sim.scene import target_from_config, truth_from_config
 from robocell.wire.transport import Transport, session_config
 from robocell.core_cy.scoring import volumetric_iou

@@ -20,7 +20,7 @@ import numpy as np
 from rerun.chunk import RrdReader
 
 from robocell.cell.daemon import CellDaemon
-from robocell.cell.recording import _rerun_executable
+from robocell.cell.recording_files import rerun_executable
 from robocell.wire import keys
 from robocell.wire.client import AsyncCellClient
 from robocell.wire.messages import (POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply, ReconstructRequest,
@@ -186,7 +186,7 @@ def test_a_live_viewer_receives_every_job_whole_beside_its_recording(tmp_path):
     config = _config(tmp_path)
     port = _free_port()
     received = tmp_path / "viewer.rrd"
-    viewer = subprocess.Popen([_rerun_executable(), "--port", str(port), "--bind", "127.0.0.1", "--save",
+    viewer = subprocess.Popen([rerun_executable(), "--port", str(port), "--bind", "127.0.0.1", "--save",
                                str(received)], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL)
 

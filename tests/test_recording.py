@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from robocell.cell.recording import JobRecording, find_recording, recording_summary, replay_command
+from robocell.cell.recording import JobRecording
+from robocell.cell.recording_files import find_recording, recording_summary, replay_command
 from robocell.core_cy.superquadric import Superquadric
 
 from tests.helpers import HEIGHT, WIDTH, intrinsics, look_at

@@ -63,7 +63,7 @@ def _has_display() -> bool:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from robocell.cell.recording import find_recording, replay_command
+    from robocell.cell.recording_files import find_recording, replay_command
     from robocell.wire.config import load_config
     from robocell.wire.errors import ConfigError
 

@@ -67,9 +67,9 @@ def add_view_arguments(parser: argparse.ArgumentParser) -> None:
 
 def web_viewer_argv(web_port: int, grpc_port: int, *, bind: str = _LOOPBACK) -> list[str]:
     """The web viewer with its gRPC proxy (SDKs send to it, browsers watch), no browser opened."""
-    from robocell.cell.recording import _rerun_executable
+    from robocell.cell.recording_files import rerun_executable
 
-    return [_rerun_executable(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
+    return [rerun_executable(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
             "--web-viewer-port", str(web_port)]
 
 
