@@ -37,7 +37,7 @@ from robocell.wire.transport import BaseTransport
 
 from .asking import Asker
 from .upkeep import apply_retention_every
-from .handle import JobHandle
+from .handle import JobHandle, stored_when_taken
 from .job import Checkpoint, Job, Picture, success_message
 from .lane import MotionLane
 from .lock import RunDirLock
@@ -240,8 +240,8 @@ class CellDaemon(RequestHandlers):
     async def store(self, event: JobEvent, *, sync: bool, error_kind: str | None,
                     checkpoint: Checkpoint | None) -> None:
         n_views = None if checkpoint is None else sum(spec["kind"] == View.kind for spec in checkpoint.plan)
-        self._jobs.change(event, error_kind=error_kind, n_views=n_views,
-                          checkpoint=checkpoint.model_dump_json() if checkpoint else None)
+        await stored_when_taken(self._jobs, event, error_kind=error_kind, n_views=n_views,
+                                checkpoint=checkpoint.model_dump_json() if checkpoint else None)
         if sync:
             await asyncio.to_thread(self._jobs.sync)
 

@@ -8,7 +8,10 @@ to say) goes through :meth:`JobHandle.change`, and only there, always in this or
 3. into the job's recording.
 
 A change the store refuses goes no further: nobody hears of it, and the job's state
-in memory stays what the store has. Changes of one job are applied one at a time, in
+in memory stays what the store has. The daemon's store does not refuse a change for
+want of room (:func:`stored_when_taken`): the job waits, trying again, and carries on
+by itself once the disk has room (a full disk must neither end a job a client was not
+told of, nor leave one that nothing runs). Changes of one job are applied one at a time, in
 the order they were asked for; once begun, a change is carried through even if its
 caller is cancelled (a cancelled step must not leave the store and the listeners
 apart).
@@ -29,19 +32,27 @@ step behind, which it carries on from.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
-from robocell.wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanResult, wire_state
+from robocell.wire.errors import StoreError
+from robocell.wire.messages import JobEvent, JobState, JobStatus, Lifecycle, Progress, ScanResult, wire_state
 
 from .job import Checkpoint, IllegalTransition, Job, check_transition
+from .store import JobStore
 
-__all__ = ["Books", "JobHandle", "must_sync", "SYNCED_LIFECYCLES", "SYNCED_ACTIVITIES"]
+__all__ = ["Books", "JobHandle", "must_sync", "stored_when_taken", "SYNCED_LIFECYCLES", "SYNCED_ACTIVITIES",
+           "STORE_RETRY_S"]
+
+log = logging.getLogger(__name__)
 
 #: A change into one of these lifecycles is synced before anyone hears of it.
 SYNCED_LIFECYCLES = frozenset({Lifecycle.QUEUED, Lifecycle.SUCCEEDED, Lifecycle.FAILED, Lifecycle.CANCELLED})
 #: A change that begins one of these activities is synced before anyone hears of it.
 SYNCED_ACTIVITIES = frozenset({JobState.PICKING})
+#: How often a change the store could not take (a full disk) is tried again.
+STORE_RETRY_S = 1.0
 
 
 def must_sync(before: Progress | None, lifecycle: Lifecycle, progress: Progress | None) -> bool:
@@ -51,6 +62,30 @@ def must_sync(before: Progress | None, lifecycle: Lifecycle, progress: Progress 
         return True
     begins = progress is not None and (before is None or before.activity is not progress.activity)
     return begins and progress is not None and progress.activity in SYNCED_ACTIVITIES
+
+
+async def stored_when_taken(store: JobStore, event: JobEvent, *, retry_s: float = STORE_RETRY_S,
+                            **fields: Any) -> JobStatus:
+    """``store.change(event, **fields)``, tried again every ``retry_s`` seconds while the store is
+    open and cannot take it (a full disk): the job waits there, and nobody hears of the change
+    before it is stored; it carries on by itself once the store takes it. Raises the store's
+    error once the store is closed (the daemon stops: the restarted one carries the job on)."""
+    tries = 0
+    while True:
+        tries += 1
+        try:
+            status = store.change(event, **fields)
+        except StoreError as exc:
+            if store.closed:
+                raise
+            if tries == 1:
+                log.error("job %s: the store cannot take its change (%s): trying again every %g s",
+                          event.job_id, exc, retry_s)
+            await asyncio.sleep(retry_s)
+            continue
+        if tries > 1:
+            log.warning("job %s: the store took its change at try %d: carrying on", event.job_id, tries)
+        return status
 
 
 class Books(Protocol):
@@ -90,6 +125,7 @@ class JobHandle:
             The store cannot take it; nothing is changed, nobody told.
         """
         applied = asyncio.ensure_future(self._apply(message, lifecycle, progress, error_kind, result, checkpoint))
+        applied.add_done_callback(_retrieved)  # a caller cancelled meanwhile no longer asks how it went
         return await asyncio.shield(applied)
 
     def accepted(self, event: JobEvent) -> None:
@@ -140,3 +176,8 @@ class JobHandle:
         self._books.publish(event)
         self._books.record_event(job, event)
         return event
+
+
+def _retrieved(future: asyncio.Future[JobEvent]) -> None:
+    if not future.cancelled():
+        future.exception()

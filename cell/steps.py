@@ -27,7 +27,7 @@ from robocell.core_cy.errors import CoreError
 from robocell.core_cy.plan import camera_poses
 from robocell.wire import keys
 from robocell.wire.config import CellConfig
-from robocell.wire.errors import CellError, LinkDown
+from robocell.wire.errors import CellError, LinkDown, StoreError
 from robocell.wire.messages import (CameraModel, CaptureInfo, CaptureRequest, JobState, Message,
                            MoveReply, MoveRequest, NextViewQuery, ReconstructReply,
                            ReconstructRequest, ReconstructView, ScanResult, parse)
@@ -152,7 +152,10 @@ class View(Step):
         info = parse_reply(CaptureInfo, reply.attachment, "the camera worker")
         job.durations_s[f"capture{view}"] = info.duration_s
         picture = Picture(reply.payload, flange, camera_poses([flange], config.T_flange_cam)[0])
-        await cell.keep(job, picture)
+        try:
+            await cell.keep(job, picture)
+        except StoreError as exc:  # the job has it in memory; a restarted daemon would take this view again
+            logging.getLogger(__name__).warning("job %s: picture %d not kept for a restart: %s", job.job_id, view, exc)
         job.captures.append(picture)
         cell.record(job, "log_view", view, picture.jpeg, config.camera.K, picture.T_base_cam, (info.width, info.height))
         return None

@@ -61,6 +61,7 @@ class JobStore:
 
     def __init__(self, path: Path, *, timeout: float = 5.0):
         self.path = Path(path)
+        self.closed = False
         with self._errors():
             # isolation_level=None: we issue BEGIN/COMMIT ourselves, so each
             # method is exactly one transaction and nothing is left open.
@@ -93,6 +94,7 @@ class JobStore:
 
     def close(self) -> None:
         """Close the database; later calls raise :class:`StoreError`. Closing twice is fine."""
+        self.closed = True
         self._db.close()
 
     def __enter__(self) -> JobStore:

@@ -222,6 +222,54 @@ def test_a_success_the_store_refuses_is_told_to_nobody_and_the_restart_carries_t
     _run(scenario())
 
 
+def test_a_change_the_store_cannot_take_holds_the_job_until_the_disk_has_room_then_it_carries_on(tmp_path,
+                                                                                                 monkeypatch):
+    """Issue 23: a full disk mid-job neither ends the job untold nor leaves it to nothing (a phantom
+    until a restart): the job waits, nobody hears of the change, and it goes on by itself."""
+    config = _config(tmp_path)
+    change, keep_picture = JobStore.change, JobStore.keep_picture
+    full = {"disk": True}
+    refused: list[str] = []
+
+    def full_disk_from_view_1(store, event, **fields):
+        if full["disk"] and event.view == 1 and event.state is JobState.CAPTURING:
+            refused.append(event.message)
+            raise StoreError(f"job store {store.path}: database or disk is full")
+        return change(store, event, **fields)
+
+    def no_room_for_pictures(store, job_id, view, jpeg, poses):
+        if full["disk"]:
+            raise StoreError(f"job store {store.path}: database or disk is full")
+        return keep_picture(store, job_id, view, jpeg, poses)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("w")
+        monkeypatch.setattr(JobStore, "change", full_disk_from_view_1)
+        monkeypatch.setattr(JobStore, "keep_picture", no_room_for_pictures)
+        try:
+            async with daemon(network, config) as client:
+                client.listen()
+                status = await client.submit(ScanRequest(target=target_from_config(config.sim)))
+                async with asyncio.timeout(20):
+                    while len(refused) < 2:  # tried, and tried again
+                        await asyncio.sleep(0.01)
+                held = await client.status(status.job_id)
+                assert held.state is JobState.MOVING and held.view == 1 and not held.state.finished
+                full["disk"] = False   # room again: the same daemon carries the job on, no restart
+                final = await client.wait(status.job_id, timeout=20)
+                assert final.state is JobState.SUCCEEDED
+                assert len((await client.result(status.job_id)).T_base_cam) == 3
+            states = [(e.state, e.view) for e in await _events(config, status.job_id)]
+            assert states.count((JobState.CAPTURING, 1)) == 1 and states.count((JobState.SUCCEEDED, None)) == 1
+            assert workers.answered == ["w"]
+        finally:
+            await workers.close()
+
+    _run(scenario())
+
+
 def test_a_worker_frozen_mid_job_loses_it_to_another_and_the_job_succeeds(tmp_path):
     config = _config(tmp_path, reconstruct={"max_attempts": 2})
 
