@@ -48,6 +48,7 @@ from .recorder import Recorder
 from .backgrounds import Backgrounds
 from .plan import flange_poses, job_steps, next_view_candidates, resume
 from .requests import RequestHandlers
+from .reserve import release_if_full
 from .steps import Step, StepFailed, View
 from .store import JobStore, queued_event
 
@@ -113,8 +114,8 @@ class CellDaemon(RequestHandlers):
         lock.acquire()
         try:
             await self._refuse_a_second_daemon()
-            # Only this daemon writes it (the run directory's lock): a lock held long is a fault.
-            self._store = JobStore(self._store_path, timeout=_STORE_BUSY_S)
+            release_if_full(self.run_dir)  # on a full disk, the room kept to open the store (cell.reserve)
+            self._store = JobStore(self._store_path, timeout=_STORE_BUSY_S)  # a lock held long is a fault
             self._recorder.start()
             self._publisher.start()
             try:
@@ -319,8 +320,7 @@ class CellDaemon(RequestHandlers):
             await handle.change(error, lifecycle=Lifecycle.FAILED, error_kind=kind)
 
     async def _succeed(self, handle: JobHandle) -> None:
-        job = handle.job
-        result = job.result
+        job, result = handle.job, handle.job.result
         if job.request.kind == "backgrounds":  # no model: the pictures kept are what it made
             await handle.change(f"kept {len(job.captures)} backgrounds of the empty workspace in "
                                 f"{self.backgrounds.root}", lifecycle=Lifecycle.SUCCEEDED)

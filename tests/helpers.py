@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import subprocess
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from robocell.core_cy.plan import look_at
 from robocell.core_cy.camera import Camera
@@ -35,3 +42,22 @@ def orthogonal_cameras(centre, distance: float, focal: float = FOCAL) -> list[Ca
         cameras.append(Camera(K=intrinsics(focal), T_world_cam=look_at(centre + distance * axis, centre, up),
                               view=index))
     return cameras
+
+
+@contextlib.contextmanager
+def tmpfs(parent: Path, size: str) -> Iterator[Path]:
+    """A tmpfs of ``size`` (``mount``'s words: ``256k``, ``24m``) mounted in a new folder of ``parent``,
+    unmounted after; the test is skipped where none can be mounted (it needs root)."""
+    mount_point = Path(parent) / f"disk-{uuid.uuid4().hex[:8]}"
+    mount_point.mkdir()
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount_point)],
+                              capture_output=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        pytest.skip(f"cannot mount a tmpfs: {exc}")
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {done.stderr.decode().strip()}")
+    try:
+        yield mount_point
+    finally:
+        subprocess.run(["umount", "-l", str(mount_point)], capture_output=True, timeout=10)

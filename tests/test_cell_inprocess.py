@@ -13,8 +13,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import shutil
 import time
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -23,10 +25,11 @@ import pytest
 import robocell.cell.daemon
 import robocell.cell.requests
 from robocell.cell.daemon import CellDaemon
+from robocell.cell.reserve import MIN_FREE_BYTES, RESERVE_BYTES, RESERVE_NAME
 from robocell.cell.store import JobStore
 from robocell.wire import keys
 from robocell.wire.client import AsyncCellClient
-from robocell.wire.errors import CellError, StoreError
+from robocell.wire.errors import CellError, RemoteError, StoreError
 from robocell.wire.fake_transport import MemoryNetwork
 from robocell.wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
                            MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
@@ -36,6 +39,7 @@ from robocell.workers.reconstruct.worker import ReconstructWorker
 from robocell.workers.sim.scene import target_from_config
 
 from tests.cell_fixtures import cell_config
+from tests.helpers import tmpfs
 
 LIMIT_S = 60.0
 
@@ -268,6 +272,55 @@ def test_a_change_the_store_cannot_take_holds_the_job_until_the_disk_has_room_th
             await workers.close()
 
     _run(scenario())
+
+
+def _fill(disk: Path) -> Path:
+    """Write a file on ``disk`` until it has no room left; the file."""
+    filler = disk / "filler"
+    with open(filler, "wb", buffering=0) as file:
+        for chunk in (1 << 20, 1 << 12, 1):
+            try:
+                while True:
+                    file.write(bytes(chunk))
+            except OSError:  # no room for one more of this size: try smaller ones
+                pass
+    return filler
+
+
+def test_a_daemon_on_a_full_disk_starts_refuses_new_jobs_saying_why_and_takes_them_again_once_there_is_room(
+        tmp_path):
+    """Issue 23: a daemon whose disk something else filled could not open its store, and under systemd
+    restarted for ever. It gives back the room it kept (cell.reserve), starts, says so, and resumes."""
+    with tmpfs(tmp_path, "24m") as disk:
+        config = _config(disk / "run")
+        reserve = config.run_dir / RESERVE_NAME
+
+        async def scenario() -> None:
+            network = MemoryNetwork()
+            workers = Workers(network, config)
+            await workers.reconstructor("w")
+            request = ScanRequest(target=target_from_config(config.sim))
+            try:
+                async with daemon(network, config) as client:   # room: its first job makes the reserve
+                    await client.scan(request, timeout=30)
+                assert reserve.stat().st_size == RESERVE_BYTES
+                filler = _fill(disk)
+                assert shutil.disk_usage(disk).free < 4096
+                async with daemon(network, config) as client:   # it starts
+                    status = await client.cell_status()
+                    assert status.disk is not None and status.disk.free_on_disk is not None
+                    assert status.disk.free_on_disk < MIN_FREE_BYTES
+                    with pytest.raises(RemoteError, match=r"^the cell's disk is full: \d+\.\d MB free where "
+                                                          r".*: no new job until there is room$"):
+                        await client.submit(request)
+                    filler.unlink()   # room again: the same daemon takes jobs
+                    result = await client.scan(request, timeout=30)
+                    assert len(result.T_base_cam) == 3
+                assert reserve.stat().st_size == RESERVE_BYTES   # kept again
+            finally:
+                await workers.close()
+
+        _run(scenario())
 
 
 def test_a_worker_frozen_mid_job_loses_it_to_another_and_the_job_succeeds(tmp_path):

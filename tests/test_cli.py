@@ -22,7 +22,7 @@ from robocell.core_cy.superquadric import Superquadric
 from robocell.cli.jobs import format_status
 from robocell.cli.main import build_parser, main
 from robocell.wire.config import CellConfig, load_config
-from robocell.wire.messages import CellStatus, ReconstructorStatus
+from robocell.wire.messages import CellStatus, DiskUsage, ReconstructorStatus
 
 from tests.bundles import edit_scan
 from tests.cell_fixtures import free_port, wait_until
@@ -223,6 +223,18 @@ def test_status_columns_line_up_with_their_headers():
     for title in ("capacity", "load", "of ours", "heartbeat", "sent", "failed"):
         end = table[0].index(title) + len(title)
         assert table[1][end - 1] != " " and table[2][end - 1] != " " and table[1][end:end + 1] in ("", " "), title
+
+
+def test_status_says_when_the_disk_is_too_full_for_new_jobs():
+    mb = 1024 * 1024
+    disk = DiskUsage(recordings=5 * mb, pictures=0, store=mb, other=0, free_on_disk=3 * mb)
+    status = CellStatus(cell="bay", started=0.0, time=30.0, workers={"robot": True, "camera": True},
+                        reconstructors=[], queued=0, max_queued=100, waiting_for_reconstructor=0,
+                        jobs={"succeeded": 3}, recent_failures=[], disk=disk)
+    lines = format_status(status).splitlines()
+    assert "disk FULL: no new job is taken until 8 MB are free on it" in lines
+    roomy = format_status(status.model_copy(update={"disk": disk.model_copy(update={"free_on_disk": 900 * mb})}))
+    assert "FULL" not in roomy
 
 
 # --- replay --------------------------------------------------------------------------------------------

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import uuid
 import warnings
 from pathlib import Path
 
@@ -17,6 +15,7 @@ from rerun.chunk import RrdReader
 
 from robocell.cell.recorder import Recorder
 from tests.cell_fixtures import wait_until
+from tests.helpers import tmpfs
 
 VERDICT_S = 60.0  # a recorder process imports Rerun first, at the lowest priority, on a busy machine
 
@@ -85,19 +84,8 @@ def test_a_recording_on_a_full_device_is_named(recorder, tmp_path):
 @pytest.fixture
 def small_disk(tmp_path):
     """A 256 kB tmpfs (needs root and mount; skipped where there are none)."""
-    mount_point = tmp_path / f"disk-{uuid.uuid4().hex[:8]}"
-    mount_point.mkdir()
-    try:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mount_point)],
-                              capture_output=True, timeout=10)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        pytest.skip(f"cannot mount a tmpfs: {exc}")
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {done.stderr.decode().strip()}")
-    try:
+    with tmpfs(tmp_path, "256k") as mount_point:
         yield mount_point
-    finally:
-        subprocess.run(["umount", "-l", str(mount_point)], capture_output=True, timeout=10)
 
 
 def test_a_recording_that_fills_the_disk_is_named_cut_short(recorder, small_disk):

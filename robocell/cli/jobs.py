@@ -412,6 +412,10 @@ def format_status(status: CellStatus) -> str:
                      f"(recordings {disk.recordings / mb:.1f}, pictures {disk.pictures / mb:.1f}, "
                      f"backgrounds {disk.backgrounds / mb:.1f}, store {disk.store / mb:.1f}){free}; retention "
                      f"will free {to_free / mb:.1f} MB and {disk.jobs_to_prune} jobs")
+        from robocell.cell.reserve import MIN_FREE_BYTES
+
+        if disk.free_on_disk is not None and disk.free_on_disk < MIN_FREE_BYTES:
+            lines.append(f"disk FULL: no new job is taken until {MIN_FREE_BYTES / mb:.0f} MB are free on it")
     if status.recent_failures:
         lines.append("recent failures:")
         for failure in status.recent_failures:

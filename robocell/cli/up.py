@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from robocell.cell.reserve import release_if_full
 from robocell.wire import keys
 from robocell.wire.config import CellConfig
 from robocell.wire.errors import CellError
@@ -125,6 +126,7 @@ class CellProcesses:
             self._check_router_port()
         self._check_roles()
         self.log_dir.mkdir(parents=True, exist_ok=True)
+        release_if_full(self.run_dir)  # on a full disk, the room the daemon keeps to start (cell.reserve)
         # The JSON masks the camera password; the children get it from the environment instead.
         self.config_path.write_text(self.config.model_dump_json(indent=1))
         self._environment = dict(os.environ)
