@@ -11,10 +11,10 @@ A change the store refuses goes no further: nobody hears of it, and the job's st
 in memory stays what the store has. The daemon's store does not refuse a change for
 want of room (:func:`stored_when_taken`): the job waits, trying again, and carries on
 by itself once the disk has room (a full disk must neither end a job a client was not
-told of, nor leave one that nothing runs). Changes of one job are applied one at a time, in
-the order they were asked for; once begun, a change is carried through even if its
-caller is cancelled (a cancelled step must not leave the store and the listeners
-apart).
+told of, nor leave one that nothing runs). Changes of one job are applied one at a
+time, in the order they were asked for; once begun, a change is carried through even
+if its caller is cancelled (a cancelled step must not leave the store and the
+listeners apart).
 
 What must be on disk before anyone hears of it (:func:`must_sync`):
 

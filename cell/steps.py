@@ -40,6 +40,8 @@ from .verify import Evidence, Verdict, check_answer, job_evidence
 
 __all__ = ["Step", "StepFailed", "Cell", "View", "Reconstruct", "KeepBackgrounds", "parse_reply"]
 
+log = logging.getLogger(__name__)
+
 
 class StepFailed(CellError):
     """A step failed; the message says why, ``kind`` the class of the error behind it."""
@@ -155,7 +157,7 @@ class View(Step):
         try:
             await cell.keep(job, picture)
         except StoreError as exc:  # the job has it in memory; a restarted daemon would take this view again
-            logging.getLogger(__name__).warning("job %s: picture %d not kept for a restart: %s", job.job_id, view, exc)
+            log.warning("job %s: picture %d not kept for a restart: %s", job.job_id, view, exc)
         job.captures.append(picture)
         cell.record(job, "log_view", view, picture.jpeg, config.camera.K, picture.T_base_cam, (info.width, info.height))
         return None

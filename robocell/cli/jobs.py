@@ -171,7 +171,6 @@ def _background_request(args: argparse.Namespace) -> ScanRequest:
 async def _scan(client: AsyncCellClient, args: argparse.Namespace) -> int:
     """Submit, show the progress, print the result; Ctrl-C cancels the job (a second leaves it running)."""
     from robocell.wire.errors import CellError
-    from robocell.wire.messages import JobState
 
     # Progress is for a person: with --json it goes to stderr, and stdout has the one JSON document.
     progress = sys.stderr if args.json else sys.stdout
