@@ -20,7 +20,7 @@ from robocell.wire.transport import Request, RequestError, Response
 from .handle import JobHandle
 from .job import Checkpoint, IllegalTransition
 from .plan import job_steps
-from .reserve import RESERVE_NAME, full_disk_refusal, keep_reserve
+from .reserve import full_disk_refusal
 from .steps import Step
 from .store import JobStore
 from .tokens import JobTokenRefused, check_token, new_token, token_digest
@@ -81,8 +81,6 @@ class RequestHandlers:
         full = full_disk_refusal(self.run_dir)
         if full is not None:
             raise RequestError(full)
-        if not (self.run_dir / RESERVE_NAME).exists():  # the room kept for a restart on a full disk
-            await asyncio.to_thread(keep_reserve, self.run_dir)
         plan = job_steps(scan, poses)
         point = Checkpoint(plan=[step.spec() for step in plan], done=0).model_dump_json()
         token = new_token()  # the job's secret: its client's alone (only its digest is kept)

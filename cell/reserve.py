@@ -38,24 +38,23 @@ def free_bytes(run_dir: Path) -> int | None:
         return None
 
 
-def release_if_full(run_dir: Path) -> bool:
-    """Delete the reserve when the disk has less than :data:`MIN_FREE_BYTES` free; whether it did."""
+def release_if_full(run_dir: Path) -> None:
+    """Delete the reserve when the disk has less than :data:`MIN_FREE_BYTES` free."""
     free, reserve = free_bytes(run_dir), Path(run_dir) / RESERVE_NAME
     if free is None or free >= MIN_FREE_BYTES or not reserve.exists():
-        return False
+        return
     try:
         reserve.unlink()
     except OSError as exc:
         log.error("the disk of %s is full, and its reserve cannot be deleted: %s", run_dir, exc)
-        return False
+        return
     log.error("the disk of %s is full (%.1f MB free): its reserve of %.0f MB deleted so that the daemon starts; "
               "no new job is taken until there is room", run_dir, free / _MB, RESERVE_BYTES / _MB)
-    return True
 
 
 def keep_reserve(run_dir: Path) -> None:
-    """Make the reserve if it is missing and the disk has room for it and the jobs besides.
-    Blocking (a few megabytes written): call it in a thread."""
+    """Make the reserve if it is missing and the disk has room for it and the jobs besides (the
+    daemon's upkeep calls it). Blocking (a few megabytes written): call it in a thread."""
     reserve = Path(run_dir) / RESERVE_NAME
     free = free_bytes(run_dir)
     if reserve.exists() or free is None or free < MIN_FREE_BYTES + RESERVE_BYTES:

@@ -47,6 +47,7 @@ from robocell.wire.messages import DiskUsage, JobState
 
 from .backgrounds import Background, Backgrounds
 from .backgrounds import remove as remove_background
+from .reserve import free_bytes
 
 __all__ = ["RetentionReport", "FileEntry", "apply_retention", "disk_usage", "plan_recordings", "plan_pictures",
            "plan_backgrounds", "GRACE_S"]
@@ -354,9 +355,7 @@ def disk_usage(run_dir: Path, policy: RetentionConfig, *, now: float, store_path
     backgrounds = [entry for entry, _ in _backgrounds(run_dir).values()]
     background_bytes = sum(e.size for e in backgrounds)
     store_bytes = _store_bytes(store_path)
-    free = None
-    with contextlib.suppress(OSError):
-        free = shutil.disk_usage(run_dir).free
+    free = free_bytes(run_dir)
     return DiskUsage(recordings=recording_bytes, pictures=picture_bytes, store=store_bytes,
                      other=max(0, total - recording_bytes - picture_bytes - background_bytes - store_bytes),
                      free_on_disk=free,

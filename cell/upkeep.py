@@ -17,6 +17,7 @@ from pathlib import Path
 from robocell.wire.config import RetentionConfig
 from robocell.wire.messages import DiskUsage, JobStatus
 
+from .reserve import keep_reserve
 from .retention import apply_retention, disk_usage
 from .store import JobStore
 
@@ -39,8 +40,11 @@ class _StoreAsSeen:
 async def apply_retention_every(run_dir: Path, store: JobStore, policy: RetentionConfig, *,
                                 active: Callable[[], Collection[str]], clock: Callable[[], float]) -> None:
     """Apply ``policy`` every ``policy.interval_s`` until cancelled, logging what each run freed; a run
-    that fails is logged, and the next one tries again. ``active``: the jobs the daemon runs now."""
+    that fails is logged, and the next one tries again. ``active``: the jobs the daemon runs now. The
+    daemon's reserve is kept, from the start and after every run."""
     while True:
+        # The room kept to start on a full disk (cell.reserve): made at start, and again once there is room.
+        await asyncio.to_thread(keep_reserve, run_dir)
         await asyncio.sleep(policy.interval_s)
         seen = _StoreAsSeen(store.path, store.unfinished())
         try:
