@@ -221,6 +221,9 @@ class CellDaemon(RequestHandlers):
     def record(self, job: Job, method: str, *args: object) -> None:
         self._recorder.call(job.job_id, self.clock() - job.started, method, *args)
 
+    def record_reconstruction(self, job: Job, reply_json: bytes, payload: bytes) -> None:
+        self._recorder.reconstruction(job.job_id, self.clock() - job.started, reply_json.decode(), payload)
+
     async def note(self, job: Job, message: str, *, level: int = logging.WARNING) -> None:
         log.log(level, "job %s: %s", job.job_id, message)
         await self._live[job.job_id].change(message)
@@ -335,12 +338,9 @@ class CellDaemon(RequestHandlers):
         await handle.change(message, lifecycle=Lifecycle.SUCCEEDED, result=result)
 
     async def _finish_recording(self, job: Job, message: str) -> str | None:
-        """A success's recording drawn to its end and closed before the success is told, so that its
-        result names a recording that could not be written, or whose recorder died (issue 23): what
-        is wrong with it, or None. The success's own line comes before its event is stored, here."""
-        if job.reconstruction is not None:
-            reply, payload, drawn = job.reconstruction
-            self._recorder.reconstruction(job.job_id, drawn, reply.decode(), payload)
+        """A success's recording closed before the success is told, so that its result names a
+        recording that could not be written, or whose recorder died (issue 23): what is wrong with
+        it, or None. The success's own line comes before its event is stored, here."""
         self.record(job, "log_text", f"{Lifecycle.SUCCEEDED.value}: {message}", "INFO")
         return await self._recorder.verdict(job.job_id, self.run_dir / f"{job.job_id}.rrd", RECORDING_VERDICT_S)
 

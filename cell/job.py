@@ -116,8 +116,6 @@ class Job:
     #: What the job waited for, seconds: see ``ScanResult.durations_s``.
     durations_s: dict[str, float] = field(default_factory=dict)
     result: ScanResult | None = None
-    #: The reconstruction worker's reply (attachment, payload), and the job time it came, for the recording.
-    reconstruction: tuple[bytes, bytes, float] | None = None
     #: A pick's flange poses by name ("above", "grasp", "lift", ...), once a grasp is chosen.
     pick_poses: dict[str, np.ndarray] = field(default_factory=dict)
     #: Why the job's recording cannot be written, if it cannot.

@@ -116,6 +116,7 @@ class JobRecording:
         self._closed = False
         self._problem: str | None = None
         self._cameras: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}  # K, T_world_cam, (w, h)
+        self._silhouettes: set[int] = set()  # the views whose silhouettes were drawn
         # Not the global recording: several jobs are recorded at once in one process.
         self._rec = rr.RecordingStream(application_id, recording_id=job_id)
         self._rec.save(self.path)
@@ -184,6 +185,15 @@ class JobRecording:
         if mask.ndim != 2:
             raise ValueError(f"a silhouette must be a 2-D mask, got shape {mask.shape}")
         self._log(f"world/camera{index}/silhouette", rr.SegmentationImage((mask != 0).astype(np.uint8)))
+        self._silhouettes.add(index)
+
+    def clear_reconstruction(self) -> None:
+        """Take the reconstruction drawn last out of the recording from now on (an answer the daemon
+        refused): its points, its model, and each view's silhouette and outline."""
+        views = sorted(self._silhouettes | set(self._cameras))
+        for entity in ["world/points", "world/fit", *(f"world/camera{index}/{layer}" for index in views
+                                                     for layer in ("silhouette", "outline"))]:
+            self._log(entity, rr.Clear(recursive=True))
 
     def log_points(self, name: str, points: np.ndarray, colour=(0, 160, 255)) -> None:
         """A point cloud, (N, 3) world, e.g. ``"sphere"`` before carving and ``"carved"`` after."""

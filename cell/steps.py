@@ -73,6 +73,9 @@ class Cell(Protocol):
     def record(self, job: Job, method: str, *args: object) -> None:
         """Add to the job's recording (``cell.recording.JobRecording.<method>``)."""
 
+    def record_reconstruction(self, job: Job, reply_json: bytes, payload: bytes) -> None:
+        """Draw a worker's reconstruction (its reply and payload) in the job's recording."""
+
     async def note(self, job: Job, message: str, *, level: int = logging.WARNING) -> None:
         """Tell the job's listeners something that changes nothing (a retry, say); logged at ``level``
         (a warning unless told: news that needs no one's attention is ``logging.INFO``)."""
@@ -233,11 +236,16 @@ class Reconstruct(Step):
             answer = parse_reply(ReconstructReply, reply.attachment, "the reconstruction worker")
             if answer.result is None:  # the core's verdict on these pictures: no use retrying
                 raise StepFailed(answer.error or "no result", kind=answer.error_kind)
-            if answer.worker != worker or answer.ticket != request.ticket:
+            drawn = answer.worker == worker and answer.ticket == request.ticket
+            if not drawn:
                 verdict = Verdict(False, f"it answered as {answer.worker!r} to ticket {answer.ticket!r}")
             else:  # its model must agree with the daemon's own pictures, its grasps with the model
+                # Drawn by the recorder's process while it is checked here; taken out again if refused.
+                cell.record_reconstruction(job, reply.attachment or b"", reply.payload)
                 verdict = await asyncio.to_thread(check_answer, answer.result, await evidence)
             if not verdict.ok:
+                if drawn:
+                    cell.record(job, "clear_reconstruction")
                 cell.pool.refuse(worker, verdict.reason)
                 tried.add(worker)
                 failures.append(f"attempt {attempt} on {worker}: refused: {verdict.reason}")
@@ -248,7 +256,6 @@ class Reconstruct(Step):
             cell.pool.confirm(worker)
             fit = answer.result.superquadric
             grasps = [answer.result.grasps[i] for i in verdict.grasps]
-            job.reconstruction = (reply.attachment or b"", reply.payload, cell.clock() - job.started)
             nxt = answer.result.next_view
             job.result = ScanResult(
                 job_id=job.job_id, superquadric=fit, parts=answer.result.parts, grasps=grasps,

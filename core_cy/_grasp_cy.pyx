@@ -2,7 +2,9 @@
 """Kernels of core_cy.grasp: the candidates' nominal checks, the hull's points against them, and a
 grasp's margins on perturbed copies of the model's sampled surface."""
 
-from libc.math cimport acos, atan2, cos, erf, erfc, fabs, pow, sin, sqrt, INFINITY, NAN
+from libc.math cimport acos, atan2, cos, erf, erfc, exp, fabs, log, pow, sin, sqrt, INFINITY, NAN
+
+from ._superquadric_cy cimport _log_sum
 
 
 cdef enum:
@@ -622,3 +624,71 @@ def in_finger_path(const double[:, ::1] offsets not None, const double[:, :, ::1
                         and y <= half_open + finger_thickness):
                     hit[m] = 1
                     break
+
+
+
+cdef inline bint _in_union(double px, double py, double pz, const double[:, :, ::1] R, const double[:, ::1] t,
+                           const double[:, ::1] sizes, const double[:, ::1] shapes, double factor) noexcept nogil:
+    """Whether the point lies inside a part taken ``factor`` times as large (see union_inside)."""
+    cdef Py_ssize_t p
+    cdef double x, y, z, logA, w1, w2, e1, e2
+    cdef double tiny = 1e-300
+    for p in range(R.shape[0]):
+        x = fabs(R[p, 0, 0] * px + R[p, 0, 1] * py + R[p, 0, 2] * pz + t[p, 0])
+        y = fabs(R[p, 1, 0] * px + R[p, 1, 1] * py + R[p, 1, 2] * pz + t[p, 1])
+        z = fabs(R[p, 2, 0] * px + R[p, 2, 1] * py + R[p, 2, 2] * pz + t[p, 2])
+        if x > sizes[p, 0] * factor or y > sizes[p, 1] * factor or z > sizes[p, 2] * factor:
+            continue  # outside the part's box: outside the part
+        e1, e2 = shapes[p, 0], shapes[p, 1]
+        logA = _log_sum(2.0 / e2 * (log(x if x > tiny else tiny) - log(sizes[p, 0])),
+                        2.0 / e2 * (log(y if y > tiny else tiny) - log(sizes[p, 1])), &w1, &w2)
+        if exp(_log_sum(e2 / e1 * logA, 2.0 / e1 * (log(z if z > tiny else tiny) - log(sizes[p, 2])),
+                        &w1, &w2)) < pow(factor, 2.0 / e1):
+            return True
+    return False
+
+
+def union_inside(const double[:, ::1] points not None, const double[:, :, ::1] R not None,
+                 const double[:, ::1] t not None, const double[:, ::1] sizes not None,
+                 const double[:, ::1] shapes not None, double factor):
+    """Whether any point lies inside the union of superquadrics each taken ``factor`` times as large.
+
+    points (N, 3) in some frame; part p maps them into its own frame as ``R[p] @ x + t[p]``; sizes
+    (P, 3), shapes (P, 2). A point is inside part p where its inside-outside value (evaluated as
+    core_cy.superquadric.inside_outside does) is below ``factor ** (2 / e1)``: F scales with the
+    size as ``F(x; s a) = s ** (-2 / e1) F(x; a)``. Only a point inside the part's box, taken
+    ``factor`` times as large, can be inside it, so F is evaluated there alone.
+    """
+    cdef Py_ssize_t i
+    cdef bint found = False
+    with nogil:
+        for i in range(points.shape[0]):
+            if _in_union(points[i, 0], points[i, 1], points[i, 2], R, t, sizes, shapes, factor):
+                found = True
+                break
+    return found
+
+
+def line_extents(const double[:, :, ::1] lines not None, const double[:, :, ::1] R not None,
+                 const double[:, ::1] t not None, const double[:, ::1] sizes not None,
+                 const double[:, ::1] shapes not None, double factor, Py_ssize_t[:, ::1] extents not None):
+    """The first and last sample of each line inside the union (see :func:`union_inside`).
+
+    lines (C, L, 3): C lines of L samples each. Writes extents (C, 2): the indices of the first and
+    the last sample inside, or -1, -1 where none is. Each line is walked in from both ends and
+    stops at the union, so only the samples outside it are evaluated, and one inside at each end.
+    """
+    cdef Py_ssize_t c, j, first, last, n = lines.shape[1]
+    with nogil:
+        for c in range(lines.shape[0]):
+            first, last = -1, -1
+            for j in range(n):
+                if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, sizes, shapes, factor):
+                    first = j
+                    break
+            if first >= 0:
+                for j in range(n - 1, first - 1, -1):
+                    if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, sizes, shapes, factor):
+                        last = j
+                        break
+            extents[c, 0], extents[c, 1] = first, last

@@ -20,8 +20,10 @@ import cv2
 import numpy as np
 
 from .camera import Camera
+from ._grasp_cy import line_extents as _line_extents
+from ._grasp_cy import union_inside as _union_inside
 from .gripper import Gripper
-from .superquadric import Superquadric, inside_outside, surface_points
+from .superquadric import Superquadric, surface_points
 
 __all__ = ["model_iou", "grasp_problem", "MODEL_SLACK"]
 
@@ -60,45 +62,40 @@ def model_iou(parts: Sequence[Superquadric], camera: Camera, silhouette: np.ndar
     return int(np.count_nonzero(seen & projected)) / union if union else 0.0
 
 
-class _Levels:
-    """The inside-outside function of each part of a model at some points, for the model at any scale.
+class _Union:
+    """The model's parts seen from a grasp's frame, for samples in that frame inside their union
+    taken any number of times as large (``_grasp_cy``'s ``union_inside`` and ``line_extents``)."""
 
-    A superquadric's F scales with its size as ``F(x; s a) = s ** (-2 / e1) F(x; a)``, so a point is
-    inside the part ``s`` times as large where ``F(x; a) < s ** (2 / e1)``: one evaluation serves the
-    model taken larger and smaller. A point outside a part's box (``|x_i| > a_i`` in its frame) is
-    outside the part, so F is evaluated only in the box of the largest scale asked (``reach``).
-    ``points`` are in the grasp frame, ``T_world_grasp`` its pose.
-    """
+    def __init__(self, parts: Sequence[Superquadric], T_world_grasp: np.ndarray) -> None:
+        T_part_grasp = np.array([np.linalg.inv(part.T_world_object) @ T_world_grasp for part in parts])
+        self._kernel_args = (np.ascontiguousarray(T_part_grasp[:, :3, :3]),
+                             np.ascontiguousarray(T_part_grasp[:, :3, 3]),
+                             np.ascontiguousarray([part.size for part in parts], dtype=np.float64),
+                             np.ascontiguousarray([part.shape for part in parts], dtype=np.float64))
 
-    def __init__(self, parts: Sequence[Superquadric], points: np.ndarray, T_world_grasp: np.ndarray,
-                 reach: float) -> None:
-        self.parts = parts
-        self.levels = []
-        for part in parts:
-            T_part_grasp = np.linalg.inv(part.T_world_object) @ T_world_grasp
-            local = points @ T_part_grasp[:3, :3].T + T_part_grasp[:3, 3]
-            near = np.all(np.abs(local) <= part.size * reach, axis=1)
-            level = np.full(len(points), np.inf)
-            if near.any():
-                level[near] = inside_outside(local[near], Superquadric(part.size, part.shape, np.eye(4)))
-            self.levels.append(level)
+    def any_inside(self, points: np.ndarray, factor: float) -> bool:
+        """Whether any of ``points`` (N, 3) is inside."""
+        return bool(_union_inside(points, *self._kernel_args, factor))
 
-    def inside(self, factor: float) -> np.ndarray:
-        """(N,) True where a point is inside the union of the parts taken ``factor`` times as large."""
-        inside = np.zeros(len(self.levels[0]) if self.levels else 0, bool)
-        for part, level in zip(self.parts, self.levels):
-            inside |= level < factor ** (2.0 / float(part.shape[0]))
-        return inside
+    def widest_chord(self, lines: np.ndarray, line_coordinate: np.ndarray, factor: float) -> float | None:
+        """Over ``lines`` (C, L, 3) of samples, the longest stretch from a line's first sample inside
+        to its last, measured in ``line_coordinate`` (L,); None where no sample is inside."""
+        extents = np.empty((len(lines), 2), np.intp)
+        _line_extents(lines, *self._kernel_args, factor, extents)
+        met = extents[:, 0] >= 0
+        if not met.any():
+            return None
+        return float((line_coordinate[extents[met, 1]] - line_coordinate[extents[met, 0]]).max())
 
 
 @dataclass(frozen=True)
 class _Samples:
-    """Where :func:`grasp_problem` samples a gripper, in the grasp frame: under the pads (a grid of
-    across x line x along, ``pads_y`` its line coordinate), where the open fingers are, and the palm."""
+    """Where :func:`grasp_problem` samples a gripper, in the grasp frame: under the pads (lines
+    across the closing direction, a grid of across x along of them, each sampled at ``line``, its
+    coordinate along the closing direction), where the open fingers are, and the palm."""
 
-    pads: np.ndarray
-    pads_shape: tuple[int, ...]
-    pads_y: np.ndarray
+    pad_lines: np.ndarray
+    line: np.ndarray
     fingers: np.ndarray
     palm: np.ndarray
 
@@ -108,15 +105,15 @@ def _samples(g: Gripper) -> _Samples:
     half_open = g.max_opening / 2
     t = np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness, _LINE_SAMPLES)
     across = np.linspace(-g.finger_width / 2, g.finger_width / 2, _ACROSS_SAMPLES)
-    X, Y, Z = np.meshgrid(across, t, np.linspace(g.tip - g.pad_length, g.tip, _ALONG_SAMPLES), indexing="ij")
+    X, Z, Y = np.meshgrid(across, np.linspace(g.tip - g.pad_length, g.tip, _ALONG_SAMPLES), t, indexing="ij")
     fingers = np.meshgrid(across, t[np.abs(t) >= half_open], np.linspace(g.palm, g.tip, _ALONG_SAMPLES),
                           indexing="ij")
     palm_x, palm_y = np.meshgrid(np.linspace(-g.palm_width / 2, g.palm_width / 2, _ACROSS_SAMPLES + 2),
                                  np.linspace(-half_open - g.finger_thickness, half_open + g.finger_thickness,
                                              _ACROSS_SAMPLES + 2), indexing="ij")
     palm = np.stack([palm_x.ravel(), palm_y.ravel(), np.full(palm_x.size, g.palm)], axis=1)
-    return _Samples(np.stack([X, Y, Z], axis=-1).reshape(-1, 3), X.shape, Y,
-                    np.stack(fingers, axis=-1).reshape(-1, 3), palm)
+    pad_lines = np.ascontiguousarray(np.stack([X, Y, Z], axis=-1).reshape(-1, len(t), 3))
+    return _Samples(pad_lines, t, np.ascontiguousarray(np.stack(fingers, axis=-1).reshape(-1, 3)), palm)
 
 
 def grasp_problem(T_world_grasp: np.ndarray, width: float, parts: Sequence[Superquadric], gripper: Gripper,
@@ -150,26 +147,19 @@ def grasp_problem(T_world_grasp: np.ndarray, width: float, parts: Sequence[Super
     grown, shrunk = 1 + MODEL_SLACK, 1 - MODEL_SLACK
     samples = _samples(g)
     # Under the pads: the contacts are where the model meets the pads' faces.
-    under_pads = _Levels(parts, samples.pads, T, grown)
-    met = under_pads.inside(grown).reshape(samples.pads_shape)
-    if not met.any():
+    union = _Union(parts, T)
+    most = union.widest_chord(samples.pad_lines, samples.line, grown)
+    if most is None:
         return "the model is not between its pads"
-
-    def widest(mask: np.ndarray) -> float:
-        # The chord of each (across, along) column of samples: from its lowest inside sample to its highest.
-        Y = samples.pads_y
-        chords = np.where(mask, Y, -np.inf).max(axis=1) - np.where(mask, Y, np.inf).min(axis=1)
-        return float(chords[np.isfinite(chords)].max(initial=0.0))
-
-    most, least = widest(met), widest(under_pads.inside(shrunk).reshape(samples.pads_shape))
+    least = union.widest_chord(samples.pad_lines, samples.line, shrunk) or 0.0
     slack = max(_WIDTH_SHARE * width, _WIDTH_FLOOR)
     # Only a width below the model's is refused: the gripper opens fully before it closes, so a
     # wider claim costs nothing, and the planner claims one where the model misses much of the
     # silhouettes (it plans on the visual hull's box there, which this check does not know).
     if width < least - slack:
         return f"its width {width:.3f} m is not the model's between the pads ({least:.3f}-{most:.3f} m)"
-    if _Levels(parts, samples.fingers, T, shrunk).inside(shrunk).any():
+    if union.any_inside(samples.fingers, shrunk):
         return "the open fingers would cut the model"
-    if _Levels(parts, samples.palm, T, shrunk).inside(shrunk).any():
+    if union.any_inside(samples.palm, shrunk):
         return "the palm would cut the model"
     return None

@@ -11,14 +11,15 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
-import time
 
 import pytest
+from rerun.chunk import RrdReader
 
 from robocell.wire.errors import NoResponder, RemoteError, StoreError
 from robocell.wire.messages import (ACTIVITIES, POINTS_ENCODING, Blob, JobState, Reconstruction, ReconstructReply,
                            ReconstructRequest, Superquadric)
 from robocell.wire.transport import Transport
+from robocell.cell.recording import recording_problem
 from robocell.cell.store import JobStore
 
 from tests.cell_fixtures import (GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell, cell_config,
@@ -317,6 +318,13 @@ def test_a_made_up_reconstruction_is_refused(rig):
     assert error.startswith("reconstructing: gave up after 3 attempts: attempt 1 on liar: refused: "
                             "the model does not match the pictures: view 0 overlaps its silhouette by"), error
     assert error.count("refused: the model does not match the pictures") == 3, error
+    # Drawn in the recording as it came, and taken out again when it was refused.
+    recording = cell.config.run_dir / f"{job_id}.rrd"
+    wait_until(lambda: recording_problem(recording) is None, timeout=20, what="the failed job's recording closed")
+    rows = sorted((at, "Clear:is_recursive" in batch.schema.names)
+                  for chunk in RrdReader(str(recording)).stream() if chunk.entity_path == "/world/fit"
+                  for batch in [chunk.to_record_batch()] for at in batch.column("job").cast("int64").to_pylist())
+    assert [cleared for _, cleared in rows] == [False, True] * 3, rows
 
 
 def test_a_job_the_store_cannot_take_is_refused_and_the_cell_goes_on(rig):

@@ -254,3 +254,22 @@ def test_replay_command_native_and_web(tmp_path):
     help_text = subprocess.run([native[0], "--help"], capture_output=True, text=True, timeout=60, check=True).stdout
     for flag in ("--serve-web", "--bind", "--port", "--web-viewer-port"):
         assert flag in help_text
+
+
+def test_a_refused_reconstruction_is_taken_out_of_the_recording_from_then_on(tmp_path):
+    path = tmp_path / "j2.rrd"
+    with JobRecording(path, "j2") as rec:
+        rec.log_view(0, _jpeg(0), intrinsics(), look_at(POSITIONS[0], CENTRE), (WIDTH, HEIGHT))
+        rec.set_time(1.0)
+        rec.log_silhouette(0, _mask(0))
+        rec.log_points("carved", CENTRE + np.zeros((3, 3)))
+        rec.log_superquadric("fit", Superquadric([0.04, 0.03, 0.05], [0.5, 1.0], np.eye(4)))
+        rec.set_time(2.0)
+        rec.clear_reconstruction()
+    cleared = {}
+    for chunk, batch in _record_batches(path):
+        if "Clear:is_recursive" in batch.schema.names:
+            cleared[chunk.entity_path] = [t.total_seconds() for t in batch.column("job").to_pylist()]
+    assert cleared == {entity: [2.0] for entity in ("/world/points", "/world/fit", "/world/camera0/silhouette",
+                                                   "/world/camera0/outline")}
+    assert recording_summary(path)["/world/camera0/image"] == ["EncodedImage"]  # the pictures stay

@@ -188,3 +188,35 @@ def test_the_evidence_made_once_judges_every_attempts_answer(scans, tmp_path):
     broken = job_evidence(request, [pictures[0], Picture(b"not a jpeg", np.eye(4), poses[1]), pictures[2]], config)
     verdict = check_answer(scan.answer, broken)
     assert not verdict.ok and verdict.reason == "the answer cannot be checked: view 1: the picture cannot be decoded"
+
+
+def test_the_grasp_checks_compiled_union_agrees_with_the_inside_outside_function():
+    # The check walks lines of samples in from their ends; judged here against every sample's own
+    # inside-outside value (core_cy.superquadric.inside_outside), on a model of two parts.
+    from robocell.core_cy._grasp_cy import line_extents, union_inside
+    from robocell.core_cy.superquadric import inside_outside
+
+    rng = np.random.default_rng(3)
+    tilted = np.eye(4)
+    tilted[:3, :3] = np.array([[np.cos(0.6), -np.sin(0.6), 0], [np.sin(0.6), np.cos(0.6), 0], [0, 0, 1]])
+    tilted[:3, 3] = [0.03, -0.01, 0.02]
+    parts = [CoreSuperquadric([0.04, 0.02, 0.05], [0.3, 1.0], np.eye(4)),
+             CoreSuperquadric([0.01, 0.03, 0.02], [1.0, 0.5], tilted)]
+    T_part_grasp = np.array([np.linalg.inv(p.T_world_object) for p in parts])  # the grasp frame is the world's
+    args = (np.ascontiguousarray(T_part_grasp[:, :3, :3]), np.ascontiguousarray(T_part_grasp[:, :3, 3]),
+            np.array([p.size for p in parts]), np.array([p.shape for p in parts]))
+    starts, directions = rng.uniform(-0.06, 0.06, (200, 3)), rng.normal(size=(200, 3))
+    lines = np.ascontiguousarray(starts[:, None] + np.linspace(-0.1, 0.1, 81)[None, :, None] * directions[:, None])
+    met = 0
+    for factor in (0.85, 1.0, 1.15):
+        extents = np.empty((len(lines), 2), np.intp)
+        line_extents(lines, *args, factor, extents)
+        for line, (first, last) in zip(lines, extents):
+            inside = np.zeros(len(line), bool)
+            for part in parts:
+                inside |= inside_outside(line, part) < factor ** (2 / part.shape[0])
+            expected = np.flatnonzero(inside)
+            assert (first, last) == ((expected[0], expected[-1]) if len(expected) else (-1, -1))
+            assert union_inside(line, *args, factor) == bool(len(expected))
+            met += bool(len(expected))
+    assert 50 < met < 550  # lines that meet the model and lines that miss it were both tried
