@@ -30,6 +30,7 @@ def run_recorder(connection: Connection, reports: Connection, n_points: int, liv
 
     recordings: dict[str, JobRecording] = {}
     unopened: dict[str, str] = {}   # why a job's recording could not be opened
+    unwritten: set[str] = set()     # the recordings logged to since they were last flushed
     drawing = _Drawing(n_points)
     viewer = _Viewer(live)
 
@@ -77,6 +78,12 @@ def run_recorder(connection: Connection, reports: Connection, n_points: int, liv
                 log.exception("job %s: recording %s failed", job_id, kind)
                 if job_id in recordings:
                     recordings[job_id].log_text(f"recording {kind} failed: {type(exc).__name__}: {exc}", "ERROR")
+            unwritten.add(job_id)
+            # Nothing waiting: what was logged goes to disk now, not at the close that a success waits for.
+            if not connection.poll():
+                for written in unwritten & recordings.keys():
+                    recordings[written].flush()
+                unwritten.clear()
     finally:
         for job_id, recording in recordings.items():
             report(job_id, recording.close())

@@ -63,6 +63,7 @@ PART_COLOURS = ((60, 200, 90, 200), (70, 130, 250, 200), (240, 200, 40, 200), (2
 _OUTLINE_COLOUR = (255, 255, 0)
 # A recording's last write waits at most this long (a disk that hangs must not hold the recorder).
 _FLUSH_TIMEOUT_S = 30.0
+_IDLE_FLUSH_TIMEOUT_S = 1.0  # a flush between messages holds the other jobs' recordings up no longer
 _DISCONNECT_WAIT_S = 5.0  # a live viewer that went away takes Rerun up to 5 s
 
 
@@ -115,6 +116,7 @@ class JobRecording:
         self._time = 0.0
         self._closed = False
         self._problem: str | None = None
+        self._flush_failed = False
         self._cameras: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}  # K, T_world_cam, (w, h)
         self._silhouettes: set[int] = set()  # the views whose silhouettes were drawn
         # Not the global recording: several jobs are recorded at once in one process.
@@ -254,6 +256,18 @@ class JobRecording:
             colour = (255, 140, 0) if index == chosen else (150, 150, 150)
             entity = f"world/grasps/{'chosen' if index == chosen else index}"
             self._log(entity, _transform(T), rr.Boxes3D(centers=centres, half_sizes=halves, colors=colour))
+
+    def flush(self) -> None:
+        """Write what was logged so far to the file (its close then has only the rest to write). A
+        write that fails is left to :meth:`close` to report; the file is not flushed again before it."""
+        with self._lock:
+            if self._closed or self._flush_failed:
+                return
+            try:
+                self._rec.flush(timeout_sec=_IDLE_FLUSH_TIMEOUT_S)
+            except Exception as exc:  # Rerun's file writer stopped: a full disk, say
+                self._flush_failed = True
+                _log.warning("job %s: the recording could not be written: %s", self.job_id, exc)
 
     def close(self) -> str | None:
         """Flush and write the file's footer. Idempotent.
