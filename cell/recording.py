@@ -61,9 +61,10 @@ _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
 PART_COLOURS = ((60, 200, 90, 200), (70, 130, 250, 200), (240, 200, 40, 200), (200, 80, 220, 200),
                 (40, 210, 220, 200), (250, 110, 110, 200))
 _OUTLINE_COLOUR = (255, 255, 0)
-# A recording's last write waits at most this long (a disk that hangs must not hold the recorder).
-_FLUSH_TIMEOUT_S = 30.0
-_IDLE_FLUSH_TIMEOUT_S = 1.0  # a flush between messages holds the other jobs' recordings up no longer
+# A write of a recording waits at most this long (a disk that hangs must not hold the recorder; once
+# Rerun's file writer has stopped, a flush waits this long before it says so). The recorder writes as
+# it goes, so a close has little left to write.
+_FLUSH_TIMEOUT_S = 5.0
 _DISCONNECT_WAIT_S = 5.0  # a live viewer that went away takes Rerun up to 5 s
 
 
@@ -116,7 +117,7 @@ class JobRecording:
         self._time = 0.0
         self._closed = False
         self._problem: str | None = None
-        self._flush_failed = False
+        self._write_failure: str | None = None  # why a flush failed, if one did
         self._cameras: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}  # K, T_world_cam, (w, h)
         self._silhouettes: set[int] = set()  # the views whose silhouettes were drawn
         # Not the global recording: several jobs are recorded at once in one process.
@@ -261,12 +262,12 @@ class JobRecording:
         """Write what was logged so far to the file (its close then has only the rest to write). A
         write that fails is left to :meth:`close` to report; the file is not flushed again before it."""
         with self._lock:
-            if self._closed or self._flush_failed:
+            if self._closed or self._write_failure is not None:
                 return
             try:
-                self._rec.flush(timeout_sec=_IDLE_FLUSH_TIMEOUT_S)
+                self._rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
             except Exception as exc:  # Rerun's file writer stopped: a full disk, say
-                self._flush_failed = True
+                self._write_failure = str(exc) or type(exc).__name__
                 _log.warning("job %s: the recording could not be written: %s", self.job_id, exc)
 
     def close(self) -> str | None:
@@ -282,9 +283,10 @@ class JobRecording:
             if self._closed:
                 return self._problem
             self._closed = True
-            failure = None
+            failure = self._write_failure
             try:
-                self._rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+                if failure is None:  # after a failed write a flush only waits for its timeout
+                    self._rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
             except Exception as exc:  # Rerun's file writer stopped: a full disk, say
                 failure = str(exc) or type(exc).__name__
             finally:
