@@ -196,10 +196,12 @@ def test_a_daemon_killed_during_a_reconstruction_resumes_it_from_the_pictures(ri
         pictures_taken = rig.camera.server.request_count
         assert cell.loop.run(cell.processes.stop_child("daemon", kill=True)) == -9
         cell.loop.run(cell.processes.start_child("daemon"))
-        # Sent again from the kept pictures (the gate still holds the first request: it queues behind it).
-        wait_until(lambda: len(rig.reconstructor.received) == sent + 2, timeout=30, what="the reconstruction sent again")
+        wait_until(lambda: any("the daemon restarted" in e.message for e in cell.events(status.job_id)),
+                   timeout=30, what="the restarted daemon carrying the job on")
     finally:
-        rig.reconstructor.release()
+        rig.reconstructor.release()  # the first request (whose asker is gone) ends; the job's waits behind it
+    # Sent again from the kept pictures.
+    wait_until(lambda: len(rig.reconstructor.received) == sent + 2, timeout=30, what="the reconstruction sent again")
     final = cell.wait(status.job_id)
     assert final.state is JobState.SUCCEEDED, final.error
     assert rig.camera.server.request_count == pictures_taken  # no picture taken again
