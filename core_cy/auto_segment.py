@@ -685,6 +685,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
                                  cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
     else:
         region = _with_pieces_beside(region, differs)
+        # The plane's parallax outlines an object the colour of the table where other views see the table
+        # beside it, and leaves its inside (table-coloured against table-coloured) out: a silhouette has
+        # no holes, so what the evidence encloses is the object's too.
+        region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
     cut = _graph_cut(view, region, score)
     standing_out = cv2.bitwise_and(region, differs)
     if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
