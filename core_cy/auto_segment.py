@@ -877,33 +877,57 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         change = np.abs(ratios[view.index]).sum(axis=2)
         score = change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR)
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-    # Twice: first with nothing taken to stand anywhere, then with what stood out the first time hiding
-    # the table points behind it (a view that sees the object there cannot confirm a shadow).
-    occluders = None
-    for _ in range(2):
-        scores, standing = {}, {}
-        for view in views:
-            others = [v for v in views if v is not view]
-            evidence = _ratio_parallax(view, others, plane, ratios, occluders)
-            unseen = (evidence < 0) & (changed[view.index] > 0)
-            score = evidence / max(_noise_level(np.where(evidence < 0, np.nan, evidence)), _BACKGROUND_NOISE_FLOOR)
-            # Where every other view has the table point behind the object, the pixel changed and nothing
-            # says it is a shadow (the object's foot, or a face whose table points it covers).
-            score = np.where(np.isnan(score), _HIDDEN, score)
-            score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
-            stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-            # A table point no other view sees (the top of a tall object maps far behind it, out of their
-            # pictures): what changed there stands out only as part of what stands out beside it.
-            count, labels = cv2.connectedComponents(cv2.bitwise_or(stands, np.where(unseen, 255, 0).astype(np.uint8)),
-                                                    connectivity=8)
-            joined = np.zeros(count, bool)
-            joined[np.unique(labels[stands > 0])] = True
-            joined[0] = False
-            attached = unseen & joined[labels]
-            score = np.where(unseen, np.where(attached, _HIDDEN, 0.0), score).astype(np.float32)
-            scores[view.index] = score
-            standing[view.index] = cv2.bitwise_or(stands, np.where(attached, 255, 0).astype(np.uint8))
-        occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
+    # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
+    # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
+    # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
+    scores, standing = _stands_out(views, plane, ratios, changed, None)
+    occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
+    scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    for _ in range(_OCCLUSION_ROUNDS):
+        cuts = _background_cut(views, aim, scores, standing)
+        occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
+                                                cv2.erode(cut, _SMALL))
+                     for view, (cut, _) in zip(views, cuts)}
+        scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    return _background_cut(views, aim, scores, standing)
+
+
+#: How many times the silhouettes cut from the evidence hide the table behind them for the next evidence.
+_OCCLUSION_ROUNDS = 2
+
+
+def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
+                changed: dict[int, np.ndarray],
+                occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
+    where it does (0/255), the table behind ``occluders`` hidden."""
+    scores, standing = {}, {}
+    for view in views:
+        others = [v for v in views if v is not view]
+        evidence = _ratio_parallax(view, others, plane, ratios, occluders)
+        unseen = (evidence < 0) & (changed[view.index] > 0)
+        score = evidence / max(_noise_level(np.where(evidence < 0, np.nan, evidence)), _BACKGROUND_NOISE_FLOOR)
+        # Where every other view has the table point behind the object, the pixel changed and nothing
+        # says it is a shadow (the object's foot, or a face whose table points it covers).
+        score = np.where(np.isnan(score), _HIDDEN, score)
+        score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
+        stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+        # A table point no other view sees (the top of a tall object maps far behind it, out of their
+        # pictures): what changed there stands out only as part of what stands out beside it.
+        count, labels = cv2.connectedComponents(cv2.bitwise_or(stands, np.where(unseen, 255, 0).astype(np.uint8)),
+                                                connectivity=8)
+        joined = np.zeros(count, bool)
+        joined[np.unique(labels[stands > 0])] = True
+        joined[0] = False
+        attached = unseen & joined[labels]
+        scores[view.index] = np.where(unseen, np.where(attached, _HIDDEN, 0.0), score).astype(np.float32)
+        standing[view.index] = cv2.bitwise_or(stands, np.where(attached, 255, 0).astype(np.uint8))
+    return scores, standing
+
+
+def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, np.ndarray],
+                    standing: dict[int, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence."""
     cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
     for view in views:
         cw, ch = view.coarse_size
@@ -923,8 +947,6 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))
     return cuts
-
-
 
 
 def _holes_filled(binary: np.ndarray) -> np.ndarray:
