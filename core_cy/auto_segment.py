@@ -434,6 +434,11 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
         cuts = _background_cuts(views, parallax, aim)
     else:
         cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
+        if parallax is not None:
+            # Once more with each view's silhouette hiding the table points behind it too: where another
+            # view sees the object in front of the table point, it neither confirms nor denies it.
+            standing = [cv2.bitwise_or(first, cut) for first, (cut, _) in zip(standing, cuts) if first is not None]
+            cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
