@@ -436,9 +436,14 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
         cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
         if parallax is not None:
             # Once more with each view's silhouette hiding the table points behind it too: where another
-            # view sees the object in front of the table point, it neither confirms nor denies it.
+            # view sees the object in front of the table point, it neither confirms nor denies it. The
+            # second look adds what the first one's false agreements hid; what it drops (a part seen only
+            # as hidden, which the graph cut gave the table this time) the first look keeps.
             standing = [cv2.bitwise_or(first, cut) for first, (cut, _) in zip(standing, cuts) if first is not None]
-            cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
+            again = [_first_cut(view, views, parallax, aim, standing, earlier)
+                     for view, (_, earlier) in zip(views, cuts)]
+            cuts = [(_filled_region(cv2.bitwise_or(first, second), view), score)
+                    for view, (first, _), (second, score) in zip(views, cuts, again)]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
@@ -629,9 +634,12 @@ def _brightness(image: np.ndarray) -> np.ndarray:
 
 
 def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, aim: np.ndarray,
-               standing: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray | None]:
+               standing: Sequence[np.ndarray | None],
+               earlier: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """The view's coarse silhouette from its own cues (0/255, the coarse size), and the evidence
-    it came from, in units of its noise (None without a plane or a background)."""
+    it came from, in units of its noise (None without a plane or a background). ``earlier``, the
+    evidence of a look with less of the table taken to be hidden: where a table point is hidden now,
+    what that look saw stands."""
     cw, ch = view.coarse_size
     centre = _coarse_aim(view, aim)
     floor = _NOISE_FLOOR
@@ -665,6 +673,8 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), floor)
     score = evidence / noise
+    if earlier is not None:
+        score = np.where(np.isnan(score) & (earlier > _HIDDEN), earlier, score)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
     # to the object's foot, or on it: it joins what stands out, for the graph cut to decide; but only
     # what differs from the table says that something stands there at all.
