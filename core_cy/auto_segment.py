@@ -110,6 +110,21 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._points: dict[tuple[bytes], tuple[np.ndarray, np.ndarray]] = {}
+
+    def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
+        (h, w, 2) float32 maps for cv2.remap, and (h * w,) which of them ``other`` sees (a fresh copy).
+        Geometry alone: worked out once per pair of views."""
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in self._mappings:
+            if key[1:] not in self._points:
+                self._points[key[1:]] = _plane_points(self, plane)
+            points, valid = self._points[key[1:]]
+            self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
+        maps, inside = self._mappings[key]
+        return maps, inside.copy()
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
         """Full-resolution pixel coordinates (N, 2) to coarse ones (pixel centres on integers)."""
@@ -160,24 +175,11 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     ``standing``, per other view, what stands out in it (0/255, or None): where the plane point lies
     behind the object in another view, that view sees the object, not the table, and says nothing."""
     cw, ch = view.coarse_size
-    grid = view.coarse_grid()
-    rays = view.rays(grid)
-    normal, offset = plane[:3], plane[3]
-    height = float(normal @ view.camera.center + offset)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -height / (rays @ normal)
-    valid = np.isfinite(t) & (t > 0)
-    points = view.camera.center + np.where(valid, t, 0.0)[:, None] * rays
     evidence = np.full(cw * ch, np.inf, np.float32)
     seen = np.zeros(cw * ch, bool)
     occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
-        uv, depth = other.project(points)
-        coarse_uv = other.to_coarse(uv).astype(np.float32)
-        ow, oh = other.coarse_size
-        inside = valid & (depth > 0) & (coarse_uv[:, 0] >= 0) & (coarse_uv[:, 1] >= 0) & \
-            (coarse_uv[:, 0] <= ow - 1) & (coarse_uv[:, 1] <= oh - 1)
-        maps = coarse_uv.reshape(ch, cw, 2)
+        maps, inside = view.mapping(other, plane)
         warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
@@ -231,9 +233,8 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
     cw, ch = view.coarse_size
     contradicted = np.zeros((ch, cw), bool)
     ratio = _darkening(view)
-    points, valid = _plane_points(view, plane)
     for other in others:
-        maps, inside = _plane_maps(other, points, valid, (cw, ch))
+        maps, inside = view.mapping(other, plane)
         other_shadow = _shadow_of_table(other).astype(np.uint8)
         # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
         other_ratio = _darkening(other).astype(np.float32)
@@ -855,13 +856,12 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
     change alike from every view, what stands above the plane does not. NaN where every other view that
     would see the table point has it behind ``occluders`` (0/255 per view: what surely stands there)."""
     cw, ch = view.coarse_size
-    points, valid = _plane_points(view, plane)
     own = ratios[view.index]
     best = np.full((ch, cw), np.inf, np.float32)
     seen = np.zeros((ch, cw), bool)
     occluded = np.zeros((ch, cw), bool)
     for other in others:
-        maps, inside_flat = _plane_maps(other, points, valid, (cw, ch))
+        maps, inside_flat = view.mapping(other, plane)
         inside = inside_flat.reshape(ch, cw)
         # A pixel's worth of misregistration: the other view's range of values around the point.
         low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
