@@ -757,7 +757,10 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     mask[sure & (score[crop] > 5.0)] = cv2.GC_FGD
     low = score[crop] < 1.0
     if view.background is not None:
-        mask[low & ~sure] = cv2.GC_BGD
+        # Against the empty workspace what shows no change is table for sure, but not within the region that
+        # stands out: a face there that changed alike in another view (a dark face beside the shadow seen
+        # through it) is left to the colour models.
+        mask[low & ~sure & ~inside] = cv2.GC_BGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
