@@ -6,8 +6,10 @@ optical axes (the *aim*). The table is a plane, so the plane's homography
 maps one view's table onto another's exactly, shadow included, while what
 stands above the plane does not map (plane parallax): a pixel whose colour
 no other view confirms through the plane is above it. A picture of the empty
-workspace (``background``), where there is one, says the same directly; a
-shadow there is the table, darker, of the same chromaticity.
+workspace (``background``), where there is one, says the same directly: the
+image's ratio to it is 1 on the table (its texture divides out), a smooth
+darkening on a shadow, and the plane maps that ratio from one view to another
+alike on the table and on a shadow but not on what stands above the plane.
 
 Per view, at a coarse scale (about 160 pixels a side, where every cue is
 cheap): the cues give an evidence map; the region that stands out nearest
@@ -20,7 +22,7 @@ a view, must contain that view's silhouette; what lies outside it (a
 shadow, a stretch of table) is table, and that view is cut again with it
 marked so. Last, the silhouette's edge is placed at full resolution: each
 pixel of a thin band along the coarse edge goes to the side, object or
-table, whose nearby colour it is closer to.
+table, whose colour just beside the band it is closer to.
 
 Without a support plane the aim alone seeds the cut (the region around it
 is taken for the object, the image's border for the background), and the
@@ -108,6 +110,21 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._points: dict[tuple[bytes], tuple[np.ndarray, np.ndarray]] = {}
+
+    def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
+        (h, w, 2) float32 maps for cv2.remap, and (h * w,) which of them ``other`` sees (a fresh copy).
+        Geometry alone: worked out once per pair of views."""
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in self._mappings:
+            if key[1:] not in self._points:
+                self._points[key[1:]] = _plane_points(self, plane)
+            points, valid = self._points[key[1:]]
+            self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
+        maps, inside = self._mappings[key]
+        return maps, inside.copy()
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
         """Full-resolution pixel coordinates (N, 2) to coarse ones (pixel centres on integers)."""
@@ -158,24 +175,11 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     ``standing``, per other view, what stands out in it (0/255, or None): where the plane point lies
     behind the object in another view, that view sees the object, not the table, and says nothing."""
     cw, ch = view.coarse_size
-    grid = view.coarse_grid()
-    rays = view.rays(grid)
-    normal, offset = plane[:3], plane[3]
-    height = float(normal @ view.camera.center + offset)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -height / (rays @ normal)
-    valid = np.isfinite(t) & (t > 0)
-    points = view.camera.center + np.where(valid, t, 0.0)[:, None] * rays
     evidence = np.full(cw * ch, np.inf, np.float32)
     seen = np.zeros(cw * ch, bool)
     occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
-        uv, depth = other.project(points)
-        coarse_uv = other.to_coarse(uv).astype(np.float32)
-        ow, oh = other.coarse_size
-        inside = valid & (depth > 0) & (coarse_uv[:, 0] >= 0) & (coarse_uv[:, 1] >= 0) & \
-            (coarse_uv[:, 0] <= ow - 1) & (coarse_uv[:, 1] <= oh - 1)
-        maps = coarse_uv.reshape(ch, cw, 2)
+        maps, inside = view.mapping(other, plane)
         warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
@@ -229,9 +233,8 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
     cw, ch = view.coarse_size
     contradicted = np.zeros((ch, cw), bool)
     ratio = _darkening(view)
-    points, valid = _plane_points(view, plane)
     for other in others:
-        maps, inside = _plane_maps(other, points, valid, (cw, ch))
+        maps, inside = view.mapping(other, plane)
         other_shadow = _shadow_of_table(other).astype(np.uint8)
         # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
         other_ratio = _darkening(other).astype(np.float32)
@@ -417,7 +420,9 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     # With two views the parallax cannot tell the object in one from the other's object mapped through
     # the plane onto the table beside it (each view's first look holds both): the aim seeds the cut.
     parallax = plane if len(views) > 2 else None
-    if parallax is not None:
+    # With every view's empty workspace, the change against it is compared through the plane.
+    every_background = parallax is not None and all(view.background is not None for view in views)
+    if parallax is not None and not every_background:
         # What stands out in each view, on the first look: where another view's plane point lies behind
         # it, that view sees the object, not the table, and cannot confirm or deny a pixel (nor, with
         # backgrounds, confirm that a darkening there is a shadow on the table).
@@ -425,7 +430,21 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
             evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
             first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
             standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
-    cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
+    if every_background:
+        assert parallax is not None
+        cuts = _background_cuts(views, parallax, aim)
+    else:
+        cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
+        if parallax is not None:
+            # Once more with each view's silhouette hiding the table points behind it too: where another
+            # view sees the object in front of the table point, it neither confirms nor denies it. The
+            # second look adds what the first one's false agreements hid; what it drops (a part seen only
+            # as hidden, which the graph cut gave the table this time) the first look keeps.
+            standing = [cv2.bitwise_or(first, cut) for first, (cut, _) in zip(standing, cuts) if first is not None]
+            again = [_first_cut(view, views, parallax, aim, standing, earlier)
+                     for view, (_, earlier) in zip(views, cuts)]
+            cuts = [(_filled_region(cv2.bitwise_or(first, second), view), score)
+                    for view, (first, _), (second, score) in zip(views, cuts, again)]
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
@@ -467,7 +486,10 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             view = views[culprit]
             masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {culprit}))
             continue
-        candidates = [i for i in everyone - done if excess[i] > 1.0]
+        # Only a view seeded by the aim alone is cut again within the others' hull: a view whose evidence
+        # seeded it (the plane's parallax, the empty workspace) knows better than a hull that the other
+        # views' misses carved too small (on the benchmark's printed scenes every such cut lost).
+        candidates = [i for i in everyone - done if excess[i] > 1.0 and scores[i] is None]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -558,7 +580,12 @@ class _Hulls:
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The full-resolution silhouette and its outline: each pixel of a band along the coarse edge goes
-    to the side (object or table) whose nearby colour it is closer to."""
+    to the side (object or table) whose colour just beside the band it is closer to.
+
+    A pixel on the edge mixes the two sides' colours there; the nearest pixel sure to be object and the
+    nearest sure to be table give them (a print's local colour, not its mean over a window, which sent a
+    print's pixels to the table; and beside a shadow the table's colour is the shadow's, which the empty
+    workspace's picture is not: it sent a shadow's pixels to a dark object)."""
     height, width = view.image.shape[:2]
     band = int(np.ceil(max(view.sx, view.sy))) + 1
     x, y, w, h = cv2.boundingRect(coarse_mask)
@@ -572,21 +599,8 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     sure = cv2.erode(mask, kernel)
     table = 1 - cv2.dilate(mask, kernel)
     image = view.image[y0:y1, x0:x1].astype(np.float32)
-    window = (4 * band + 1, 4 * band + 1)
-
-    def local_mean(weights: np.ndarray) -> np.ndarray:
-        w = cv2.boxFilter(weights.astype(np.float32), -1, window, normalize=False)
-        total = cv2.boxFilter(image * weights[..., None].astype(np.float32), -1, window, normalize=False)
-        return total / np.maximum(w, 1e-3)[..., None]
-
-    object_colour = local_mean(sure)
-    object_distance = _relative_difference(image, object_colour)
-    if view.full_background is not None:
-        # Along the edge the empty workspace is the table's own colour there (a print's dark ink next
-        # to the edge would pass for shadow if shadows were forgiven here; the coarse cut left them out).
-        table_distance = _relative_difference(image, view.full_background[y0:y1, x0:x1].astype(np.float32))
-    else:
-        table_distance = _relative_difference(image, local_mean(table))
+    object_distance = _relative_difference(image, _nearest_colour(image, sure))
+    table_distance = _relative_difference(image, _nearest_colour(image, table))
     uncertain = (sure == 0) & (table == 0)
     chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
     if not cv2.countNonZero(chosen):
@@ -594,6 +608,18 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     silhouette = np.zeros((height, width), np.uint8)
     silhouette[y0:y1, x0:x1] = chosen
     return mask_with_outline(silhouette, view=view.index)
+
+
+def _nearest_colour(image: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(h, w, 3) float32: at every pixel of ``image``, the colour of the nearest pixel where ``seeds`` (h, w)
+    is nonzero (``image`` itself where there is none)."""
+    if not seeds.any():
+        return image
+    # With DIST_LABEL_PIXEL every seed pixel is its own label, numbered in raster order from 1.
+    _, labels = cv2.distanceTransformWithLabels(np.where(seeds > 0, 0, 1).astype(np.uint8), cv2.DIST_L2, 3,
+                                                labelType=cv2.DIST_LABEL_PIXEL)
+    ys, xs = np.nonzero(seeds)
+    return image[ys, xs][labels - 1]
 
 
 def _coarse_aim(view: _View, aim: np.ndarray) -> np.ndarray:
@@ -609,9 +635,12 @@ def _brightness(image: np.ndarray) -> np.ndarray:
 
 
 def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, aim: np.ndarray,
-               standing: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray | None]:
+               standing: Sequence[np.ndarray | None],
+               earlier: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """The view's coarse silhouette from its own cues (0/255, the coarse size), and the evidence
-    it came from, in units of its noise (None without a plane or a background)."""
+    it came from, in units of its noise (None without a plane or a background). ``earlier``, the
+    evidence of a look with less of the table taken to be hidden: where a table point is hidden now,
+    what that look saw stands."""
     cw, ch = view.coarse_size
     centre = _coarse_aim(view, aim)
     floor = _NOISE_FLOOR
@@ -645,6 +674,8 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), floor)
     score = evidence / noise
+    if earlier is not None:
+        score = np.where(np.isnan(score) & (earlier > _HIDDEN), earlier, score)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
     # to the object's foot, or on it: it joins what stands out, for the graph cut to decide; but only
     # what differs from the table says that something stands there at all.
@@ -670,6 +701,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
                                  cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
     else:
         region = _with_pieces_beside(region, differs)
+        # The plane's parallax outlines an object the colour of the table where other views see the table
+        # beside it, and leaves its inside (table-coloured against table-coloured) out: a silhouette has
+        # no holes, so what the evidence encloses is the object's too.
+        region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
     cut = _graph_cut(view, region, score)
     standing_out = cv2.bitwise_and(region, differs)
     if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
@@ -722,7 +757,10 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     mask[sure & (score[crop] > 5.0)] = cv2.GC_FGD
     low = score[crop] < 1.0
     if view.background is not None:
-        mask[low & ~sure] = cv2.GC_BGD
+        # Against the empty workspace what shows no change is table for sure, but not within the region that
+        # stands out: a face there that changed alike in another view (a dark face beside the shadow seen
+        # through it) is left to the colour models.
+        mask[low & ~sure & ~inside] = cv2.GC_BGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
@@ -800,3 +838,138 @@ def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = N
         mask[cv2.dilate(hull, _SMALL, iterations=2) == 0] = cv2.GC_BGD
     cv2.circle(mask, (cx, cy), max(2, cw // 40), cv2.GC_FGD, thickness=-1)
     return _run_grabcut(view, mask, (0, 0, cw, ch))
+
+
+#: Added to every channel before a ratio of image to empty workspace is taken: a dark pixel's noise must
+#: not pass for a change of brightness.
+_RATIO_OFFSET = 8.0
+
+
+def _log_ratio(view: _View) -> np.ndarray:
+    """(h, w, 3) float32: the log of each channel of the image over the empty workspace. The table's own
+    texture divides out; a shadow is a smooth darkening, the same seen from any view."""
+    assert view.background is not None
+    return np.log((view.coarse + _RATIO_OFFSET) / (view.background + _RATIO_OFFSET)).astype(np.float32)
+
+
+def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
+                    occluders: dict[int, np.ndarray] | None) -> np.ndarray:
+    """How little any other view, seeing the same table point through the support plane, agrees with each
+    coarse pixel's change against the empty workspace (:func:`_log_ratio`): the table and a shadow on it
+    change alike from every view, what stands above the plane does not. NaN where every other view that
+    would see the table point has it behind ``occluders`` (0/255 per view: what surely stands there)."""
+    cw, ch = view.coarse_size
+    own = ratios[view.index]
+    best = np.full((ch, cw), np.inf, np.float32)
+    seen = np.zeros((ch, cw), bool)
+    occluded = np.zeros((ch, cw), bool)
+    for other in others:
+        maps, inside_flat = view.mapping(other, plane)
+        inside = inside_flat.reshape(ch, cw)
+        # A pixel's worth of misregistration: the other view's range of values around the point.
+        low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
+        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        disagreement = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+        if occluders is not None:
+            behind = cv2.remap(occluders[other.index], maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
+                               borderValue=0) > 0
+            occluded |= inside & behind
+            inside &= ~behind
+        best = np.where(inside, np.minimum(best, disagreement), best)
+        seen |= inside
+    # Hidden behind what stands there in the other views that would see it: NaN; out of every other view's
+    # picture: -1 (nothing is known).
+    best[~seen] = np.where(occluded[~seen], np.nan, -1.0)
+    return best
+
+
+def _background_cuts(views: Sequence[_View], plane: np.ndarray,
+                     aim: np.ndarray) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Every view's coarse silhouette and its evidence (in units of its noise), when every view has a picture
+    of the empty workspace and there is a support plane: what changed against the empty workspace, less what
+    changed alike in another view at the same table point (a shadow)."""
+    ratios = {view.index: _log_ratio(view) for view in views}
+    changed = {}
+    for view in views:
+        change = np.abs(ratios[view.index]).sum(axis=2)
+        score = change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR)
+        changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
+    # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
+    # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
+    scores, standing = _stands_out(views, plane, ratios, changed, None)
+    occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
+    scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    for _ in range(_OCCLUSION_ROUNDS):
+        cuts = _background_cut(views, aim, scores, standing)
+        occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
+                                                cv2.erode(cut, _SMALL))
+                     for view, (cut, _) in zip(views, cuts)}
+        scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    return _background_cut(views, aim, scores, standing)
+
+
+#: How many times the silhouettes cut from the evidence hide the table behind them for the next evidence.
+_OCCLUSION_ROUNDS = 2
+
+
+def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
+                changed: dict[int, np.ndarray],
+                occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
+    where it does (0/255), the table behind ``occluders`` hidden."""
+    scores, standing = {}, {}
+    for view in views:
+        others = [v for v in views if v is not view]
+        evidence = _ratio_parallax(view, others, plane, ratios, occluders)
+        unseen = (evidence < 0) & (changed[view.index] > 0)
+        score = evidence / max(_noise_level(np.where(evidence < 0, np.nan, evidence)), _BACKGROUND_NOISE_FLOOR)
+        # Where every other view has the table point behind the object, the pixel changed and nothing
+        # says it is a shadow (the object's foot, or a face whose table points it covers).
+        score = np.where(np.isnan(score), _HIDDEN, score)
+        score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
+        stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+        # A table point no other view sees (the top of a tall object maps far behind it, out of their
+        # pictures): what changed there stands out only as part of what stands out beside it.
+        count, labels = cv2.connectedComponents(cv2.bitwise_or(stands, np.where(unseen, 255, 0).astype(np.uint8)),
+                                                connectivity=8)
+        joined = np.zeros(count, bool)
+        joined[np.unique(labels[stands > 0])] = True
+        joined[0] = False
+        attached = unseen & joined[labels]
+        scores[view.index] = np.where(unseen, np.where(attached, _HIDDEN, 0.0), score).astype(np.float32)
+        standing[view.index] = cv2.bitwise_or(stands, np.where(attached, 255, 0).astype(np.uint8))
+    return scores, standing
+
+
+def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, np.ndarray],
+                    standing: dict[int, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence."""
+    cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
+    for view in views:
+        cw, ch = view.coarse_size
+        centre = _coarse_aim(view, aim)
+        differs, score = standing[view.index], scores[view.index]
+        closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
+        near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
+        if cv2.countNonZero(near) < 12:
+            raise SilhouetteError(_NOTHING, view=view.index)
+        hull = cv2.convexHull(cv2.findNonZero(near))
+        region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
+                                 cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
+        # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
+        region = _holes_filled(region)
+        cut = _graph_cut(view, region, score)
+        if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
+            cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
+        cuts.append((cut, score))
+    return cuts
+
+
+def _holes_filled(binary: np.ndarray) -> np.ndarray:
+    """A 0/255 image with every hole (background not connected to the image's border) filled."""
+    padded = cv2.copyMakeBorder(binary, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    outside = padded.copy()
+    cv2.floodFill(outside, None, (0, 0), 255)
+    return cv2.bitwise_or(binary, cv2.bitwise_not(outside)[1:-1, 1:-1])
