@@ -40,22 +40,21 @@ of samples under the pads only from its ends in to the model, as the widest
 chord needs no more): on 600 grasps, honest and moved by up to 3 cm or given a
 wrong width, of models of one part and of two, every verdict is the one of the
 former code, at a sixth of its cost. On the 138 scans below
-(``bench/probe_verify.py``), making the evidence costs 0.45 of the scan's
-reconstruction on average (1.24 at worst: then part of it waits on the path)
-and the check of an answer 0.08 (0.25 at worst, an answer of many grasps).
+(``bench/probe_verify.py``), making the evidence costs 0.41 of the scan's
+reconstruction on average (0.71 at worst) and the check of an answer 0.016
+(0.066 at worst, an answer of many grasps).
 
 Why the threshold (:data:`MIN_VIEW_IOU`, 0.3), re-measured with ``bench/probe_verify.py``
 on the simulator's scans (``robocell sim scans``, the standard set and the grasp
 set, 138 scans; each reconstructed by the real pipeline with the ``auto``
 segmentation, as a worker does): the worst view of a correct reconstruction
-scores 0.41 at this scale (a grasp-set object too big for the gripper; 0.48 for
-an L of two boxes, which one superquadric describes poorly; 0.60 or more for
-every other object, 0.85 the median), and a model 8 to 10 times too big scores
-0.18 at most (0.04 the median): none of the 138 honest fits is refused, and
-none of the 276 oversized ones passes. A model 1.5 times too big still scores
-up to 0.47 (all 138 pass): this check catches a model of something else, or far
-too big or small, not a fit that is a little off. Of the honest answers' 855
-grasps, 854 follow from their models.
+scores 0.475 at this scale (an L of two boxes; 0.535 for a plate, 0.85 the
+median), and a model 8 to 10 times too big scores 0.185 at most (0.04 the
+median): none of the 138 honest fits is refused, and none of the 276 oversized
+ones passes. A model 1.5 times too big still scores up to 0.71 (all 138 pass):
+this check catches a model of something else, or far too big or small, not a
+fit that is a little off. Of the honest answers' 856 grasps, all follow from
+their models.
 
 A grasp that does not follow from the model is dropped from the answer
 (:attr:`Verdict.grasps` lists those that do). The planner plans on the hull's
