@@ -2,14 +2,15 @@
 
 The one-superquadric fit comes first. A part must pay for itself: it is kept only
 when, without it, the union's silhouette IoU would drop by at least
-``PART_GAIN`` in two views (in every view, with fewer), or by twice that in one
-(a dumbbell's bar, hidden behind its weights in the other views): what it explains,
-summed over the views where it explains ``PART_GAIN``, is ``2 PART_GAIN``. So where
-the silhouettes and the one superquadric disagree by less than that, no part can pay
-and the object stays one superquadric: decided before anything else is done, from
-the pixels where they disagree farther from the other's outline than the edges'
-noise (a band along the outline is no part's; a superquadric's views disagree by
-a few percent of IoU there and nowhere else).
+``PART_GAIN`` in at least two views (in every view, with fewer); a part seen in one
+view only has no depth. A union may also carve away what one view shows empty, with
+no more volume: twice ``PART_GAIN`` there (a dumbbell's two weights without the gap
+between them, hidden behind them in the other views). So where the silhouettes and
+the one superquadric disagree by less than that, no part can pay and the object stays
+one superquadric: decided before anything else is done, from the pixels where they
+disagree farther from the other's outline than the edges' noise (a band along the
+outline is no part's; a superquadric's views disagree by a few percent of IoU there
+and nowhere else).
 
 Otherwise parts are proposed, each round from the union so far:
 
@@ -28,7 +29,8 @@ together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouett
 a few steps; the best goes on to convergence (and, while it leaves the silhouettes
 unexplained, the proposals left behind go on in turn); the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
-if it gains over the model before it what one part must pay, with more parts, or with no more and a lower edge cost (a better minimum); a union whose
+if it gains ``PART_GAIN`` of IoU over the model before it in two views (or carves),
+with more parts, or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
 parts. Last, each part standing a little tilted is tried resting on a face
@@ -56,9 +58,11 @@ __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
 
 MAX_PARTS = 6
 # What a part must explain to pay for its eleven parameters: this share of a view's
-# silhouette IoU, in two views (every view, with fewer), or twice that in one.
+# silhouette IoU, in two views (every view, with fewer).
 PART_GAIN = 0.02
 _VIEWS_TO_PAY = 2
+# What a union must explain more in the one view that sees it, to carve away what that view shows empty.
+_CARVED_GAIN = _VIEWS_TO_PAY * PART_GAIN
 # Edge samples per view for the union: a part that owns a tenth of the outline has ten.
 _PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
@@ -146,27 +150,26 @@ def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
 
 
-def _paid(gains) -> np.ndarray:
-    """(...,) what gains per view (last axis) pay: their sum over the views where each is at least
-    ``PART_GAIN``. A part pays where that is ``PART_GAIN`` in two views, or twice that in one
-    (a dumbbell's bar hides behind its weights in the other views)."""
-    gains = np.asarray(gains)
-    return np.sum(np.where(gains >= PART_GAIN, gains, 0.0), axis=-1)
-
-
-def _price(views: int) -> float:
-    return _views_to_pay(views) * PART_GAIN
+def _views_paid(gains) -> np.ndarray:
+    """(...,) in how many views the gains (last axis) reach ``PART_GAIN``."""
+    return np.sum(np.asarray(gains) >= PART_GAIN, axis=-1)
 
 
 def _could_pay(shares) -> bool:
-    """Whether a new part could pay: it can explain a view's unexplained share at most."""
-    return bool(_paid(shares) >= _price(len(shares)))
+    """Whether a new part could pay, or a union carve away what one view shows empty: either can
+    explain a view's unexplained share at most."""
+    shares = np.asarray(shares)
+    return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or shares.max() >= _CARVED_GAIN)
 
 
 def _pays(ious, without: np.ndarray) -> np.ndarray:
-    """(P,) what each part pays, plus a thousandth of its mean gain (a tie-break)."""
+    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
     gains = np.asarray(ious)[None, :] - without
-    return _paid(gains) + 1e-3 * np.clip(gains.mean(axis=1), 0.0, 1.0)
+    return _views_paid(gains) + np.clip(gains.mean(axis=1), 0.0, 0.999)
+
+
+def _volume(parts) -> float:
+    return float(sum(part.volume for part in parts))
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
@@ -237,8 +240,13 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
         # (not the one superquadric: that is the single fit's, from its own starts).
         gains = np.asarray(candidate_ious) - np.asarray(ious)
-        gained = int(np.sum(gains >= PART_GAIN))
-        explains_more = bool(_paid(gains) >= _price(len(cameras)))
+        gained = int(_views_paid(gains))
+        # A union that explains more in one view only, with no more volume, carves away what that
+        # view shows empty (a dumbbell's weights without the gap between them, which the other
+        # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
+        # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
+        explains_more = (gained >= _views_to_pay(len(cameras))
+                         or (gains.max() >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
         if explains_more and len(candidate) <= len(current):
             explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
         if explains_more:
@@ -303,7 +311,7 @@ def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[
             return parts, ious
         pays = _pays(ious, without)
         weakest = int(np.argmin(pays))
-        if pays[weakest] >= _price(len(cameras)):
+        if pays[weakest] >= _views_to_pay(len(cameras)):
             return parts, ious
         rest = parts[:weakest] + parts[weakest + 1:]
         parts = fitter.result(fitter.descent(rest).run(_ITERATIONS)).parts
