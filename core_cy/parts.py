@@ -10,7 +10,7 @@ the one superquadric disagree by less than that, no part can pay and the object 
 one superquadric: decided before anything else is done, from the pixels where they
 disagree farther from the other's outline than the edges' noise (a band along the
 outline is no part's; a superquadric's views disagree by a few percent of IoU there
-and nowhere else).
+and nowhere else). The same decides whether another round is worth proposing.
 
 Otherwise parts are proposed, each round from the union so far:
 
@@ -220,7 +220,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         base = current if trial is None else trial
         if len(base) >= min(max_parts, MAX_PARTS):
             break
-        if bounded > 1 and not _could_pay(1.0 - np.asarray(ious)):
+        if bounded > 1 and not _could_pay(unexplained_shares(base, cameras, silhouettes, boxes)):
             break
         proposals = _splits(base, points, plane) + _additions(base, points, cameras, silhouettes, boxes, plane)
         if len(base) == 1 and plane is not None:
