@@ -203,7 +203,10 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     if ious is None:
         ious, _ = union_ious((single,), cameras, silhouettes, boxes)
     ious = list(ious)
-    if max_parts < 2 or not _could_pay(unexplained_shares((single,), cameras, silhouettes, boxes)):
+    # A view's unexplained share is at most its miss, 1 - IoU: where even that cannot pay, the
+    # pixels need not be looked at.
+    if (max_parts < 2 or not _could_pay(1.0 - np.asarray(ious))
+            or not _could_pay(unexplained_shares((single,), cameras, silhouettes, boxes))):
         return PartsFit((single,), ious)
     points = np.asarray(points, dtype=np.float64)
     plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
