@@ -356,11 +356,12 @@ def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
 
 
 def _waists(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
-    """Each part cut where it narrows along its longest axis (parts meet at a waist: a dumbbell's
-    bar between its weights, a bottle's neck): the hull points it explains best, in slabs along
-    the axis, each slab's width the least of its extents across the axis; the waist is the run of
-    slabs about the narrowest that are nearer its width than the widest's. The pieces before,
-    within and after the waist each give a part whose z axis is that axis."""
+    """Each part cut in three where it narrows along its longest axis (parts meet at a waist: a
+    dumbbell's bar between its weights): the hull points it explains best, in slabs along the
+    axis, each slab's width the least of its extents across the axis (the views carve the hull
+    narrow across their rays); the waist is the run of slabs about the narrowest that are nearer
+    its width than the widest's, at most ``_WAIST`` of it. The pieces before, within and after the
+    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits."""
     if len(points) < 2 * _MIN_GROUP:
         return []
     owner = np.argmin(_ratios(parts, points), axis=0)
