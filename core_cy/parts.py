@@ -2,10 +2,15 @@
 
 The one-superquadric fit comes first. A part must pay for itself: it is kept only
 when, without it, the union's silhouette IoU would drop by at least
-``PART_GAIN`` in at least two views (in every view, with fewer). So where no
-two views miss that much of their silhouettes, no part can pay and the
-object stays one superquadric: that is decided from the IoUs the fit's
-quality check computes anyway, before anything else is done.
+``PART_GAIN`` in at least two views (in every view, with fewer); a part seen in one
+view only has no depth. A union may also carve away what one view shows empty, with
+no more volume: twice ``PART_GAIN`` there (a dumbbell's two weights without the gap
+between them, hidden behind them in the other views). So where the silhouettes and
+the one superquadric disagree by less than that, no part can pay and the object stays
+one superquadric: decided before anything else is done, from the pixels where they
+disagree farther from the other's outline than the edges' noise (a band along the
+outline is no part's; a superquadric's views disagree by a few percent of IoU there
+and nowhere else). The same decides whether another round is worth proposing.
 
 Otherwise parts are proposed, each round from the union so far:
 
@@ -24,8 +29,8 @@ together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouett
 a few steps; the best goes on to convergence (and, while it leaves the silhouettes
 unexplained, the proposals left behind go on in turn); the parts that do not pay are
 dropped (the least useful first, the rest refined again). The union is kept
-if it gains ``PART_GAIN`` of IoU over the model before it in two views, with more
-parts, or with no more and a lower edge cost (a better minimum); a union whose
+if it gains ``PART_GAIN`` of IoU over the model before it in two views (or carves),
+with more parts, or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
 parts. Last, each part standing a little tilted is tried resting on a face
@@ -46,7 +51,7 @@ from scipy.spatial import cKDTree
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _EXPLAINED_PX, _SEARCH_ITERATIONS, _Fitter
+from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
@@ -56,13 +61,20 @@ MAX_PARTS = 6
 # silhouette IoU, in two views (every view, with fewer).
 PART_GAIN = 0.02
 _VIEWS_TO_PAY = 2
+# What a union must explain more in the one view that sees it, to carve away what that view shows empty.
+_CARVED_GAIN = _VIEWS_TO_PAY * PART_GAIN
 # Edge samples per view for the union: a part that owns a tenth of the outline has ten.
 _PART_SAMPLES = 96
 # Levenberg-Marquardt steps of the union after the choice among proposals, and after a part is dropped.
 _ITERATIONS = 30
 # A hull point projecting this far (px) outside the union's outline is unexplained in that view.
 _UNEXPLAINED_PX = 2.0
+# Silhouette and model disagreeing within this (px) of the other's outline is the edges' noise (twice their RMS).
+_EDGE_BAND_PX = 2 * _NOISE_PX
 _MIN_GROUP = 11  # points of an unexplained group to place a part on
+# Slabs along a part's axis, and directions across it, to find where it narrows; a waist is at most
+# this share of the widest slab's width.
+_SLABS, _WIDTH_DIRECTIONS, _WAIST = 12, 8, 0.5
 _GROUPS = 2  # the largest groups each make a proposal
 _START_SHAPE = np.array([0.5, 0.5])
 _FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
@@ -105,6 +117,29 @@ def union_ious(parts, cameras, silhouettes, boxes) -> tuple[list[float], np.ndar
     return ious, without
 
 
+def unexplained_shares(parts, cameras, silhouettes, boxes, band: float = _EDGE_BAND_PX) -> list[float]:
+    """Each view's share of the silhouette and the union's projection together that one explains and
+    the other not, farther than ``band`` (px) from the other's outline: what a part could
+    explain (a band along the edges is the edges' own noise, no part's)."""
+    shares = []
+    for camera, silhouette, box in zip(cameras, silhouettes, boxes):
+        object_pixels, covers, _ = hull_covers([projected_outline(part, camera) for part in parts], silhouette, box)
+        if object_pixels is None:
+            shares.append(1.0)
+            continue
+        covered = np.any(np.stack(covers), axis=0)
+        union = int(np.count_nonzero(object_pixels | covered))
+        missed = object_pixels & ~covered
+        extra = covered & ~object_pixels
+        far = 0
+        for mask, other in ((missed, covered), (extra, object_pixels)):
+            if mask.any():
+                distance = cv2.distanceTransform((~other).view(np.uint8), cv2.DIST_L2, 3)
+                far += int(np.count_nonzero(distance[mask] > band))
+        shares.append(far / union if union else 1.0)
+    return shares
+
+
 def _iou(object_pixels: np.ndarray, covers: list[np.ndarray]) -> float:
     covered = np.any(np.stack(covers), axis=0) if covers else np.zeros_like(object_pixels)
     union = int(np.count_nonzero(object_pixels | covered))
@@ -115,15 +150,26 @@ def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
 
 
-def _could_pay(ious) -> bool:
-    """Whether a new part could pay: it can raise a view's IoU by its miss at most."""
-    return int(np.sum(1.0 - np.asarray(ious) >= PART_GAIN)) >= _views_to_pay(len(ious))
+def _views_paid(gains) -> np.ndarray:
+    """(...,) in how many views the gains (last axis) reach ``PART_GAIN``."""
+    return np.sum(np.asarray(gains) >= PART_GAIN, axis=-1)
+
+
+def _could_pay(shares) -> bool:
+    """Whether a new part could pay, or a union carve away what one view shows empty: either can
+    explain a view's unexplained share at most."""
+    shares = np.asarray(shares)
+    return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or shares.max() >= _CARVED_GAIN)
 
 
 def _pays(ious, without: np.ndarray) -> np.ndarray:
     """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
     gains = np.asarray(ious)[None, :] - without
-    return np.sum(gains >= PART_GAIN, axis=1) + np.clip(gains.mean(axis=1), 0.0, 0.999)
+    return _views_paid(gains) + np.clip(gains.mean(axis=1), 0.0, 0.999)
+
+
+def _volume(parts) -> float:
+    return float(sum(part.volume for part in parts))
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
@@ -157,7 +203,10 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     if ious is None:
         ious, _ = union_ious((single,), cameras, silhouettes, boxes)
     ious = list(ious)
-    if max_parts < 2 or not _could_pay(ious):
+    # A view's unexplained share is at most its miss, 1 - IoU: where even that cannot pay, the
+    # pixels need not be looked at.
+    if (max_parts < 2 or not _could_pay(1.0 - np.asarray(ious))
+            or not _could_pay(unexplained_shares((single,), cameras, silhouettes, boxes))):
         return PartsFit((single,), ious)
     points = np.asarray(points, dtype=np.float64)
     plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
@@ -172,13 +221,20 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     while bounded < MAX_PARTS:
         bounded += 1
         base = current if trial is None else trial
-        if len(base) >= min(max_parts, MAX_PARTS) or not _could_pay(ious):
+        if len(base) >= min(max_parts, MAX_PARTS):
+            break
+        if bounded > 1 and not _could_pay(unexplained_shares(base, cameras, silhouettes, boxes)):
             break
         proposals = _splits(base, points, plane) + _additions(base, points, cameras, silhouettes, boxes, plane)
         if len(base) == 1 and plane is not None:
             # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
             # also split the box of the whole hull, standing on the table.
             proposals += _splits((upright_box(points, plane[:3]),), points, plane)
+        if len(base) == 1:
+            # Two ends and the thinner part between them (a dumbbell's bar) are no split in two.
+            proposals += _waists(base, points)
+            if plane is not None:
+                proposals += _waists((upright_box(points, plane[:3]),), points)
         if not proposals:
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
@@ -187,8 +243,13 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
         # (not the one superquadric: that is the single fit's, from its own starts).
         gains = np.asarray(candidate_ious) - np.asarray(ious)
-        gained = int(np.sum(gains >= PART_GAIN))
-        explains_more = gained >= _views_to_pay(len(cameras))
+        gained = int(_views_paid(gains))
+        # A union that explains more in one view only, with no more volume, carves away what that
+        # view shows empty (a dumbbell's weights without the gap between them, which the other
+        # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
+        # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
+        explains_more = (gained >= _views_to_pay(len(cameras))
+                         or (gains.max() >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
         if explains_more and len(candidate) <= len(current):
             explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
         if explains_more:
@@ -291,6 +352,54 @@ def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
             floor = _FLOOR * part.size
             frame = R if plane is None else _upright(R, plane[:3])
             proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, frame, floor) for half in halves))
+    return proposals
+
+
+def _waists(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
+    """Each part cut in three where it narrows along its longest axis (parts meet at a waist: a
+    dumbbell's bar between its weights): the hull points it explains best, in slabs along the
+    axis, each slab's width the least of its extents across the axis (the views carve the hull
+    narrow across their rays); the waist is the run of slabs about the narrowest that are nearer
+    its width than the widest's, at most ``_WAIST`` of it. The pieces before, within and after the
+    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits."""
+    if len(points) < 2 * _MIN_GROUP:
+        return []
+    owner = np.argmin(_ratios(parts, points), axis=0)
+    angles = np.pi * np.arange(_WIDTH_DIRECTIONS) / _WIDTH_DIRECTIONS
+    directions = np.stack([np.cos(angles), np.sin(angles)])
+    proposals = []
+    for k, part in enumerate(parts):
+        mine = points[owner == k]
+        axis = int(np.argmax(part.size))
+        order = [(axis + 1) % 3, (axis + 2) % 3, axis]
+        frame = part.T_world_object[:3, :3][:, order]
+        local = mine @ frame
+        along = local[:, 2]
+        edges = np.linspace(along.min(), along.max(), _SLABS + 1)
+        slab = np.clip(np.searchsorted(edges, along, side="right") - 1, 0, _SLABS - 1)
+        width = np.full(_SLABS, np.nan)
+        for i in range(_SLABS):
+            across = local[slab == i, :2] @ directions
+            if len(across) >= 3:
+                width[i] = float(np.min(across.max(axis=0) - across.min(axis=0)))
+        if np.count_nonzero(np.isfinite(width)) < 3:
+            continue
+        narrowest = int(np.nanargmin(width))
+        low, high = float(np.nanmin(width)), float(np.nanmax(width))
+        if low > _WAIST * high:
+            continue
+        inside = ~(width > (low + high) / 2)  # nan (an empty slab) counts as narrow
+        first = last = narrowest
+        while first > 0 and inside[first - 1]:
+            first -= 1
+        while last < _SLABS - 1 and inside[last + 1]:
+            last += 1
+        cuts = [edges[first], edges[last + 1]]
+        pieces = [mine[along < cuts[0]], mine[(along >= cuts[0]) & (along < cuts[1])], mine[along >= cuts[1]]]
+        if min(len(piece) for piece in pieces) < _MIN_GROUP:
+            continue  # narrowing at an end: a split in two proposes that
+        floor = _FLOOR * part.size[order]
+        proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(piece, frame, floor) for piece in pieces))
     return proposals
 
 
