@@ -49,7 +49,7 @@ __all__ = ["auto_silhouettes", "aim_point"]
 COARSE_SIDE = 200
 #: A view in which nothing stands out over this share of the evidence's noise is empty.
 _NOTHING = "nothing stands on the table near the views' aim"
-_GC_ITERATIONS = 3
+_GC_ITERATIONS = 2
 #: The evidence's noise is taken to be at least this (a relative colour difference): JPEG and a
 #: pixel's worth of misregistration leave that much on a flat table.
 _NOISE_FLOOR = 0.03
