@@ -192,3 +192,44 @@ def test_a_background_keeps_what_only_looks_like_a_shadow(tmp_path):
                                  backgrounds=backgrounds)
         ious = [_iou(mask, truth) for (mask, _), truth in zip(found, truths)]
         assert np.mean(ious) > least, (name, ious)
+
+
+@pytest.fixture(scope="module")
+def printed_views(tmp_path_factory):
+    """(image, camera, true silhouette) of every view of four of the simulator's printed scenes."""
+    from robocell.workers.sim.scans import printed_set
+
+    directory = tmp_path_factory.mktemp("printed")
+    specs = {spec.name: spec for spec in printed_set(1)}
+    views = []
+    for name in ("fabric-printed-ellipsoid", "oak-soup-can-lying-can", "wood-printed-box", "laminate-white-box"):
+        specs[name].write(directory)
+        bundle = load_bundle(directory / name)
+        for index, view in enumerate(bundle.views):
+            views.append((cv2.imdecode(np.frombuffer(view.image, np.uint8), cv2.IMREAD_COLOR), view.camera,
+                          cv2.imread(str(directory / name / f"truth_mask{index}.png"), cv2.IMREAD_GRAYSCALE)))
+    return views
+
+
+@pytest.mark.parametrize("error, gain", [("none", -0.003), ("grown", 0.03), ("shrunk", 0.03)])
+def test_the_edge_is_placed_finer_than_the_coarse_scale(printed_views, error, gain):
+    """The true silhouette at the coarse scale (about 3 pixels to one), as it is or a coarse pixel off all
+    round (grown, shrunk): the full-resolution edge lands nearer the true silhouette than the coarse one
+    resampled, or as near when there is nothing to correct (an edge drawn pixel by pixel lost the limbs
+    an object's shading darkens and the pixels JPEG mixes: 0.955 against 0.977 resampled), across printed
+    objects, textured tables and a white box on white laminate."""
+    from robocell.core_cy.auto_segment import _refined, _View
+
+    refined, resampled = [], []
+    for index, (image, camera, truth) in enumerate(printed_views):
+        view = _View(index, image, camera, None)
+        coarse = np.where(cv2.resize(truth, view.coarse_size, interpolation=cv2.INTER_AREA) >= 128, 255, 0)
+        coarse = coarse.astype(np.uint8)
+        if error != "none":
+            coarse = (cv2.dilate if error == "grown" else cv2.erode)(coarse, np.ones((3, 3), np.uint8))
+        silhouette, _ = _refined(view, coarse)
+        refined.append(_iou(silhouette, truth))
+        height, width = truth.shape
+        resampled.append(_iou(cv2.resize(coarse, (width, height), interpolation=cv2.INTER_LINEAR) >= 128, truth))
+    assert np.mean(refined) > np.mean(resampled) + gain, (refined, resampled)
+    assert min(refined) > (0.94 if error == "none" else 0.84), refined
