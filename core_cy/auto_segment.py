@@ -20,10 +20,9 @@ with colour models of object and table learned from the seeds. The views
 then check each other: the hull carved from all other views, projected into
 a view, must contain that view's silhouette; what lies outside it (a
 shadow, a stretch of table) is table, and that view is cut again with it
-marked so. Last, the silhouette's edge is placed at full resolution by a
-second graph cut confined to a band one coarse pixel wide on either side of
-the coarse edge, its colour models learned from the sure object inside the
-band and the sure table outside it.
+marked so. Last, the silhouette's edge is placed at full resolution: each
+pixel of a thin band along the coarse edge goes to the side, object or
+table, whose colour just beside the band it is closer to.
 
 Without a support plane the aim alone seeds the cut (the region around it
 is taken for the object, the image's border for the background), and the
@@ -580,19 +579,17 @@ class _Hulls:
 
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The full-resolution silhouette and its outline: a second graph cut, at full resolution, places the
-    edge within a band one coarse pixel wide on either side of the coarse edge.
+    """The full-resolution silhouette and its outline: each pixel of a band along the coarse edge goes
+    to the side (object or table) whose colour just beside the band it is closer to.
 
-    Within the band the coarse mask cannot say (the coarse pixel there mixes the two sides); beyond it,
-    inside is sure object and outside sure table, and the colour models are learned from those around
-    the object. The cut then follows the image's own edges, to the pixel, where the coarse mask put the
-    edge anywhere within a coarse pixel. (Each band pixel going to the side whose nearest sure colour it
-    is closer to, without the cut's smoothness, lost the limbs an object's shading darkens and the
-    mixed pixels JPEG leaves: with the true coarse mask it did worse than no refinement at all.)"""
+    A pixel on the edge mixes the two sides' colours there; the nearest pixel sure to be object and the
+    nearest sure to be table give them (a print's local colour, not its mean over a window, which sent a
+    print's pixels to the table; and beside a shadow the table's colour is the shadow's, which the empty
+    workspace's picture is not: it sent a shadow's pixels to a dark object)."""
     height, width = view.image.shape[:2]
-    band = max(1, round(max(view.sx, view.sy)))
+    band = int(np.ceil(max(view.sx, view.sy))) + 1
     x, y, w, h = cv2.boundingRect(coarse_mask)
-    reach = 6 * band
+    reach = 4 * band
     x0, y0 = max(0, int(x * view.sx) - reach), max(0, int(y * view.sy) - reach)
     x1, y1 = min(width, int((x + w) * view.sx) + reach), min(height, int((y + h) * view.sy) + reach)
     # The coarse mask, resampled smoothly and cut at its half-way line, within the box.
@@ -601,20 +598,28 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
     sure = cv2.erode(mask, kernel)
     table = 1 - cv2.dilate(mask, kernel)
-    labels = np.where(mask > 0, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
-    labels[sure > 0] = cv2.GC_FGD
-    labels[table > 0] = cv2.GC_BGD
-    if sure.any() and table.any():
-        background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
-        cv2.setRNGSeed(0)
-        cv2.grabCut(np.ascontiguousarray(view.image[y0:y1, x0:x1]), labels, (0, 0, 0, 0), background_model,
-                    object_model, 1, cv2.GC_INIT_WITH_MASK)
-    chosen = np.where(np.isin(labels, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
+    image = view.image[y0:y1, x0:x1].astype(np.float32)
+    object_distance = _relative_difference(image, _nearest_colour(image, sure))
+    table_distance = _relative_difference(image, _nearest_colour(image, table))
+    uncertain = (sure == 0) & (table == 0)
+    chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
     if not cv2.countNonZero(chosen):
         raise SilhouetteError(_NOTHING, view=view.index)
     silhouette = np.zeros((height, width), np.uint8)
     silhouette[y0:y1, x0:x1] = chosen
     return mask_with_outline(silhouette, view=view.index)
+
+
+def _nearest_colour(image: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(h, w, 3) float32: at every pixel of ``image``, the colour of the nearest pixel where ``seeds`` (h, w)
+    is nonzero (``image`` itself where there is none)."""
+    if not seeds.any():
+        return image
+    # With DIST_LABEL_PIXEL every seed pixel is its own label, numbered in raster order from 1.
+    _, labels = cv2.distanceTransformWithLabels(np.where(seeds > 0, 0, 1).astype(np.uint8), cv2.DIST_L2, 3,
+                                                labelType=cv2.DIST_LABEL_PIXEL)
+    ys, xs = np.nonzero(seeds)
+    return image[ys, xs][labels - 1]
 
 
 def _coarse_aim(view: _View, aim: np.ndarray) -> np.ndarray:
