@@ -11,7 +11,7 @@ image's ratio to it is 1 on the table (its texture divides out), a smooth
 darkening on a shadow, and the plane maps that ratio from one view to another
 alike on the table and on a shadow but not on what stands above the plane.
 
-Per view, at a coarse scale (about 160 pixels a side, where every cue is
+Per view, at a coarse scale (about 200 pixels a side, where every cue is
 cheap): the cues give an evidence map; the region that stands out nearest
 the aim gives the seeds (sure object, sure table, and the uncertain rest) of
 a graph cut (OpenCV's GrabCut, initialised with that mask on a small region
