@@ -159,7 +159,7 @@ def _could_pay(shares) -> bool:
     """Whether a new part could pay, or a union carve away what one view shows empty: either can
     explain a view's unexplained share at most."""
     shares = np.asarray(shares)
-    return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or shares.max() >= _CARVED_GAIN)
+    return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or float(np.max(shares)) >= _CARVED_GAIN)
 
 
 def _pays(ious, without: np.ndarray) -> np.ndarray:
@@ -249,7 +249,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
         # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
         explains_more = (gained >= _views_to_pay(len(cameras))
-                         or (gains.max() >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
+                         or (float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
         if explains_more and len(candidate) <= len(current):
             explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
         if explains_more:
