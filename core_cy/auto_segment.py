@@ -111,17 +111,18 @@ class _View:
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
-        self._points: dict[tuple[bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
         (h, w, 2) float32 maps for cv2.remap, and (h * w,) which of them ``other`` sees (a fresh copy).
         Geometry alone: worked out once per pair of views."""
-        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        plane_key = np.asarray(plane, np.float64).tobytes()
+        key = (other.index, plane_key)
         if key not in self._mappings:
-            if key[1:] not in self._points:
-                self._points[key[1:]] = _plane_points(self, plane)
-            points, valid = self._points[key[1:]]
+            if plane_key not in self._points:
+                self._points[plane_key] = _plane_points(self, plane)
+            points, valid = self._points[plane_key]
             self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
         maps, inside = self._mappings[key]
         return maps, inside.copy()
@@ -694,11 +695,9 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # Against the empty workspace what differs is the object, but in pieces where its print or its
         # colour matches the table here and there: every piece near the aim joins, within their convex
         # outline, for the graph cut to seed from (one piece alone loses an object of the table's colour).
-        closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
-        near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
-        hull = cv2.convexHull(cv2.findNonZero(near))
-        region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
-                                 cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
+        near = _components_near(cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING), centre,
+                                reach=0.25 * np.hypot(cw, ch))
+        region = _joined_within_outline(near)
     else:
         region = _with_pieces_beside(region, differs)
         # The plane's parallax outlines an object the colour of the table where other views see the table
@@ -951,20 +950,26 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
         cw, ch = view.coarse_size
         centre = _coarse_aim(view, aim)
         differs, score = standing[view.index], scores[view.index]
-        closed = cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING)
-        near = _components_near(closed, centre, reach=0.25 * np.hypot(cw, ch))
+        near = _components_near(cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING), centre,
+                                reach=0.25 * np.hypot(cw, ch))
         if cv2.countNonZero(near) < 12:
             raise SilhouetteError(_NOTHING, view=view.index)
-        hull = cv2.convexHull(cv2.findNonZero(near))
-        region = cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(near), hull, 255),
-                                 cv2.morphologyEx(near, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
-        region = _holes_filled(region)
+        region = _holes_filled(_joined_within_outline(near))
         cut = _graph_cut(view, region, score)
         if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))
     return cuts
+
+
+def _joined_within_outline(pieces: np.ndarray) -> np.ndarray:
+    """The pieces (0/255) joined within their convex outline, each closed: the region a graph cut
+    seeds from when what differs from the empty workspace comes in pieces (where an object's print or
+    colour matches the table here and there)."""
+    hull = cv2.convexHull(cv2.findNonZero(pieces))
+    return cv2.bitwise_and(cv2.fillConvexPoly(np.zeros_like(pieces), hull, 255),
+                           cv2.morphologyEx(pieces, cv2.MORPH_CLOSE, _CLOSING, iterations=3))
 
 
 def _holes_filled(binary: np.ndarray) -> np.ndarray:
