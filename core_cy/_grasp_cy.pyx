@@ -2,9 +2,9 @@
 """Kernels of core_cy.grasp: the candidates' nominal checks, the hull's points against them, and a
 grasp's margins on perturbed copies of the model's sampled surface."""
 
-from libc.math cimport acos, atan2, cos, erf, erfc, exp, fabs, log, pow, sin, sqrt, INFINITY, NAN
+from libc.math cimport acos, atan2, cos, erf, erfc, fabs, log, pow, sin, sqrt, INFINITY, NAN
 
-from ._superquadric_cy cimport _log_sum
+from ._superquadric_cy cimport _level
 
 
 cdef enum:
@@ -631,19 +631,15 @@ cdef inline bint _in_union(double px, double py, double pz, const double[:, :, :
                            const double[:, ::1] sizes, const double[:, ::1] shapes, double factor) noexcept nogil:
     """Whether the point lies inside a part taken ``factor`` times as large (see union_inside)."""
     cdef Py_ssize_t p
-    cdef double x, y, z, logA, w1, w2, e1, e2
-    cdef double tiny = 1e-300
+    cdef double x, y, z
     for p in range(R.shape[0]):
         x = fabs(R[p, 0, 0] * px + R[p, 0, 1] * py + R[p, 0, 2] * pz + t[p, 0])
         y = fabs(R[p, 1, 0] * px + R[p, 1, 1] * py + R[p, 1, 2] * pz + t[p, 1])
         z = fabs(R[p, 2, 0] * px + R[p, 2, 1] * py + R[p, 2, 2] * pz + t[p, 2])
         if x > sizes[p, 0] * factor or y > sizes[p, 1] * factor or z > sizes[p, 2] * factor:
             continue  # outside the part's box: outside the part
-        e1, e2 = shapes[p, 0], shapes[p, 1]
-        logA = _log_sum(2.0 / e2 * (log(x if x > tiny else tiny) - log(sizes[p, 0])),
-                        2.0 / e2 * (log(y if y > tiny else tiny) - log(sizes[p, 1])), &w1, &w2)
-        if exp(_log_sum(e2 / e1 * logA, 2.0 / e1 * (log(z if z > tiny else tiny) - log(sizes[p, 2])),
-                        &w1, &w2)) < pow(factor, 2.0 / e1):
+        if _level(x, y, z, log(sizes[p, 0]), log(sizes[p, 1]), log(sizes[p, 2]), shapes[p, 0],
+                  shapes[p, 1]) < pow(factor, 2.0 / shapes[p, 0]):
             return True
     return False
 

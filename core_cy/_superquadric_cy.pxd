@@ -68,6 +68,17 @@ cdef inline double _log_sum(double la, double lb, double* wa, double* wb) noexce
 
 
 
+cdef inline double _level(double x, double y, double z, double la1, double la2, double la3,
+                          double e1, double e2) noexcept nogil:
+    """The inside-outside function F at |x|, |y|, |z| in the object's frame (la: the logs of the
+    sizes), in log space (``u^p = exp(p log u)``); |x| below 1e-300 is taken as that (log stays finite)."""
+    cdef double w1, w2
+    cdef double tiny = 1e-300
+    cdef double logA = _log_sum(2.0 / e2 * (log(x if x > tiny else tiny) - la1),
+                                2.0 / e2 * (log(y if y > tiny else tiny) - la2), &w1, &w2)
+    return exp(_log_sum(e2 / e1 * logA, 2.0 / e1 * (log(z if z > tiny else tiny) - la3), &w1, &w2))
+
+
 cdef double _support(const double* a, const double* e, const double* v, double* dh_da,
                      double* dh_de, double* dh_dv) noexcept nogil
 

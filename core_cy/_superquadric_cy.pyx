@@ -75,19 +75,15 @@ def inside_outside(const double[:, ::1] points not None, const double[:, ::1] R 
     cdef Py_ssize_t i, n = points.shape[0]
     cdef double la1 = log(size[0]), la2 = log(size[1]), la3 = log(size[2])
     cdef double e1 = shape[0], e2 = shape[1]
-    cdef double qx, qy, qz, x, y, z, logA, w1, w2
+    cdef double qx, qy, qz
     with nogil:
         for i in range(n):
             qx = points[i, 0] - t[0]
             qy = points[i, 1] - t[1]
             qz = points[i, 2] - t[2]
-            x = fabs(R[0, 0] * qx + R[1, 0] * qy + R[2, 0] * qz)
-            y = fabs(R[0, 1] * qx + R[1, 1] * qy + R[2, 1] * qz)
-            z = fabs(R[0, 2] * qx + R[1, 2] * qy + R[2, 2] * qz)
-            logA = _log_sum(2.0 / e2 * (log(x if x > _TINY else _TINY) - la1),
-                            2.0 / e2 * (log(y if y > _TINY else _TINY) - la2), &w1, &w2)
-            out[i] = exp(_log_sum(e2 / e1 * logA,
-                                  2.0 / e1 * (log(z if z > _TINY else _TINY) - la3), &w1, &w2))
+            out[i] = _level(fabs(R[0, 0] * qx + R[1, 0] * qy + R[2, 0] * qz),
+                            fabs(R[0, 1] * qx + R[1, 1] * qy + R[2, 1] * qz),
+                            fabs(R[0, 2] * qx + R[1, 2] * qy + R[2, 2] * qz), la1, la2, la3, e1, e2)
 
 
 cdef inline double _jaklic(const double* params, double R[3][3], double dR[3][3][3], double s,
