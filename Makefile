@@ -35,7 +35,7 @@ $(BIN)/python: | python
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # Build tools go in first so that re-installs can skip pip's isolated build environment.
-$(STAMP): $(BIN)/python pyproject.toml setup.py $(wildcard core_cy/*.pyx) | python
+$(STAMP): $(BIN)/python pyproject.toml setup.py $(wildcard core_cy/*.pyx core_cy/*.pxd) | python
 	$(BIN)/python -m pip install --quiet "setuptools>=77" wheel "cython>=3.0,<4" "numpy>=2.0,<3"
 	$(BIN)/python -m pip install --quiet --no-build-isolation -e '.[test]'
 	touch $@
