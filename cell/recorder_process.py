@@ -132,7 +132,6 @@ class _Drawing:
         self.n_points = n_points
 
     def reconstruction(self, recording, reply_json: str, payload: bytes) -> None:
-        import cv2
         import numpy as np
 
         from robocell.core_cy.sphere import fibonacci_sphere
@@ -143,12 +142,8 @@ class _Drawing:
         result = answer.result
         if result is None or answer.points is None:
             return
-        at = 0
-        for view, blob in enumerate(answer.silhouettes):
-            png = np.frombuffer(payload, np.uint8, count=blob.length, offset=at)
-            recording.log_silhouette(view, cv2.imdecode(png, cv2.IMREAD_GRAYSCALE))
-            at += blob.length
-        points = np.frombuffer(payload, "<f4", count=answer.points.length // 4, offset=at).reshape(-1, 3)
+        ends = np.cumsum([0] + [blob.length for blob in answer.silhouettes])  # the PNGs, then the points
+        points = np.frombuffer(payload, "<f4", count=answer.points.length // 4, offset=int(ends[-1])).reshape(-1, 3)
         sphere = np.asarray(result.centre) + result.radius * fibonacci_sphere(self.n_points)
         recording.log_points("sphere", sphere, colour=(150, 150, 150))
         recording.log_points("carved", points.astype(np.float64))
@@ -158,3 +153,8 @@ class _Drawing:
             recording.log_superquadric("fit", Superquadric.from_dict(result.superquadric.model_dump()))
         timings = ", ".join(f"{stage} {ms:.1f} ms" for stage, ms in result.timings_ms.items())
         recording.log_text(f"reconstruction on {answer.worker}: {timings}")
+        for view, (start, end) in enumerate(zip(ends[:-1], ends[1:])):
+            try:
+                recording.log_silhouette(view, payload[start:end])
+            except ValueError as exc:  # not a PNG of its view's size: the rest is drawn still
+                recording.log_text(f"the worker's silhouette of view {view} is not drawn: {exc}", "WARNING")

@@ -4,11 +4,11 @@ Each job is written as it happens to ``<run dir>/<job id>.rrd``, on the
 timeline ``"job"`` (seconds since the job started). World frame: the robot
 base, z up, metres. Entities::
 
-    world                            ViewCoordinates RIGHT_HAND_Z_UP, AnnotationContext (static)
+    world                            ViewCoordinates RIGHT_HAND_Z_UP (static)
     world/robot/flange               Transform3D, TransformAxes3D
     world/camera{i}                  Transform3D (camera-to-world), Pinhole (RDF)
     world/camera{i}/image            EncodedImage (image/jpeg)
-    world/camera{i}/silhouette       SegmentationImage (0 background, 1 object)
+    world/camera{i}/silhouette       EncodedImage (image/png as the worker sent it: white = object)
     world/camera{i}/outline          LineStrips2D (the model's projected outline: the union of its parts)
     world/points/{name}              Points3D ("sphere", "carved")
     world/{name}                     Mesh3D ("fit": each part in its own colour; "truth")
@@ -43,6 +43,7 @@ from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
 from robocell.core_cy.camera import Camera
+from robocell.core_cy.images import checked_size, png_size
 from robocell.core_cy.meshes import vertex_normals
 from robocell.core_cy.quality import projected_outline
 from robocell.wire import keys
@@ -53,14 +54,14 @@ __all__ = ["JobRecording", "recording_problem", "union_outline", "PART_COLOURS"]
 _log = logging.getLogger(__name__)
 
 TIMELINE = "job"
-_OBJECT_CLASSES = rr.AnnotationContext([(0, "background", (0, 0, 0, 0)), (1, "object", (255, 64, 0, 110))])
 _FLANGE_AXIS_LENGTH = 0.1  # metres
 # Rerun's level names; "WARNING" is Python's spelling of its "WARN".
 _LEVELS = {"WARNING": "WARN", "FATAL": "CRITICAL"}
-#: The colours of a model's parts, in order (RGBA): told apart at a glance, none the silhouettes' orange.
+#: The colours of a model's parts, in order (RGBA): told apart at a glance.
 PART_COLOURS = ((60, 200, 90, 200), (70, 130, 250, 200), (240, 200, 40, 200), (200, 80, 220, 200),
                 (40, 210, 220, 200), (250, 110, 110, 200))
 _OUTLINE_COLOUR = (255, 255, 0)
+_SILHOUETTE_OPACITY = 0.4  # the picture stays readable under the silhouette
 # A write of a recording waits at most this long (a disk that hangs must not hold the recorder; once
 # Rerun's file writer has stopped, a flush waits this long before it says so). The recorder writes as
 # it goes, so a close has little left to write.
@@ -133,8 +134,6 @@ class JobRecording:
         for stream in self._streams:
             stream.send_recording_name(f"job {job_id}")
             stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-            # On "world", the annotation context applies to every silhouette below it.
-            stream.log("world", _OBJECT_CLASSES, static=True)
 
     def __enter__(self) -> JobRecording:
         return self
@@ -182,12 +181,23 @@ class JobRecording:
         self._log(camera, _transform(T_world_cam), pinhole)
         self._log(f"{camera}/image", rr.EncodedImage(contents=bytes(jpeg), media_type="image/jpeg"))
 
-    def log_silhouette(self, index: int, mask: np.ndarray) -> None:
-        """View ``index``'s silhouette, (H, W), nonzero = object; drawn over its image."""
-        mask = np.asarray(mask)
-        if mask.ndim != 2:
-            raise ValueError(f"a silhouette must be a 2-D mask, got shape {mask.shape}")
-        self._log(f"world/camera{index}/silhouette", rr.SegmentationImage((mask != 0).astype(np.uint8)))
+    def log_silhouette(self, index: int, png: bytes) -> None:
+        """View ``index``'s silhouette as a worker sends it: a PNG of the view's size, white where
+        the object is; drawn over its image, half transparent. It is logged as it came, never
+        decoded here: decoding three of them cost the recorder more than the rest of a model's
+        drawing, which a success waits for (the viewer decodes them), and a PNG is a thousandth
+        of the pixels it holds. Only its header is read: a PNG that declares another size than
+        the view's image, or more pixels than may be decoded, is refused (``ValueError``)."""
+        png = bytes(png)
+        size = png_size(png)
+        if size is None:
+            raise ValueError(f"view {index}'s silhouette is not a PNG ({len(png)} bytes)")
+        checked_size(png, what="the silhouette", view=index)
+        if index in self._cameras and size != self._cameras[index][2]:
+            width, height = self._cameras[index][2]
+            raise ValueError(f"view {index}'s silhouette is {size[0]}x{size[1]} pixels, its image {width}x{height}")
+        self._log(f"world/camera{index}/silhouette", rr.EncodedImage(contents=png, media_type="image/png",
+                                                                     opacity=_SILHOUETTE_OPACITY))
         self._silhouettes.add(index)
 
     def clear_reconstruction(self) -> None:

@@ -130,7 +130,7 @@ def test_recording_holds_images_poses_clouds_and_meshes(cell, scanned):
     for view in range(3):
         assert summary[f"/world/camera{view}"] == ["Pinhole", "Transform3D"]
         assert summary[f"/world/camera{view}/image"] == ["EncodedImage"]
-        assert summary[f"/world/camera{view}/silhouette"] == ["SegmentationImage"]
+        assert summary[f"/world/camera{view}/silhouette"] == ["EncodedImage"]
     assert summary["/world/points/sphere"] == ["Points3D"]
     assert summary["/world/points/carved"] == ["Points3D"]
     assert summary["/world/fit"] == ["Mesh3D"]

@@ -32,10 +32,11 @@ def _jpeg(index: int) -> bytes:
     return encoded.tobytes()
 
 
-def _mask(index: int) -> np.ndarray:
+def _mask(index: int) -> bytes:
+    """View ``index``'s silhouette as a worker sends it: a PNG, white = object."""
     mask = np.zeros((HEIGHT, WIDTH), np.uint8)
     cv2.circle(mask, (WIDTH // 2 + 20 * index, HEIGHT // 2), 80, 255, -1)
-    return mask
+    return cv2.imencode(".png", mask)[1].tobytes()
 
 
 def _log_job(path: Path, job_id: str) -> dict[str, object]:
@@ -100,7 +101,7 @@ def _record_batches(path: Path):
 
 EXPECTED = {
     "/log": ["TextLog"],
-    "/world": ["AnnotationContext", "ViewCoordinates"],
+    "/world": ["ViewCoordinates"],
     "/world/robot/flange": ["Transform3D", "TransformAxes3D"],
     "/world/points/sphere": ["Points3D"],
     "/world/points/carved": ["Points3D"],
@@ -108,7 +109,7 @@ EXPECTED = {
     "/world/truth": ["Mesh3D"],
     **{f"/world/camera{i}": ["Pinhole", "Transform3D"] for i in range(3)},
     **{f"/world/camera{i}/image": ["EncodedImage"] for i in range(3)},
-    **{f"/world/camera{i}/silhouette": ["SegmentationImage"] for i in range(3)},
+    **{f"/world/camera{i}/silhouette": ["EncodedImage"] for i in range(3)},
 }
 
 
@@ -197,8 +198,17 @@ def test_bad_input_is_refused_with_its_shape(tmp_path):
             rec.log_points("sphere", np.zeros((4, 2)))
         with pytest.raises(ValueError, match="4x4"):
             rec.log_robot_pose(np.eye(3))
-        with pytest.raises(ValueError, match="2-D"):
-            rec.log_silhouette(0, np.zeros((2, 2, 2)))
+        with pytest.raises(ValueError, match="view 0's silhouette is not a PNG"):
+            rec.log_silhouette(0, cv2.imencode(".jpg", np.zeros((HEIGHT, WIDTH), np.uint8))[1].tobytes())
+        # A few bytes that declare 20000x20000 pixels: refused by the header, never decoded.
+        bomb = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR\x00\x00N\x20\x00\x00N\x20"
+        with pytest.raises(ValueError, match="20000x20000 pixels"):
+            rec.log_silhouette(0, bomb)
+        rec.log_view(1, _jpeg(1), intrinsics(), look_at(POSITIONS[1], CENTRE), (WIDTH, HEIGHT))
+        half = cv2.imencode(".png", np.zeros((HEIGHT // 2, WIDTH // 2), np.uint8))[1].tobytes()
+        with pytest.raises(ValueError, match=f"view 1's silhouette is {WIDTH // 2}x{HEIGHT // 2} pixels, "
+                                             f"its image {WIDTH}x{HEIGHT}"):
+            rec.log_silhouette(1, half)
 
 
 def test_concurrent_recordings_stay_separate(tmp_path):
@@ -273,3 +283,32 @@ def test_a_refused_reconstruction_is_taken_out_of_the_recording_from_then_on(tmp
     assert cleared == {entity: [2.0] for entity in ("/world/points", "/world/fit", "/world/camera0/silhouette",
                                                    "/world/camera0/outline")}
     assert recording_summary(path)["/world/camera0/image"] == ["EncodedImage"]  # the pictures stay
+
+
+def test_a_workers_silhouette_that_is_not_a_png_of_its_view_costs_only_itself(tmp_path):
+    from robocell.cell.recorder_process import _Drawing
+    from robocell.wire.messages import POINTS_ENCODING, Blob, Reconstruction, ReconstructReply
+
+    T = np.eye(4)
+    T[:3, 3] = CENTRE
+    result = Reconstruction(superquadric={"size": [0.04, 0.03, 0.05], "shape": [0.5, 1.0], "T_world_object": T.tolist()},
+                            silhouette_iou=[0.9] * 3, residual=0.001, timings_ms={"total": 1.0},
+                            centre=list(CENTRE), radius=0.1)
+    bomb = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR\x00\x00N\x20\x00\x00N\x20"  # declares 20000x20000 pixels
+    silhouettes = [_mask(0), bomb, _mask(2)]
+    points = (CENTRE + 0.01 * np.eye(3)).astype("<f4").tobytes()
+    reply = ReconstructReply(job_id="j3", result=result, worker="w", ticket="t",
+                             silhouettes=[Blob(encoding="image/png", length=len(s)) for s in silhouettes],
+                             points=Blob(encoding=POINTS_ENCODING, length=len(points)))
+    path = tmp_path / "j3.rrd"
+    with JobRecording(path, "j3") as rec:
+        for view in range(3):
+            rec.log_view(view, _jpeg(view), intrinsics(), look_at(POSITIONS[view], CENTRE), (WIDTH, HEIGHT))
+        _Drawing(n_points=100).reconstruction(rec, reply.model_dump_json(), b"".join(silhouettes) + points)
+    summary = recording_summary(path)
+    assert summary["/world/camera0/silhouette"] == summary["/world/camera2/silhouette"] == ["EncodedImage"]
+    assert "/world/camera1/silhouette" not in summary
+    assert summary["/world/fit"] == ["Mesh3D"] and summary["/world/points/carved"] == ["Points3D"]
+    texts = [text for _, batch in _record_batches(path) for name in batch.schema.names if name.endswith(":text")
+             for text in batch.column(name).to_pylist()]
+    assert any("silhouette of view 1 is not drawn" in str(text) and "20000x20000" in str(text) for text in texts), texts
