@@ -198,8 +198,9 @@ class AsyncCellClient:
         TimeoutError
             If the job is not finished within ``timeout`` seconds.
         """
-        await self._wait_finished(job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
-        return await self.status(job_id)
+        final = await self._wait_finished(job_id, timeout=timeout, on_event=on_event, poll_s=poll_s)
+        assert isinstance(final, JobStatus), "a result only when asked for"
+        return final
 
     def _subscribe_events(self) -> bool:
         """Make sure this client hears every event of the cell; whether it already did."""
@@ -243,9 +244,10 @@ class AsyncCellClient:
             del self._listeners[job_id]
 
     async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
-                             poll_s: float, heard_from_start: bool = False) -> tuple[JobState, JobEvent | None]:
-        """The job's final state and final event, from its events (or, should one be lost, from
-        polling its status: then the event is None).
+                             poll_s: float, heard_from_start: bool = False,
+                             want_result: bool = False) -> JobStatus | ScanResult:
+        """The daemon's word on the job's end, heard from its events (or, should one be lost, from
+        polling its status): its final status, or with ``want_result`` the result of a success.
 
         ``heard_from_start``: this client was listening before the job was submitted, so no
         event of it can have been missed and the status need not be asked first.
@@ -257,7 +259,9 @@ class AsyncCellClient:
         try:
             # Asked after subscribing: an end in between is not missed.
             state = JobState.QUEUED if heard_from_start else (await self.status(job_id)).state
-            while not state.finished:
+            if state.finished:
+                return await self._ended(job_id, state, want_result)
+            while True:
                 remaining = deadline - loop.time()
                 if remaining <= 0:
                     raise TimeoutError(f"job {job_id} is still {state.value} after {timeout:g} s")
@@ -269,24 +273,40 @@ class AsyncCellClient:
                         state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
                     except LinkDown:
                         pass  # the router is away: the job goes on, and so does the wait
+                    if state.finished:
+                        return await self._ended(job_id, state, want_result)
                     continue
                 if event.state.finished:
                     # An event is anyone's to publish on an open router: an end is believed only
                     # once the daemon confirms it (a forged one is dropped, and the wait goes on).
-                    confirmed = (await self.status(job_id)).state
+                    final = await self._ended(job_id, event.state, want_result)
+                    confirmed = final.state if isinstance(final, JobStatus) else JobState.SUCCEEDED
                     if confirmed is not event.state:
                         log.warning("ignoring a %s event for job %s, which the daemon says is %s",
                                     event.state.value, job_id, confirmed.value)
                         state = confirmed
+                        if state.finished:
+                            return final
                         continue
+                    if on_event is not None:
+                        on_event(event)
+                    return final
                 if on_event is not None:
                     on_event(event)
                 state = event.state
-                if state.finished:
-                    return state, event
-            return state, None
         finally:
             self._unlisten(job_id, queue)
+
+    async def _ended(self, job_id: str, state: JobState, want_result: bool) -> JobStatus | ScanResult:
+        """The daemon's word on a job that ``state`` says has ended: its status, or with ``want_result``
+        and a success, its result. Only a job that succeeded has a result, so asking for it both
+        confirms the success and fetches it, in one question."""
+        if want_result and state is JobState.SUCCEEDED:
+            try:
+                return await self.result(job_id)
+            except RemoteError:  # no result: it did not succeed after all
+                pass
+        return await self.status(job_id)
 
     async def scan(self, request: ScanRequest, *, timeout: float = 120.0,
                    on_event: Callable[[JobEvent], None] | None = None, poll_s: float = 1.0) -> ScanResult:
@@ -301,13 +321,12 @@ class AsyncCellClient:
         """
         self.listen()  # before submitting: every event of the job is heard
         status = await self.submit(request)
-        state, _ = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event,
-                                                 poll_s=poll_s, heard_from_start=True)
-        if state is JobState.SUCCEEDED:
-            # Asked of the daemon, not taken from the event: anyone may publish an event.
-            return await self.result(status.job_id)
-        ended = await self.status(status.job_id)
-        raise JobFailed(f"job {ended.job_id} {ended.state.value}: {ended.error or 'no reason given'}", status=ended)
+        # The result is asked of the daemon, not taken from the event: anyone may publish an event.
+        final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event, poll_s=poll_s,
+                                          heard_from_start=True, want_result=True)
+        if isinstance(final, ScanResult):
+            return final
+        raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}", status=final)
 
 
 class CellClient:
