@@ -22,6 +22,7 @@ from a start (the point fit) minimises the sum.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -70,11 +71,15 @@ class SilhouetteFit:
         (read from the robust cost: exact when they are all alike).
     iterations : int
         Levenberg-Marquardt steps tried from the start that won.
+    evaluations : int
+        Evaluations of the cost over every start, each part of a union counted: the fit's work, by
+        which a later search can size its own (deterministic, unlike its time).
     """
 
     parts: tuple[Superquadric, ...]
     rms_px: float
     iterations: int
+    evaluations: int = 0
 
     @property
     def superquadric(self) -> Superquadric:
@@ -120,9 +125,10 @@ class _Problem:
     """The silhouette fit of a union of parts about one start: parameters to tangent planes, cost
     and normal equations. Part p's 11 parameters are ``x[11 p: 11 p + 11]``."""
 
-    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale):
+    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale, tally: list[int] | None = None):
         parts = [start] if isinstance(start, Superquadric) else list(start)
         self.count = len(parts)
+        self.tally = [0] if tally is None else tally  # part evaluations so far, shared by a fitter's problems
         self.R0 = np.ascontiguousarray([part.T_world_object[:3, :3] for part in parts])
         self.t0 = np.ascontiguousarray([part.T_world_object[:3, 3] for part in parts])
         self.scale = np.array([float(np.mean(part.size)) for part in parts])
@@ -158,6 +164,7 @@ class _Problem:
 
     def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
         views, planes = self.views, self.trial_planes
+        self.tally[0] += self.count
         for p in range(self.count):
             if not outline_points(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
                                   views.projections, views.centres, self.grid, self.uv, self.counts):
@@ -206,14 +213,20 @@ class _Fitter:
         self.loss_scale = float(loss_scale)
         # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
         self.tolerance = 0.5 * 1e-4 * views.count
+        self.tally = [0]
+
+    @property
+    def evaluations(self) -> int:
+        """Evaluations of the cost so far, over every descent, each part of a union counted."""
+        return self.tally[0]
 
     def descent(self, start) -> Descent:
         """A descent from ``start`` (a Superquadric, or the parts of a union), not yet run."""
-        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale)
+        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale, self.tally)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
     def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
-                explained_px: float | None = None) -> Descent:
+                explained_px: float | None = None, within: Callable[[], bool] | None = None) -> Descent:
         """The start whose descent fits best: every start a few steps, the ``finalists`` best of
         them a few more, and the best of those on to convergence. Two bodies (a lying cylinder and a
         bar) may explain the views alike after a step or two, and only a few steps on tell apart.
@@ -221,7 +234,8 @@ class _Fitter:
         With ``explained_px``: while the winner's outlines stay farther than that (RMS) from the
         samples, the silhouettes disagree with it (a bad local minimum): the starts left behind go
         on, in the order of their cost, each a few more steps, and one that then fits better than
-        the winner goes on to convergence and wins if it ends lower (each start is tried once)."""
+        the winner goes on to convergence and wins if it ends lower (each start is tried once), while
+        ``within`` (a budget) says so."""
         alive = [self.descent(start) for start in starts]
         if len(alive) > 1:
             for descent in alive:
@@ -238,7 +252,7 @@ class _Fitter:
         if explained_px is None:
             return best
         for descent in alive:
-            if self.rms(best.cost) <= explained_px:
+            if self.rms(best.cost) <= explained_px or (within is not None and not within()):
                 break
             if descent is best or not np.isfinite(descent.cost):
                 continue
@@ -254,7 +268,8 @@ class _Fitter:
         return _rms(cost, self.views.count, self.loss_scale)
 
     def result(self, descent: Descent) -> SilhouetteFit:
-        return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations)
+        return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations,
+                             self.evaluations)
 
 
 def _first_part(start) -> Superquadric:
