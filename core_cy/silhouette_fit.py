@@ -25,10 +25,9 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from ._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
+from ._silhouette_fit_cy import normal_equations, part_planes
 from .errors import FitError
 from .least_squares import Descent
 from .superquadric import Superquadric, _rotation
@@ -98,6 +97,12 @@ class _Views:
     rows: list  # slices of the planes array, per view
     count: int
     pixel_scale: float  # the views' mean f / depth: pixels per world unit at the object
+    # The same stacked for the kernel that draws a part's tangent planes in every view in one call.
+    all_samples: np.ndarray  # (N, 2)
+    starts: np.ndarray  # (V + 1,) view v's samples are all_samples[starts[v]:starts[v + 1]]
+    Ks: np.ndarray  # (V, 3, 3)
+    Rs: np.ndarray  # (V, 3, 3) camera to world
+    pixels_per_unit: np.ndarray  # (V,) 1 / the object's depth
 
     @classmethod
     def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
@@ -118,7 +123,12 @@ class _Views:
             rows.append(slice(row, row + len(view_samples)))
             row += len(view_samples)
         return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
-                   packed, samples, rows, row, float(np.mean(scales)))
+                   packed, samples, rows, row, float(np.mean(scales)),
+                   np.ascontiguousarray(np.concatenate(samples) if samples else np.empty((0, 2))),
+                   np.array([0] + [r.stop for r in rows], np.intp),
+                   np.ascontiguousarray([K for K, _, _, _ in packed], dtype=np.float64).reshape(-1, 3, 3),
+                   np.ascontiguousarray([R for _, R, _, _ in packed]).reshape(-1, 3, 3),
+                   np.array([scale for _, _, _, scale in packed], dtype=np.float64))
 
 
 class _Problem:
@@ -140,6 +150,8 @@ class _Problem:
         self.counts = np.empty(len(views.samples), np.intp)
         shape = (self.count, views.count, 9)
         self.planes, self.trial_planes = np.empty(shape), np.empty(shape)
+        # Which part answered for each sample last time: the kernel tries it first (only its time depends on it).
+        self.owner = np.zeros(views.count, np.intp)
         self.x0 = np.concatenate([np.concatenate([np.log(part.size), np.clip(part.shape, *_SHAPE_BOUNDS), np.zeros(6)])
                                   for part in parts])
         self.low, self.high = np.full(len(self.x0), -np.inf), np.full(len(self.x0), np.inf)
@@ -166,17 +178,12 @@ class _Problem:
         views, planes = self.views, self.trial_planes
         self.tally[0] += self.count
         for p in range(self.count):
-            if not outline_points(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
-                                  views.projections, views.centres, self.grid, self.uv, self.counts):
-                return np.inf  # the part reaches behind a camera
-            for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
-                    zip(views.samples, views.rows, views.cameras)):
-                hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
-                if len(hull) < 3:
-                    return np.inf
-                tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[p, rows])
+            if not part_planes(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
+                               views.projections, views.centres, views.all_samples, views.starts, views.Ks,
+                               views.Rs, views.pixels_per_unit, self.grid, self.uv, self.counts, planes[p]):
+                return np.inf  # the part reaches behind a camera, or its outline in a view is no polygon
         return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
-                                self.plane_weight, _TILT, JtJ, Jtr)
+                                self.plane_weight, _TILT, JtJ, Jtr, True, self.owner)
 
     def keep(self, accepted: bool) -> None:
         if accepted:
