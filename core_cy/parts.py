@@ -270,16 +270,20 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
         if bounded > 1 and not _could_pay(rasters.unexplained(base)):
             break
-        proposals = _splits(base, points, plane) + _additions(base, points, rasters, plane)
-        if len(base) == 1 and plane is not None:
+        # Which part explains each hull point best, for the splits and the waists alike.
+        owner = _owners(base, points)
+        proposals = _splits(base, points, plane, owner) + _additions(base, points, rasters, plane)
+        box = None if len(base) > 1 or plane is None else (upright_box(points, plane[:3]),)
+        if box is not None:
             # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
             # also split the box of the whole hull, standing on the table.
-            proposals += _splits((upright_box(points, plane[:3]),), points, plane)
+            box_owner = np.zeros(len(points), np.intp)  # one part owns every point
+            proposals += _splits(box, points, plane, box_owner)
         if len(base) == 1:
             # Two ends and the thinner part between them (a dumbbell's bar) are no split in two.
-            proposals += _waists(base, points)
-            if plane is not None:
-                proposals += _waists((upright_box(points, plane[:3]),), points)
+            proposals += _waists(base, points, owner)
+            if box is not None:
+                proposals += _waists(box, points, box_owner)
         if not proposals:
             break
         candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX,
@@ -380,37 +384,43 @@ def _box_start(points: np.ndarray, R: np.ndarray, floor: np.ndarray) -> Superqua
     return Superquadric(np.maximum((high - low) / 2, floor), _START_SHAPE, T)
 
 
-def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+def _owners(parts, points: np.ndarray) -> np.ndarray:
+    """(N,) which part explains each point best (the one it lies deepest in)."""
+    if len(parts) == 1:
+        return np.zeros(len(points), np.intp)
+    return np.argmin(_ratios(parts, points), axis=0)
+
+
+def _splits(parts, points: np.ndarray, plane, owner: np.ndarray) -> list[tuple[Superquadric, ...]]:
     """Each part split in two by the plane through its centre across each of its axes (on a
-    table, each half's start upright: a part rests on a face)."""
+    table, each half's start upright: a part rests on a face); ``owner`` as :func:`_owners`."""
     if len(points) < 2 * _MIN_GROUP:
         return []
-    owner = np.argmin(_ratios(parts, points), axis=0)
     proposals = []
     for k, part in enumerate(parts):
         mine = points[owner == k]
         R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
         side = (mine - centre) @ R
+        floor = _FLOOR * part.size
+        frame = R if plane is None else _upright(R, plane[:3])
         for axis in range(3):
             halves = [mine[side[:, axis] >= 0], mine[side[:, axis] < 0]]
             if min(len(half) for half in halves) < _MIN_GROUP:
                 continue
-            floor = _FLOOR * part.size
-            frame = R if plane is None else _upright(R, plane[:3])
             proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, frame, floor) for half in halves))
     return proposals
 
 
-def _waists(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
+def _waists(parts, points: np.ndarray, owner: np.ndarray) -> list[tuple[Superquadric, ...]]:
     """Each part cut in three where it narrows along its longest axis (parts meet at a waist: a
     dumbbell's bar between its weights): the hull points it explains best, in slabs along the
     axis, each slab's width the least of its extents across the axis (the views carve the hull
     narrow across their rays); the waist is the run of slabs about the narrowest that are nearer
     its width than the widest's, at most ``_WAIST`` of it. The pieces before, within and after the
-    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits."""
+    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits.
+    ``owner`` as :func:`_owners`."""
     if len(points) < 2 * _MIN_GROUP:
         return []
-    owner = np.argmin(_ratios(parts, points), axis=0)
     angles = np.pi * np.arange(_WIDTH_DIRECTIONS) / _WIDTH_DIRECTIONS
     directions = np.stack([np.cos(angles), np.sin(angles)])
     proposals = []
@@ -508,4 +518,5 @@ def _upright(R: np.ndarray, normal: np.ndarray) -> np.ndarray:
     k = int(np.argmax(np.abs(normal @ R)))
     first = R[:, (k + 1) % 3] - (R[:, (k + 1) % 3] @ normal) * normal
     first /= np.linalg.norm(first)
-    return np.stack([first, np.cross(normal, first), normal], axis=1)
+    second = normal[[1, 2, 0]] * first[[2, 0, 1]] - normal[[2, 0, 1]] * first[[1, 2, 0]]  # normal x first
+    return np.stack([first, second, normal], axis=1)
