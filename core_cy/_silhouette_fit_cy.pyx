@@ -31,13 +31,6 @@ cdef inline void _pose(const double[::1] x, const double[:, ::1] R0, const doubl
         t[k] = t0[k] + scale * x[5 + k]
 
 
-cdef inline double _signed_power(double c, double e) noexcept nogil:
-    cdef double m = fabs(c)
-    if m < _TINY:
-        return 0.0
-    return exp(e * log(m)) if c > 0 else -exp(e * log(m))
-
-
 def outline_points(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
                    double scale, const double[::1] eta not None, const double[::1] omega not None,
                    const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
@@ -55,16 +48,41 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
     """
     cdef double[::1] trig = np.empty(4 * omega.shape[0])
     cdef double[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2)
+    cdef double[:, ::1] angles = outline_angles(eta, omega)
     cdef bint in_front
-    _check_outline(eta, omega, projections, centres, grid, uv, counts)
+    _check_outline(eta.shape[0], angles, projections, centres, grid, uv, counts)
     with nogil:
-        in_front = _outline_points(x, R0, t0, scale, eta, omega, projections, centres, grid, uv, counts, trig, facing)
+        in_front = _outline_points(x, R0, t0, scale, eta.shape[0], angles, projections, centres, grid, uv, counts,
+                                   trig, facing)
     return in_front
 
 
-cdef _check_outline(const double[::1] eta, const double[::1] omega, const double[:, :, ::1] projections,
+def outline_angles(const double[::1] eta not None, const double[::1] omega not None):
+    """(len(eta) + len(omega), 4): for each angle, eta's then omega's, log |cos|, the sign of cos (0
+    where it vanishes), log |sin| and the sign of sin: the grid's signed powers, ``sign exp(e log)``,
+    without the angles' own trigonometry at every evaluation."""
+    cdef Py_ssize_t n_eta = eta.shape[0], k
+    cdef double[:, ::1] angles = np.empty((n_eta + omega.shape[0], 4))
+    cdef double angle, c
+    cdef int side
+    for k in range(angles.shape[0]):
+        angle = eta[k] if k < n_eta else omega[k - n_eta]
+        for side in range(2):
+            c = cos(angle) if side == 0 else sin(angle)
+            if fabs(c) < _TINY:
+                angles[k, 2 * side] = 0.0
+                angles[k, 2 * side + 1] = 0.0
+            else:
+                angles[k, 2 * side] = log(fabs(c))
+                angles[k, 2 * side + 1] = 1.0 if c > 0 else -1.0
+    return np.asarray(angles)
+
+
+cdef _check_outline(Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
                     const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv, Py_ssize_t[::1] counts):
-    cdef Py_ssize_t n_grid = eta.shape[0] * omega.shape[0], n_views = projections.shape[0]
+    cdef Py_ssize_t n_grid = n_eta * (angles.shape[0] - n_eta), n_views = projections.shape[0]
+    if n_eta < 1 or angles.shape[0] <= n_eta or angles.shape[1] != 4:
+        raise ValueError("angles must be outline_angles(eta, omega), eta's count n_eta")
     if grid.shape[0] != n_grid + 2 or grid.shape[1] != 6:
         raise ValueError("grid must be (len(eta) * len(omega) + 2, 6)")
     if (projections.shape[1] != 3 or projections.shape[2] != 4 or centres.shape[0] != n_views
@@ -74,11 +92,12 @@ cdef _check_outline(const double[::1] eta, const double[::1] omega, const double
 
 
 cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
-                          const double[::1] eta, const double[::1] omega, const double[:, :, ::1] projections,
+                          Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
                           const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv,
                           Py_ssize_t[::1] counts, double[::1] trig, double[::1] facing) noexcept nogil:
-    """As :func:`outline_points`; ``trig`` (4 len(omega)) and ``facing`` (len(grid)) are scratch."""
-    cdef Py_ssize_t n_eta = eta.shape[0], n_omega = omega.shape[0], n_grid = n_eta * n_omega
+    """As :func:`outline_points`, the angles as :func:`outline_angles` (``n_eta`` of them eta's);
+    ``trig`` (4 len(omega)) and ``facing`` (len(grid)) are scratch."""
+    cdef Py_ssize_t n_omega = angles.shape[0] - n_eta, n_grid = n_eta * n_omega
     cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
     cdef double R[3][3]
     cdef double dR[3][3][3]
@@ -93,15 +112,16 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
     _pose(x, R0, t0, scale, R, dR, a, t)
     # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
     for j in range(n_omega):
-        co[j] = _signed_power(cos(omega[j]), e2)
-        so[j] = _signed_power(sin(omega[j]), e2)
-        nco[j] = _signed_power(cos(omega[j]), 2.0 - e2)
-        nso[j] = _signed_power(sin(omega[j]), 2.0 - e2)
+        row = n_eta + j
+        co[j] = angles[row, 1] * exp(e2 * angles[row, 0])
+        so[j] = angles[row, 3] * exp(e2 * angles[row, 2])
+        nco[j] = angles[row, 1] * exp((2.0 - e2) * angles[row, 0])
+        nso[j] = angles[row, 3] * exp((2.0 - e2) * angles[row, 2])
     for i in range(n_eta):
-        ce = _signed_power(cos(eta[i]), e1)
-        se = _signed_power(sin(eta[i]), e1)
-        ne = _signed_power(cos(eta[i]), 2.0 - e1)
-        nz = _signed_power(sin(eta[i]), 2.0 - e1) / a[2]
+        ce = angles[i, 1] * exp(e1 * angles[i, 0])
+        se = angles[i, 3] * exp(e1 * angles[i, 2])
+        ne = angles[i, 1] * exp((2.0 - e1) * angles[i, 0])
+        nz = angles[i, 3] * exp((2.0 - e1) * angles[i, 2]) / a[2]
         for j in range(n_omega):
             row = i * n_omega + j
             grid[row, 0] = a[0] * ce * co[j]
@@ -303,7 +323,7 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
 
 
 def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
-                double scale, const double[::1] eta not None, const double[::1] omega not None,
+                double scale, Py_ssize_t n_eta, const double[:, ::1] angles not None,
                 const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
                 const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
                 const double[:, :, ::1] K not None, const double[:, :, ::1] R not None,
@@ -316,16 +336,16 @@ def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, 
     View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2 in all) and its camera
     ``K[v]``, ``R[v]`` (camera to world), ``centres[v]``, ``pixels_per_unit[v]``; ``planes``
     (N, 9) gets their rows. The outline is the convex hull of ``uv[v, :counts[v]]`` (which
-    this reorders), as ``cv2.convexHull`` draws it. Other arguments as in
-    :func:`outline_points`.
+    this reorders), as ``cv2.convexHull`` draws it. ``angles`` are :func:`outline_angles` of
+    ``n_eta`` eta's and the omega's; other arguments as in :func:`outline_points`.
     """
     cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], v, h
-    cdef double[::1] trig = np.empty(4 * omega.shape[0])
+    cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
     cdef double[::1] facing = np.empty(n_rows)
     cdef double[:, ::1] edges = np.empty((n_rows, 8))
     cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
     cdef bint ok
-    _check_outline(eta, omega, projections, centres, grid, uv, counts)
+    _check_outline(n_eta, angles, projections, centres, grid, uv, counts)
     if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or planes.shape[0] != samples.shape[0]
             or planes.shape[1] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
             or pixels_per_unit.shape[0] != n_views or K.shape[1] != 3 or K.shape[2] != 3 or R.shape[1] != 3
@@ -335,7 +355,8 @@ def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, 
         if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
             raise ValueError("starts must rise from 0 to at most N")
     with nogil:
-        ok = _outline_points(x, R0, t0, scale, eta, omega, projections, centres, grid, uv, counts, trig, facing)
+        ok = _outline_points(x, R0, t0, scale, n_eta, angles, projections, centres, grid, uv, counts, trig,
+                             facing)
         for v in range(n_views):
             if not ok:
                 break

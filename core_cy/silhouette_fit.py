@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._silhouette_fit_cy import normal_equations, part_planes
+from ._silhouette_fit_cy import normal_equations, outline_angles, part_planes
 from .errors import FitError
 from .least_squares import Descent
 from .superquadric import Superquadric, _rotation
@@ -39,6 +39,7 @@ __all__ = ["SilhouetteFit", "fit_to_silhouettes"]
 # as an ellipsoid's rim).
 _ETA = -np.pi / 2 + np.pi * np.arange(1, 17) / 17
 _OMEGA = -np.pi + 2 * np.pi * np.arange(40) / 40
+_ANGLES = outline_angles(_ETA, _OMEGA)  # the grid's trigonometry, once
 # Exponents above 1 pinch the shape (a diamond, a star): no object a robot picks, and a square
 # section seen as a diamond turned 45 degrees is a false minimum on the way to the box.
 _SHAPE_BOUNDS = (0.1, 1.0)
@@ -178,7 +179,7 @@ class _Problem:
         views, planes = self.views, self.trial_planes
         self.tally[0] += self.count
         for p in range(self.count):
-            if not part_planes(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
+            if not part_planes(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], len(_ETA), _ANGLES,
                                views.projections, views.centres, views.all_samples, views.starts, views.Ks,
                                views.Rs, views.pixels_per_unit, self.grid, self.uv, self.counts, planes[p]):
                 return np.inf  # the part reaches behind a camera, or its outline in a view is no polygon
