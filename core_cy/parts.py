@@ -52,7 +52,7 @@ from scipy.spatial import cKDTree
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
 from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
-from .superquadric import Superquadric, inside_outside, resting_on, upright_box
+from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
 
@@ -134,7 +134,9 @@ class _Rasters:
         """Per view, ``hull_covers`` of the parts' projections."""
         parts = tuple(parts)
         if len(parts) != len(self._parts) or any(a is not b for a, b in zip(parts, self._parts)):
-            self._drawn = [hull_covers([projected_outline(part, camera) for part in parts], silhouette, box)
+            surfaces = [surface_points(part) for part in parts]  # the same points, seen from every view
+            self._drawn = [hull_covers([projected_outline(part, camera, surface) for part, surface in zip(parts, surfaces)],
+                                       silhouette, box)
                            for camera, silhouette, box in zip(self.cameras, self.silhouettes, self.boxes)]
             self._parts = parts
         return self._drawn
