@@ -336,7 +336,7 @@ def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, 
     View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2 in all) and its camera
     ``K[v]``, ``R[v]`` (camera to world), ``centres[v]``, ``pixels_per_unit[v]``; ``planes``
     (N, 9) gets their rows. The outline is the convex hull of ``uv[v, :counts[v]]`` (which
-    this reorders), as ``cv2.convexHull`` draws it. ``angles`` are :func:`outline_angles` of
+    this reorders): the polygon ``cv2.convexHull`` draws. ``angles`` are :func:`outline_angles` of
     ``n_eta`` eta's and the omega's; other arguments as in :func:`outline_points`.
     """
     cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], v, h
@@ -391,9 +391,11 @@ cdef inline double _turn(_Point o, _Point a, _Point b) noexcept nogil:
 
 cdef Py_ssize_t _convex_hull(_Point* points, Py_ssize_t n, _Point* hull) noexcept nogil:
     """Andrew's monotone chain: the vertices of the points' convex hull (none in line with its
-    neighbours) into ``hull`` (room for 2 n), returning how many. They run as cv2.convexHull gives
-    them, from the last point in (x, y) order along the upper chain, so the outline's edges, and
-    which of two equally near edges a sample takes, are the ones it gave; ``points`` get sorted."""
+    neighbours) into ``hull`` (room for 2 n), returning how many; ``points`` get sorted. They are
+    cv2.convexHull's vertices, turning the same way, from the last point in (x, y) order along the
+    upper chain: where cv2 starts too, but for a few point sets in a thousand (rounded to a tenth of a
+    pixel) where it starts elsewhere. The start only decides which of two edges exactly as near a
+    sample it takes."""
     cdef Py_ssize_t i, k = 0, lower
     if n < 3:
         return 0
