@@ -10,7 +10,10 @@ the model's union against the true union. Sets: the everyday compound objects of
 of views, and the superquadric scans of the standard set (how often one is split; its cup stacks and
 lumpy figures have no superquadric truth to score a union against, and are left out). Prints, per kind:
 IoU mean and worst (one superquadric / parts), parts used, and the time of parts over one
-superquadric (median; for the scans that stayed one part, and for those of up to four parts).
+superquadric (median; for the scans that stayed one part, and for those of up to four parts), and the
+silhouette fits' evaluations of their cost (each part of a union counted; deterministic, unlike the
+times) with parts over those of one superquadric. Then the YCB-like products
+(``workers.sim.scans.ycb_like_set``: the YCB set's sizes as unions of superquadrics) the same way.
 With ``--today DIR`` (a built checkout of the code before parts, e.g. /work/main), the same bundles
 are also timed by that code in a child process on the same core, in the same run, and the time of
 parts is given over that too. Asserts nothing.
@@ -34,7 +37,7 @@ from robocell.core_cy.reconstruct import Options, reconstruct
 from robocell.wire.bundle import load_bundle
 from robocell.workers.sim.judge import Part, parts_from_truth, union_iou
 from robocell.workers.sim.objects import COMPOUNDS, compound
-from robocell.workers.sim.scans import compound_set, make_spec, standard_set
+from robocell.workers.sim.scans import compound_set, make_spec, standard_set, ycb_like_set
 
 
 def _written(spec, out: Path):
@@ -84,7 +87,7 @@ def _as_parts(model) -> list[Part]:
 
 
 def measure(specs, out: Path, repeat: int, today: Path | None = None):
-    """{kind: [(iou one, iou parts, parts used, ms one, ms parts, ms today)]}"""
+    """{kind: [(iou one, iou parts, parts used, ms one, ms parts, ms today, evaluations one, with parts)]}"""
     rows = defaultdict(list)
     bundles = [_written(spec, out) for spec in specs]
     today_ms: dict = {}
@@ -97,7 +100,8 @@ def measure(specs, out: Path, repeat: int, today: Path | None = None):
         many, ms_many = _timed(bundle, Options(), repeat)
         kind = spec.name.rsplit("-", 1)[0]
         rows[kind].append((union_iou(_as_parts([one.superquadric]), truth), union_iou(_as_parts(many.parts), truth),
-                           len(many.parts), ms_one, ms_many, today_ms.get(str(bundle.path), np.nan)))
+                           len(many.parts), ms_one, ms_many, today_ms.get(str(bundle.path), np.nan),
+                           one.evaluations["fit"], many.evaluations["fit"] + many.evaluations.get("parts", 0)))
     return rows
 
 
@@ -106,17 +110,17 @@ def table(title: str, rows) -> None:
         return  # nothing measured (--per-kind 0: the standard set alone)
     print(f"\n{title}")
     print(f"{'kind':<16}{'one sq: mean':>13}{'worst':>7}{'parts: mean':>13}{'worst':>7}{'parts used':>12}"
-          f"{'time x':>8}")
+          f"{'time x':>8}{'evals x':>9}")
     every = []
     for kind, values in rows.items():
         v = np.array(values)
         every.append(v)
         used = ",".join(str(int(n)) for n in v[:, 2])
         print(f"{kind:<16}{v[:, 0].mean():>13.3f}{v[:, 0].min():>7.3f}{v[:, 1].mean():>13.3f}{v[:, 1].min():>7.3f}"
-              f"{used:>12}{np.median(v[:, 4] / v[:, 3]):>8.2f}")
+              f"{used:>12}{np.median(v[:, 4] / v[:, 3]):>8.2f}{np.median(v[:, 7] / v[:, 6]):>9.2f}")
     v = np.concatenate(every)
     print(f"{'all':<16}{v[:, 0].mean():>13.3f}{v[:, 0].min():>7.3f}{v[:, 1].mean():>13.3f}{v[:, 1].min():>7.3f}"
-          f"{'max ' + str(int(v[:, 2].max())):>12}{np.median(v[:, 4] / v[:, 3]):>8.2f}")
+          f"{'max ' + str(int(v[:, 2].max())):>12}{np.median(v[:, 4] / v[:, 3]):>8.2f}{np.median(v[:, 7] / v[:, 6]):>9.2f}")
     one, few = v[:, 2] == 1, (v[:, 2] > 1) & (v[:, 2] <= 4)
     for label, pick in (("stayed one part", one), ("2-4 parts", few)):
         if not pick.any():
@@ -127,6 +131,9 @@ def table(title: str, rows) -> None:
                 print(f"  time of parts over {over}, {label} ({pick.sum()} scans): median {np.median(ratio):.2f}x, "
                       f"worst {ratio.max():.2f}x (parts: median {np.median(v[pick, 4]):.1f} ms, "
                       f"{over}: {np.median(v[pick, column]):.1f} ms)")
+        work = v[pick, 7] / v[pick, 6]
+        print(f"  evaluations with parts over one superquadric, {label}: median {np.median(work):.2f}x, "
+              f"worst {work.max():.2f}x")
 
 
 def main() -> None:
@@ -136,6 +143,7 @@ def main() -> None:
     parser.add_argument("--views", type=int, nargs="+", default=[3], help="numbers of views (default 3)")
     parser.add_argument("--repeat", type=int, default=2, help="timing passes per scan, best kept (default 2)")
     parser.add_argument("--skip-standard", action="store_true", help="leave out the standard set's superquadrics")
+    parser.add_argument("--skip-ycb", action="store_true", help="leave out the YCB-like products")
     parser.add_argument("--today", type=Path, help="a built checkout of the code before parts, timed beside")
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -154,6 +162,10 @@ def main() -> None:
         specs = [s for s in standard_set(0) if not s.name.startswith(("cup-stack", "lumpy"))]
         table("superquadric objects (standard set, 3 views): volumetric IoU, parts used",
               measure(specs, out / "standard", args.repeat, args.today))
+    if not args.skip_ycb:
+        for views in args.views:
+            table(f"YCB-like products, {views} views all around: volumetric IoU against the true union",
+                  measure(ycb_like_set(0, n_views=views), out / f"ycb-{views}", args.repeat, args.today))
 
 
 if __name__ == "__main__":

@@ -12,10 +12,13 @@ orientation ``R = R0 Rz(gamma) Ry(beta) Rx(alpha)``, as in the point fit.
 import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
+from libc.stdlib cimport qsort
 
 from ._superquadric_cy cimport _rotation, _support, _support_value
 
 cdef double _TINY = 1e-300
+# Edges of an outline searched together for a sample's nearest (see _tangent_planes).
+cdef Py_ssize_t _RUN = 8
 
 
 cdef inline void _pose(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
@@ -26,13 +29,6 @@ cdef inline void _pose(const double[::1] x, const double[:, ::1] R0, const doubl
     for k in range(3):
         a[k] = exp(x[k])
         t[k] = t0[k] + scale * x[5 + k]
-
-
-cdef inline double _signed_power(double c, double e) noexcept nogil:
-    cdef double m = fabs(c)
-    if m < _TINY:
-        return 0.0
-    return exp(e * log(m)) if c > 0 else -exp(e * log(m))
 
 
 def outline_points(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
@@ -50,7 +46,58 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
     scratch space (object-frame points and normals). ``x`` as in
     :func:`normal_equations`.
     """
-    cdef Py_ssize_t n_eta = eta.shape[0], n_omega = omega.shape[0], n_grid = n_eta * n_omega
+    cdef double[::1] trig = np.empty(4 * omega.shape[0])
+    cdef double[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2)
+    cdef double[:, ::1] angles = outline_angles(eta, omega)
+    cdef bint in_front
+    _check_outline(eta.shape[0], angles, projections, centres, grid, uv, counts)
+    with nogil:
+        in_front = _outline_points(x, R0, t0, scale, eta.shape[0], angles, projections, centres, grid, uv, counts,
+                                   trig, facing)
+    return in_front
+
+
+def outline_angles(const double[::1] eta not None, const double[::1] omega not None):
+    """(len(eta) + len(omega), 4): for each angle, eta's then omega's, log |cos|, the sign of cos (0
+    where it vanishes), log |sin| and the sign of sin: the grid's signed powers, ``sign exp(e log)``,
+    without the angles' own trigonometry at every evaluation."""
+    cdef Py_ssize_t n_eta = eta.shape[0], k
+    cdef double[:, ::1] angles = np.empty((n_eta + omega.shape[0], 4))
+    cdef double angle, c
+    cdef int side
+    for k in range(angles.shape[0]):
+        angle = eta[k] if k < n_eta else omega[k - n_eta]
+        for side in range(2):
+            c = cos(angle) if side == 0 else sin(angle)
+            if fabs(c) < _TINY:
+                angles[k, 2 * side] = 0.0
+                angles[k, 2 * side + 1] = 0.0
+            else:
+                angles[k, 2 * side] = log(fabs(c))
+                angles[k, 2 * side + 1] = 1.0 if c > 0 else -1.0
+    return np.asarray(angles)
+
+
+cdef _check_outline(Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
+                    const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv, Py_ssize_t[::1] counts):
+    cdef Py_ssize_t n_grid = n_eta * (angles.shape[0] - n_eta), n_views = projections.shape[0]
+    if n_eta < 1 or angles.shape[0] <= n_eta or angles.shape[1] != 4:
+        raise ValueError("angles must be outline_angles(eta, omega), eta's count n_eta")
+    if grid.shape[0] != n_grid + 2 or grid.shape[1] != 6:
+        raise ValueError("grid must be (len(eta) * len(omega) + 2, 6)")
+    if (projections.shape[1] != 3 or projections.shape[2] != 4 or centres.shape[0] != n_views
+            or centres.shape[1] != 3 or uv.shape[0] != n_views or uv.shape[1] < n_grid + 2
+            or uv.shape[2] != 2 or counts.shape[0] != n_views):
+        raise ValueError("need (V, 3, 4) projections, (V, 3) centres, (V, >= grid, 2) uv and (V,) counts")
+
+
+cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
+                          Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
+                          const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv,
+                          Py_ssize_t[::1] counts, double[::1] trig, double[::1] facing) noexcept nogil:
+    """As :func:`outline_points`, the angles as :func:`outline_angles` (``n_eta`` of them eta's);
+    ``trig`` (4 len(omega)) and ``facing`` (len(grid)) are scratch."""
+    cdef Py_ssize_t n_omega = angles.shape[0] - n_eta, n_grid = n_eta * n_omega
     cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
     cdef double R[3][3]
     cdef double dR[3][3][3]
@@ -59,83 +106,76 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
     cdef double c[3]
     cdef double w[3]
     cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz, g
-    cdef double[::1] co = np.empty(n_omega), so = np.empty(n_omega)
-    cdef double[::1] nco = np.empty(n_omega), nso = np.empty(n_omega)
-    cdef double[::1] facing = np.empty(n_grid + 2)
+    cdef double[::1] co = trig[:n_omega], so = trig[n_omega:2 * n_omega]
+    cdef double[::1] nco = trig[2 * n_omega:3 * n_omega], nso = trig[3 * n_omega:]
     cdef bint in_front = True, candidate
-    if grid.shape[0] != n_grid + 2 or grid.shape[1] != 6:
-        raise ValueError("grid must be (len(eta) * len(omega) + 2, 6)")
-    if (projections.shape[1] != 3 or projections.shape[2] != 4 or centres.shape[0] != n_views
-            or centres.shape[1] != 3 or uv.shape[0] != n_views or uv.shape[1] < n_grid + 2
-            or uv.shape[2] != 2 or counts.shape[0] != n_views):
-        raise ValueError("need (V, 3, 4) projections, (V, 3) centres, (V, >= grid, 2) uv and (V,) counts")
-    with nogil:
-        _pose(x, R0, t0, scale, R, dR, a, t)
-        # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
+    _pose(x, R0, t0, scale, R, dR, a, t)
+    # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
+    for j in range(n_omega):
+        row = n_eta + j
+        co[j] = angles[row, 1] * exp(e2 * angles[row, 0])
+        so[j] = angles[row, 3] * exp(e2 * angles[row, 2])
+        nco[j] = angles[row, 1] * exp((2.0 - e2) * angles[row, 0])
+        nso[j] = angles[row, 3] * exp((2.0 - e2) * angles[row, 2])
+    for i in range(n_eta):
+        ce = angles[i, 1] * exp(e1 * angles[i, 0])
+        se = angles[i, 3] * exp(e1 * angles[i, 2])
+        ne = angles[i, 1] * exp((2.0 - e1) * angles[i, 0])
+        nz = angles[i, 3] * exp((2.0 - e1) * angles[i, 2]) / a[2]
         for j in range(n_omega):
-            co[j] = _signed_power(cos(omega[j]), e2)
-            so[j] = _signed_power(sin(omega[j]), e2)
-            nco[j] = _signed_power(cos(omega[j]), 2.0 - e2)
-            nso[j] = _signed_power(sin(omega[j]), 2.0 - e2)
-        for i in range(n_eta):
-            ce = _signed_power(cos(eta[i]), e1)
-            se = _signed_power(sin(eta[i]), e1)
-            ne = _signed_power(cos(eta[i]), 2.0 - e1)
-            nz = _signed_power(sin(eta[i]), 2.0 - e1) / a[2]
-            for j in range(n_omega):
-                row = i * n_omega + j
-                grid[row, 0] = a[0] * ce * co[j]
-                grid[row, 1] = a[1] * ce * so[j]
-                grid[row, 2] = a[2] * se
-                grid[row, 3] = ne * nco[j] / a[0]
-                grid[row, 4] = ne * nso[j] / a[1]
-                grid[row, 5] = nz
-        for k in range(2):  # the poles
-            grid[n_grid + k, 0] = 0.0
-            grid[n_grid + k, 1] = 0.0
-            grid[n_grid + k, 2] = -a[2] if k == 0 else a[2]
-            grid[n_grid + k, 3] = 0.0
-            grid[n_grid + k, 4] = 0.0
-            grid[n_grid + k, 5] = -1.0 if k == 0 else 1.0
-        for v in range(n_views):
-            for k in range(3):  # the camera centre in the object frame
-                c[k] = (R[0][k] * (centres[v, 0] - t[0]) + R[1][k] * (centres[v, 1] - t[1])
-                        + R[2][k] * (centres[v, 2] - t[2]))
-            for row in range(n_grid + 2):
-                facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
-                               + grid[row, 5] * (grid[row, 2] - c[2]))
-            count = 0
-            for row in range(n_grid + 2):
-                if row >= n_grid:
-                    candidate = True
-                else:
-                    i = row // n_omega
-                    j = row % n_omega
-                    g = facing[row]
-                    other = i * n_omega + (j + 1) % n_omega
-                    candidate = (g > 0) != (facing[other] > 0)
-                    other = i * n_omega + (j + n_omega - 1) % n_omega
-                    candidate = candidate or ((g > 0) != (facing[other] > 0))
-                    other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
-                    candidate = candidate or ((g > 0) != (facing[other] > 0))
-                    other = (i - 1) * n_omega + j if i > 0 else n_grid
-                    candidate = candidate or ((g > 0) != (facing[other] > 0))
-                if not candidate:
-                    continue
-                for k in range(3):
-                    w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
-                hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
-                if hz <= 1e-12:
-                    in_front = False
-                    break
-                hx = projections[v, 0, 0] * w[0] + projections[v, 0, 1] * w[1] + projections[v, 0, 2] * w[2] + projections[v, 0, 3]
-                hy = projections[v, 1, 0] * w[0] + projections[v, 1, 1] * w[1] + projections[v, 1, 2] * w[2] + projections[v, 1, 3]
-                uv[v, count, 0] = <float>(hx / hz)
-                uv[v, count, 1] = <float>(hy / hz)
-                count += 1
-            counts[v] = count
-            if not in_front:
+            row = i * n_omega + j
+            grid[row, 0] = a[0] * ce * co[j]
+            grid[row, 1] = a[1] * ce * so[j]
+            grid[row, 2] = a[2] * se
+            grid[row, 3] = ne * nco[j] / a[0]
+            grid[row, 4] = ne * nso[j] / a[1]
+            grid[row, 5] = nz
+    for k in range(2):  # the poles
+        grid[n_grid + k, 0] = 0.0
+        grid[n_grid + k, 1] = 0.0
+        grid[n_grid + k, 2] = -a[2] if k == 0 else a[2]
+        grid[n_grid + k, 3] = 0.0
+        grid[n_grid + k, 4] = 0.0
+        grid[n_grid + k, 5] = -1.0 if k == 0 else 1.0
+    for v in range(n_views):
+        for k in range(3):  # the camera centre in the object frame
+            c[k] = (R[0][k] * (centres[v, 0] - t[0]) + R[1][k] * (centres[v, 1] - t[1])
+                    + R[2][k] * (centres[v, 2] - t[2]))
+        for row in range(n_grid + 2):
+            facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
+                           + grid[row, 5] * (grid[row, 2] - c[2]))
+        count = 0
+        for row in range(n_grid + 2):
+            if row >= n_grid:
+                candidate = True
+            else:
+                i = row // n_omega
+                j = row % n_omega
+                g = facing[row]
+                other = i * n_omega + (j + 1) % n_omega
+                candidate = (g > 0) != (facing[other] > 0)
+                other = i * n_omega + (j + n_omega - 1) % n_omega
+                candidate = candidate or ((g > 0) != (facing[other] > 0))
+                other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
+                candidate = candidate or ((g > 0) != (facing[other] > 0))
+                other = (i - 1) * n_omega + j if i > 0 else n_grid
+                candidate = candidate or ((g > 0) != (facing[other] > 0))
+            if not candidate:
+                continue
+            for k in range(3):
+                w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
+            hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
+            if hz <= 1e-12:
+                in_front = False
                 break
+            hx = projections[v, 0, 0] * w[0] + projections[v, 0, 1] * w[1] + projections[v, 0, 2] * w[2] + projections[v, 0, 3]
+            hy = projections[v, 1, 0] * w[0] + projections[v, 1, 1] * w[1] + projections[v, 1, 2] * w[2] + projections[v, 1, 3]
+            uv[v, count, 0] = <float>(hx / hz)
+            uv[v, count, 1] = <float>(hy / hz)
+            count += 1
+        counts[v] = count
+        if not in_front:
+            break
     return in_front
 
 
@@ -156,40 +196,85 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     Where the sample lies outside a vertex of the outline, the normal points
     from the vertex to the sample.
     """
-    cdef Py_ssize_t h = hull.shape[0], n = samples.shape[0], i, j
-    cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area
-    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
-    cdef double[:, ::1] edges = np.empty((h, 5))  # e_x, e_y, 1 / |e|^2, outward unit normal
-    if hull.shape[1] != 2 or h < 3:
+    cdef Py_ssize_t n = samples.shape[0]
+    cdef double[:, ::1] edges = np.empty((hull.shape[0], 8))
+    if hull.shape[1] != 2 or hull.shape[0] < 3:
         raise ValueError("hull must be (H, 2) with H >= 3")
     if samples.shape[1] != 2 or planes.shape[0] != n or planes.shape[1] != 9:
         raise ValueError("samples must be (N, 2) and planes (N, 9)")
+    if K.shape[0] != 3 or K.shape[1] != 3 or R.shape[0] != 3 or R.shape[1] != 3 or centre.shape[0] != 3:
+        raise ValueError("K and R must be (3, 3) and centre (3,)")
     with nogil:
-        area = 0.0
-        for j in range(h):
-            area += (hull[j, 0] * hull[(j + 1) % h, 1] - hull[(j + 1) % h, 0] * hull[j, 1])
-        # Outward normal of edge (e_x, e_y): (e_y, -e_x) when the polygon runs clockwise on screen
-        # (a positive shoelace area in these y-down coordinates), (-e_y, e_x) otherwise.
-        sign = 1.0 if area > 0 else -1.0
-        for j in range(h):
-            ex = hull[(j + 1) % h, 0] - hull[j, 0]
-            ey = hull[(j + 1) % h, 1] - hull[j, 1]
-            d2 = ex * ex + ey * ey
-            edges[j, 0] = ex
-            edges[j, 1] = ey
-            edges[j, 2] = 1.0 / d2 if d2 > 0 else 0.0
-            norm = sqrt(d2) if d2 > 0 else 1.0
-            edges[j, 3] = sign * ey / norm
-            edges[j, 4] = -sign * ex / norm
-        for i in range(n):
-            px = samples[i, 0]
-            py = samples[i, 1]
-            best = 1e300
-            best_nx = 0.0
-            best_ny = 0.0
-            for j in range(h):
-                ax = px - hull[j, 0]
-                ay = py - hull[j, 1]
+        _tangent_planes(&hull[0, 0], hull.shape[0], samples, 0, n, K, R, centre, pixels_per_unit, planes, edges)
+
+
+cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] samples, Py_ssize_t first,
+                          Py_ssize_t last, const double[:, ::1] K, const double[:, ::1] R, const double[::1] centre,
+                          double pixels_per_unit, double[:, ::1] planes, double[:, ::1] edges) noexcept nogil:
+    """As :func:`tangent_planes`, for samples ``first:last`` into the same rows of ``planes``; ``hull``
+    points to H (x, y) pairs, ``edges`` (>= H, 8) is scratch.
+
+    Each sample's nearest edge is the first of the least distance, as a search of every edge finds
+    it; but the edges are searched in runs of ``_RUN`` along the outline, and a run whose circle
+    lies farther from the sample than the edge nearest the previous sample is passed over whole.
+    """
+    cdef Py_ssize_t i, j, b, runs = (h + _RUN - 1) // _RUN, last_j, seed = 0
+    cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area, reach
+    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
+    area = 0.0
+    for j in range(h):
+        area += (hull[2 * j] * hull[2 * ((j + 1) % h) + 1] - hull[2 * ((j + 1) % h)] * hull[2 * j + 1])
+    # Outward normal of edge (e_x, e_y): (e_y, -e_x) when the polygon runs clockwise on screen
+    # (a positive shoelace area in these y-down coordinates), (-e_y, e_x) otherwise.
+    sign = 1.0 if area > 0 else -1.0
+    for j in range(h):
+        ex = hull[2 * ((j + 1) % h)] - hull[2 * j]
+        ey = hull[2 * ((j + 1) % h) + 1] - hull[2 * j + 1]
+        d2 = ex * ex + ey * ey
+        edges[j, 0] = ex
+        edges[j, 1] = ey
+        edges[j, 2] = 1.0 / d2 if d2 > 0 else 0.0
+        norm = sqrt(d2) if d2 > 0 else 1.0
+        edges[j, 3] = sign * ey / norm
+        edges[j, 4] = -sign * ex / norm
+    for b in range(runs):  # each run's circle (centre, radius) holds its vertices, hence its edges
+        last_j = min(b * _RUN + _RUN, h)
+        ax = 0.0
+        ay = 0.0
+        for j in range(b * _RUN, last_j + 1):
+            ax += hull[2 * (j % h)]
+            ay += hull[2 * (j % h) + 1]
+        ax /= last_j + 1 - b * _RUN
+        ay /= last_j + 1 - b * _RUN
+        d2 = 0.0
+        for j in range(b * _RUN, last_j + 1):
+            dx = hull[2 * (j % h)] - ax
+            dy = hull[2 * (j % h) + 1] - ay
+            d2 = max(d2, dx * dx + dy * dy)
+        edges[b, 5] = ax
+        edges[b, 6] = ay
+        edges[b, 7] = sqrt(d2)
+    for i in range(first, last):
+        px = samples[i, 0]
+        py = samples[i, 1]
+        # The distance to the previous sample's nearest edge bounds this one's (a hair more, for rounding).
+        ax = px - hull[2 * seed]
+        ay = py - hull[2 * seed + 1]
+        tau = min(max((ax * edges[seed, 0] + ay * edges[seed, 1]) * edges[seed, 2], 0.0), 1.0)
+        dx = ax - tau * edges[seed, 0]
+        dy = ay - tau * edges[seed, 1]
+        reach = sqrt(dx * dx + dy * dy) * (1.0 + 1e-9) + 1e-6
+        best = 1e300
+        best_nx = 0.0
+        best_ny = 0.0
+        for b in range(runs):
+            dx = px - edges[b, 5]
+            dy = py - edges[b, 6]
+            if dx * dx + dy * dy > (reach + edges[b, 7]) * (reach + edges[b, 7]):
+                continue  # the whole run lies farther than the previous sample's nearest edge
+            for j in range(b * _RUN, min(b * _RUN + _RUN, h)):
+                ax = px - hull[2 * j]
+                ay = py - hull[2 * j + 1]
                 tau = (ax * edges[j, 0] + ay * edges[j, 1]) * edges[j, 2]
                 if tau < 0:
                     tau = 0.0
@@ -200,40 +285,133 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
                 d2 = dx * dx + dy * dy
                 if d2 < best:
                     best = d2
+                    seed = j
                     best_nx = edges[j, 3]
                     best_ny = edges[j, 4]
                     if (tau == 0.0 or tau == 1.0) and best_nx * dx + best_ny * dy > 0 and d2 > 1e-12:
                         norm = sqrt(d2)
                         best_nx = dx / norm
                         best_ny = dy / norm
-            # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
-            s = best_nx * px + best_ny * py
-            mc0 = K[0, 0] * best_nx
-            mc1 = K[0, 1] * best_nx + K[1, 1] * best_ny
-            mc2 = K[0, 2] * best_nx + K[1, 2] * best_ny - s
-            norm = sqrt(mc0 * mc0 + mc1 * mc1 + mc2 * mc2)
-            mc0 /= norm
-            mc1 /= norm
-            mc2 /= norm
-            for j in range(3):
-                planes[i, j] = R[j, 0] * mc0 + R[j, 1] * mc1 + R[j, 2] * mc2
-            planes[i, 3] = planes[i, 0] * centre[0] + planes[i, 1] * centre[1] + planes[i, 2] * centre[2]
-            planes[i, 4] = norm * pixels_per_unit
-            # The ray's direction: K^-1 (p, 1) (upper-triangular K), turned into the world.
-            r1 = (py - K[1, 2]) / K[1, 1]
-            r0 = (px - K[0, 2] - K[0, 1] * r1) / K[0, 0]
-            r2 = 1.0
-            w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-            w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-            w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
-            norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            w0 /= norm
-            w1 /= norm
-            w2 /= norm
-            planes[i, 5] = w1 * planes[i, 2] - w2 * planes[i, 1]
-            planes[i, 6] = w2 * planes[i, 0] - w0 * planes[i, 2]
-            planes[i, 7] = w0 * planes[i, 1] - w1 * planes[i, 0]
-            planes[i, 8] = planes[i, 5] * centre[0] + planes[i, 6] * centre[1] + planes[i, 7] * centre[2]
+        # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
+        s = best_nx * px + best_ny * py
+        mc0 = K[0, 0] * best_nx
+        mc1 = K[0, 1] * best_nx + K[1, 1] * best_ny
+        mc2 = K[0, 2] * best_nx + K[1, 2] * best_ny - s
+        norm = sqrt(mc0 * mc0 + mc1 * mc1 + mc2 * mc2)
+        mc0 /= norm
+        mc1 /= norm
+        mc2 /= norm
+        for j in range(3):
+            planes[i, j] = R[j, 0] * mc0 + R[j, 1] * mc1 + R[j, 2] * mc2
+        planes[i, 3] = planes[i, 0] * centre[0] + planes[i, 1] * centre[1] + planes[i, 2] * centre[2]
+        planes[i, 4] = norm * pixels_per_unit
+        # The ray's direction: K^-1 (p, 1) (upper-triangular K), turned into the world.
+        r1 = (py - K[1, 2]) / K[1, 1]
+        r0 = (px - K[0, 2] - K[0, 1] * r1) / K[0, 0]
+        r2 = 1.0
+        w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+        w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+        w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+        norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        w0 /= norm
+        w1 /= norm
+        w2 /= norm
+        planes[i, 5] = w1 * planes[i, 2] - w2 * planes[i, 1]
+        planes[i, 6] = w2 * planes[i, 0] - w0 * planes[i, 2]
+        planes[i, 7] = w0 * planes[i, 1] - w1 * planes[i, 0]
+        planes[i, 8] = planes[i, 5] * centre[0] + planes[i, 6] * centre[1] + planes[i, 7] * centre[2]
+
+
+def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
+                double scale, Py_ssize_t n_eta, const double[:, ::1] angles not None,
+                const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
+                const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
+                const double[:, :, ::1] K not None, const double[:, :, ::1] R not None,
+                const double[::1] pixels_per_unit not None, double[:, ::1] grid not None,
+                float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None, double[:, ::1] planes not None):
+    """One part's :func:`tangent_planes` in every view, its outline drawn by :func:`outline_points`:
+    the silhouette fit's work per part and evaluation in one call. False (``planes`` then
+    unfinished) if the part reaches behind a camera or its outline in a view is no polygon.
+
+    View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2 in all) and its camera
+    ``K[v]``, ``R[v]`` (camera to world), ``centres[v]``, ``pixels_per_unit[v]``; ``planes``
+    (N, 9) gets their rows. The outline is the convex hull of ``uv[v, :counts[v]]`` (which
+    this reorders): the polygon ``cv2.convexHull`` draws. ``angles`` are :func:`outline_angles` of
+    ``n_eta`` eta's and the omega's; other arguments as in :func:`outline_points`.
+    """
+    cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], v, h
+    cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
+    cdef double[::1] facing = np.empty(n_rows)
+    cdef double[:, ::1] edges = np.empty((n_rows, 8))
+    cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
+    cdef bint ok
+    _check_outline(n_eta, angles, projections, centres, grid, uv, counts)
+    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or planes.shape[0] != samples.shape[0]
+            or planes.shape[1] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
+            or pixels_per_unit.shape[0] != n_views or K.shape[1] != 3 or K.shape[2] != 3 or R.shape[1] != 3
+            or R.shape[2] != 3):
+        raise ValueError("need (N, 2) samples, (V + 1,) starts, (N, 9) planes, (V, 3, 3) K and R, (V,) scales")
+    for v in range(n_views):
+        if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
+            raise ValueError("starts must rise from 0 to at most N")
+    with nogil:
+        ok = _outline_points(x, R0, t0, scale, n_eta, angles, projections, centres, grid, uv, counts, trig,
+                             facing)
+        for v in range(n_views):
+            if not ok:
+                break
+            h = _convex_hull(<_Point*>&uv[v, 0, 0], counts[v], <_Point*>&hull[0, 0])
+            if h < 3:
+                ok = False
+                break
+            _tangent_planes(&hull[0, 0], h, samples, starts[v], starts[v + 1], K[v], R[v], centres[v],
+                            pixels_per_unit[v], planes, edges)
+    return ok
+
+
+ctypedef struct _Point:
+    float x
+    float y
+
+
+cdef int _by_x_then_y(const void* a, const void* b) noexcept nogil:
+    cdef const _Point* p = <const _Point*>a
+    cdef const _Point* q = <const _Point*>b
+    if p.x != q.x:
+        return -1 if p.x < q.x else 1
+    if p.y != q.y:
+        return -1 if p.y < q.y else 1
+    return 0
+
+
+cdef inline double _turn(_Point o, _Point a, _Point b) noexcept nogil:
+    """Twice the signed area of the triangle o, a, b."""
+    return (<double>a.x - o.x) * (<double>b.y - o.y) - (<double>a.y - o.y) * (<double>b.x - o.x)
+
+
+cdef Py_ssize_t _convex_hull(_Point* points, Py_ssize_t n, _Point* hull) noexcept nogil:
+    """Andrew's monotone chain: the vertices of the points' convex hull (none in line with its
+    neighbours) into ``hull`` (room for 2 n), returning how many; ``points`` get sorted. They are
+    cv2.convexHull's vertices, turning the same way, from the last point in (x, y) order along the
+    upper chain: where cv2 starts too, but for a few point sets in a thousand (rounded to a tenth of a
+    pixel) where it starts elsewhere. The start only decides which of two edges exactly as near a
+    sample it takes."""
+    cdef Py_ssize_t i, k = 0, lower
+    if n < 3:
+        return 0
+    qsort(points, n, sizeof(_Point), _by_x_then_y)
+    for i in range(n - 1, -1, -1):
+        while k >= 2 and _turn(hull[k - 2], hull[k - 1], points[i]) <= 0:
+            k -= 1
+        hull[k] = points[i]
+        k += 1
+    lower = k
+    for i in range(1, n):
+        while k > lower and _turn(hull[k - 2], hull[k - 1], points[i]) <= 0:
+            k -= 1
+        hull[k] = points[i]
+        k += 1
+    return k - 1
 
 
 cdef inline double _reach(const double* a, const double* e, const double* t, double R[3][3], const double* m,
@@ -293,6 +471,19 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
     return best
 
 
+cdef inline double _box_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
+                              const double* t, double R[3][3]) noexcept nogil:
+    """How far (world units) part p's box reaches beyond the plane through sample i's ray, untilted:
+    no less than the part itself does beyond any plane :func:`_least_reach` tries."""
+    cdef double reach = -planes[p, i, 3], v
+    cdef int k
+    for k in range(3):
+        reach += planes[p, i, k] * t[k]
+        v = R[0][k] * planes[p, i, 0] + R[1][k] * planes[p, i, 1] + R[2][k] * planes[p, i, 2]
+        reach += fabs(v) * a[k]
+    return reach
+
+
 def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 not None,
                      const double[:, ::1] t0 not None, const double[::1] scale not None,
                      const double[:, :, ::1] planes not None, double loss_scale,
@@ -311,8 +502,9 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     the plane is turned about the ray by -``tilt``, 0 and ``tilt`` (radians), a parabola
     through the three reaches points to a fourth, and the least of them counts. The union's
     outline is the outermost of its parts': the sample's residual is the largest of its
-    parts' (the part that reaches farthest past it answers for it; ``owner[i]`` gets which,
-    when given). The loss is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
+    parts' (the part that reaches farthest past it answers for it, the first of those alike;
+    ``owner[i]``, when given, gets which: the part tried first, the one that answered last
+    time, is read from it and changes nothing but the time). The loss is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
     quadratic for small residuals, linear for large ones. With ``plane_weight > 0`` each
     part's reach below ``support_plane`` (n, d; unit n; the object where n . x + d >= 0),
     times ``plane_weight``, is one more residual under the same loss: the lowest part stands
@@ -320,7 +512,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     with J^T W J (block diagonal: each residual is one part's) and ``Jtr`` with J^T W r (W
     the IRLS weights of the loss) and returns the cost.
     """
-    cdef Py_ssize_t P = R0.shape[0], n = planes.shape[1], i, j, k, q, p, base, chosen, lowest
+    cdef Py_ssize_t P = R0.shape[0], n = planes.shape[1], i, j, k, q, p, base, chosen, lowest, first
     cdef double R[MAX_PARTS][3][3]
     cdef double dR[MAX_PARTS][3][3][3]
     cdef double a[MAX_PARTS][3]
@@ -375,11 +567,22 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
             if i < n:
                 best = -1e300
                 chosen = 0
-                for p in range(P):
+                # The part that answered last time first: it most likely does again, and then the others
+                # are mostly dismissed by their box alone. Which part answers does not depend on the order.
+                first = owner[i] if owner is not None and 0 <= owner[i] < P else 0
+                for q in range(P):
+                    p = first if q == 0 else (q - 1 if q <= first else q)
+                    if q > 0:
+                        # A part lies within its box, so it reaches no farther past the plane than the box
+                        # does: where that is short of the best so far (in pixels), it cannot answer.
+                        reach = _box_reach(planes, p, i, a[p], t[p], R[p])
+                        if planes[p, i, 4] * reach + 1e-9 * (fabs(planes[p, i, 4] * reach) + 1.0) < best:
+                            continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
                     reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
                                                           cosines, sines, tilt, best / planes[p, i, 4], m)
-                    if reach > best:
+                    # Of parts that reach alike, the first answers.
+                    if reach > best or (reach == best and p < chosen):
                         best = reach
                         chosen = p
                         for k in range(4):

@@ -52,7 +52,7 @@ from scipy.spatial import cKDTree
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
 from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
-from .superquadric import Superquadric, inside_outside, resting_on, upright_box
+from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
 
@@ -84,6 +84,9 @@ _MIN_TILT, _MAX_TILT = 1.0, 90.0
 # (the noise of a few steps).
 _GROUNDED_COST = 1.1
 _GROUNDED_STEPS = 2
+# The proposals a round left behind go on while the search has taken fewer than this many times the
+# evaluations of the one superquadric.
+_BUDGET = 4.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,48 +99,79 @@ class PartsFit:
         The model: the object is their union; one part for an object that is one superquadric.
     silhouette_iou : list of float
         The union's silhouette IoU in each view.
+    evaluations : int
+        Evaluations of the union's silhouette cost the search took, each part counted.
     """
 
     parts: tuple[Superquadric, ...]
     silhouette_iou: list[float]
+    evaluations: int = 0
 
 
 def union_ious(parts, cameras, silhouettes, boxes) -> tuple[list[float], np.ndarray]:
     """Each view's silhouette IoU of the union, and (P, V) of the union without each part."""
-    ious, without = [], np.zeros((len(parts), len(cameras)))
-    for v, (camera, silhouette, box) in enumerate(zip(cameras, silhouettes, boxes)):
-        object_pixels, covers, _ = hull_covers([projected_outline(part, camera) for part in parts], silhouette, box)
-        if object_pixels is None:
-            ious.append(0.0)
-            continue
-        ious.append(_iou(object_pixels, covers))
-        if len(parts) > 1:
-            for p in range(len(parts)):
-                without[p, v] = _iou(object_pixels, covers[:p] + covers[p + 1:])
-    return ious, without
+    return _Rasters(cameras, silhouettes, boxes).ious(parts)
 
 
 def unexplained_shares(parts, cameras, silhouettes, boxes, band: float = _EDGE_BAND_PX) -> list[float]:
     """Each view's share of the silhouette and the union's projection together that one explains and
     the other not, farther than ``band`` (px) from the other's outline: what a part could
     explain (a band along the edges is the edges' own noise, no part's)."""
-    shares = []
-    for camera, silhouette, box in zip(cameras, silhouettes, boxes):
-        object_pixels, covers, _ = hull_covers([projected_outline(part, camera) for part in parts], silhouette, box)
-        if object_pixels is None:
-            shares.append(1.0)
-            continue
-        covered = np.any(np.stack(covers), axis=0)
-        union = int(np.count_nonzero(object_pixels | covered))
-        missed = object_pixels & ~covered
-        extra = covered & ~object_pixels
-        far = 0
-        for mask, other in ((missed, covered), (extra, object_pixels)):
-            if mask.any():
-                distance = cv2.distanceTransform((~other).view(np.uint8), cv2.DIST_L2, 3)
-                far += int(np.count_nonzero(distance[mask] > band))
-        shares.append(far / union if union else 1.0)
-    return shares
+    return _Rasters(cameras, silhouettes, boxes).unexplained(parts, band)
+
+
+class _Rasters:
+    """The views' silhouettes, and each view's pixels of the silhouette and of each part's projection
+    (:func:`core_cy.quality.hull_covers`) for the union last drawn: a round's IoUs, the share it
+    leaves unexplained and the next round's additions all look at the union it kept, drawn once."""
+
+    def __init__(self, cameras, silhouettes, boxes) -> None:
+        self.cameras, self.silhouettes, self.boxes = list(cameras), list(silhouettes), list(boxes)
+        self._parts: tuple[Superquadric, ...] = ()
+        self._drawn: list = []
+
+    def drawn(self, parts) -> list:
+        """Per view, ``hull_covers`` of the parts' projections."""
+        parts = tuple(parts)
+        if len(parts) != len(self._parts) or any(a is not b for a, b in zip(parts, self._parts)):
+            surfaces = [surface_points(part) for part in parts]  # the same points, seen from every view
+            self._drawn = [hull_covers([projected_outline(part, camera, surface) for part, surface in zip(parts, surfaces)],
+                                       silhouette, box)
+                           for camera, silhouette, box in zip(self.cameras, self.silhouettes, self.boxes)]
+            self._parts = parts
+        return self._drawn
+
+    def ious(self, parts) -> tuple[list[float], np.ndarray]:
+        """As :func:`union_ious`."""
+        ious, without = [], np.zeros((len(parts), len(self.cameras)))
+        for v, (object_pixels, covers, _) in enumerate(self.drawn(parts)):
+            if object_pixels is None:
+                ious.append(0.0)
+                continue
+            ious.append(_iou(object_pixels, covers))
+            if len(parts) > 1:
+                for p in range(len(parts)):
+                    without[p, v] = _iou(object_pixels, covers[:p] + covers[p + 1:])
+        return ious, without
+
+    def unexplained(self, parts, band: float = _EDGE_BAND_PX) -> list[float]:
+        """As :func:`unexplained_shares`."""
+        shares = []
+        for object_pixels, covers, _ in self.drawn(parts):
+            if object_pixels is None:
+                shares.append(1.0)
+                continue
+            covered = np.any(np.stack(covers), axis=0)
+            union = int(np.count_nonzero(object_pixels | covered))
+            missed = object_pixels & ~covered
+            extra = covered & ~object_pixels
+            far = 0
+            for mask, other in ((missed, covered), (extra, object_pixels)):
+                if mask.any():
+                    distance = cv2.distanceTransform((~other).view(np.uint8), cv2.DIST_L2, 3)
+                    far += int(np.count_nonzero(distance[mask] > band))
+            shares.append(far / union if union else 1.0)
+        return shares
 
 
 def _iou(object_pixels: np.ndarray, covers: list[np.ndarray]) -> float:
@@ -173,7 +207,7 @@ def _volume(parts) -> float:
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
-              support_plane=None, max_parts: int = MAX_PARTS) -> PartsFit:
+              support_plane=None, max_parts: int = MAX_PARTS, single_evaluations: int | None = None) -> PartsFit:
     """The union of superquadrics that explains the silhouettes, from the one-superquadric fit.
 
     Parameters
@@ -194,25 +228,38 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         ``[nx, ny, nz, d]`` with a unit normal: the object stands where ``n . x + d >= 0``.
     max_parts : int
         At most this many parts (1 to ``MAX_PARTS``).
+    single_evaluations : int, optional
+        The evaluations of the cost the one superquadric took: proposals left behind by a round go
+        on only while the search has taken fewer than ``_BUDGET`` times as many (each part of a
+        union counted); without it, while they leave the silhouettes unexplained.
 
     Returns
     -------
     PartsFit
         ``(single,)`` when no part could pay for itself.
     """
+    rasters = _Rasters(cameras, silhouettes, boxes)
     if ious is None:
-        ious, _ = union_ious((single,), cameras, silhouettes, boxes)
+        ious, _ = rasters.ious((single,))
     ious = list(ious)
     # A view's unexplained share is at most its miss, 1 - IoU: where even that cannot pay, the
     # pixels need not be looked at.
     if (max_parts < 2 or not _could_pay(1.0 - np.asarray(ious))
-            or not _could_pay(unexplained_shares((single,), cameras, silhouettes, boxes))):
+            or not _could_pay(rasters.unexplained((single,)))):
         return PartsFit((single,), ious)
     points = np.asarray(points, dtype=np.float64)
     plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
     edges = [edge_samples(silhouette_outline(silhouette), silhouette, None, count=_PART_SAMPLES)
              for silhouette in silhouettes]
     fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0)
+    # Going on with a round's proposals left behind (while its winner leaves the silhouettes
+    # unexplained) is the search's most open-ended work: it stops once the search has spent
+    # _BUDGET times what the one superquadric cost. The next round, which may explain them with one
+    # more part, is not bounded so.
+    budget = np.inf if single_evaluations is None else _BUDGET * single_evaluations
+
+    def within() -> bool:
+        return fitter.evaluations < budget
     current: tuple[Superquadric, ...] = (single,)
     # A union of every part paying that explains more in one view but not yet in two (a dumbbell's
     # two weights without the bar between them) goes one round on before it is given up.
@@ -223,22 +270,27 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         base = current if trial is None else trial
         if len(base) >= min(max_parts, MAX_PARTS):
             break
-        if bounded > 1 and not _could_pay(unexplained_shares(base, cameras, silhouettes, boxes)):
+        if bounded > 1 and not _could_pay(rasters.unexplained(base)):
             break
-        proposals = _splits(base, points, plane) + _additions(base, points, cameras, silhouettes, boxes, plane)
-        if len(base) == 1 and plane is not None:
+        # Which part explains each hull point best, for the splits and the waists alike.
+        owner = _owners(base, points)
+        proposals = _splits(base, points, plane, owner) + _additions(base, points, rasters, plane)
+        box = None if len(base) > 1 or plane is None else (upright_box(points, plane[:3]),)
+        if box is not None:
             # The one superquadric may sit in a bad minimum of its own (a T is no superquadric at all):
             # also split the box of the whole hull, standing on the table.
-            proposals += _splits((upright_box(points, plane[:3]),), points, plane)
+            box_owner = np.zeros(len(points), np.intp)  # one part owns every point
+            proposals += _splits(box, points, plane, box_owner)
         if len(base) == 1:
             # Two ends and the thinner part between them (a dumbbell's bar) are no split in two.
-            proposals += _waists(base, points)
-            if plane is not None:
-                proposals += _waists((upright_box(points, plane[:3]),), points)
+            proposals += _waists(base, points, owner)
+            if box is not None:
+                proposals += _waists(box, points, box_owner)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX)).parts
-        candidate, candidate_ious = _paying(candidate, fitter, cameras, silhouettes, boxes)
+        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX,
+                                                 within=within)).parts
+        candidate, candidate_ious = _paying(candidate, fitter, rasters)
         # More parts must explain more: as much as one part must pay, in as many views. A union of no
         # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
         # (not the one superquadric: that is the single fit's, from its own starts).
@@ -259,11 +311,11 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         else:
             break
     if len(current) > 1 and plane is not None:
-        current, ious = _rested(current, fitter, plane, ious, cameras, silhouettes, boxes)
-    return PartsFit(current, ious)
+        current, ious = _rested(current, fitter, plane, ious, rasters)
+    return PartsFit(current, ious, fitter.evaluations)
 
 
-def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouettes, boxes):
+def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, rasters: _Rasters):
     """The union with each part that stands tilted tried upright (it rests on a face), kept where
     that fits the silhouettes better; and each upright part that floats (what holds it up hidden
     behind it in every view) taken down to the table (through the parts it stands on, whose volume
@@ -283,7 +335,7 @@ def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, cameras, silhouette
                 best, parts = other, other.problem.parts(other.x)
     if best.iterations == 0:
         return parts, ious
-    return parts, union_ious(parts, cameras, silhouettes, boxes)[0]
+    return parts, rasters.ious(parts)[0]
 
 
 def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
@@ -305,16 +357,16 @@ def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
     return Superquadric(size, part.shape, T)
 
 
-def _paying(parts, fitter: _Fitter, cameras, silhouettes, boxes) -> tuple[tuple[Superquadric, ...], list[float]]:
+def _paying(parts, fitter: _Fitter, rasters: _Rasters) -> tuple[tuple[Superquadric, ...], list[float]]:
     """The parts less those that do not pay (the least useful dropped first, the rest refined)."""
     parts = tuple(parts)
     while True:
-        ious, without = union_ious(parts, cameras, silhouettes, boxes)
+        ious, without = rasters.ious(parts)
         if len(parts) == 1:
             return parts, ious
         pays = _pays(ious, without)
         weakest = int(np.argmin(pays))
-        if pays[weakest] >= _views_to_pay(len(cameras)):
+        if pays[weakest] >= _views_to_pay(len(rasters.cameras)):
             return parts, ious
         rest = parts[:weakest] + parts[weakest + 1:]
         parts = fitter.result(fitter.descent(rest).run(_ITERATIONS)).parts
@@ -334,37 +386,43 @@ def _box_start(points: np.ndarray, R: np.ndarray, floor: np.ndarray) -> Superqua
     return Superquadric(np.maximum((high - low) / 2, floor), _START_SHAPE, T)
 
 
-def _splits(parts, points: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
+def _owners(parts, points: np.ndarray) -> np.ndarray:
+    """(N,) which part explains each point best (the one it lies deepest in)."""
+    if len(parts) == 1:
+        return np.zeros(len(points), np.intp)
+    return np.argmin(_ratios(parts, points), axis=0)
+
+
+def _splits(parts, points: np.ndarray, plane, owner: np.ndarray) -> list[tuple[Superquadric, ...]]:
     """Each part split in two by the plane through its centre across each of its axes (on a
-    table, each half's start upright: a part rests on a face)."""
+    table, each half's start upright: a part rests on a face); ``owner`` as :func:`_owners`."""
     if len(points) < 2 * _MIN_GROUP:
         return []
-    owner = np.argmin(_ratios(parts, points), axis=0)
     proposals = []
     for k, part in enumerate(parts):
         mine = points[owner == k]
         R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
         side = (mine - centre) @ R
+        floor = _FLOOR * part.size
+        frame = R if plane is None else _upright(R, plane[:3])
         for axis in range(3):
             halves = [mine[side[:, axis] >= 0], mine[side[:, axis] < 0]]
             if min(len(half) for half in halves) < _MIN_GROUP:
                 continue
-            floor = _FLOOR * part.size
-            frame = R if plane is None else _upright(R, plane[:3])
             proposals.append(parts[:k] + parts[k + 1:] + tuple(_box_start(half, frame, floor) for half in halves))
     return proposals
 
 
-def _waists(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
+def _waists(parts, points: np.ndarray, owner: np.ndarray) -> list[tuple[Superquadric, ...]]:
     """Each part cut in three where it narrows along its longest axis (parts meet at a waist: a
     dumbbell's bar between its weights): the hull points it explains best, in slabs along the
     axis, each slab's width the least of its extents across the axis (the views carve the hull
     narrow across their rays); the waist is the run of slabs about the narrowest that are nearer
     its width than the widest's, at most ``_WAIST`` of it. The pieces before, within and after the
-    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits."""
+    waist each give a part whose z axis is that axis; a narrowing at an end is left to the splits.
+    ``owner`` as :func:`_owners`."""
     if len(points) < 2 * _MIN_GROUP:
         return []
-    owner = np.argmin(_ratios(parts, points), axis=0)
     angles = np.pi * np.arange(_WIDTH_DIRECTIONS) / _WIDTH_DIRECTIONS
     directions = np.stack([np.cos(angles), np.sin(angles)])
     proposals = []
@@ -403,14 +461,12 @@ def _waists(parts, points: np.ndarray) -> list[tuple[Superquadric, ...]]:
     return proposals
 
 
-def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) -> list[tuple[Superquadric, ...]]:
+def _additions(parts, points: np.ndarray, rasters: _Rasters, plane) -> list[tuple[Superquadric, ...]]:
     """The union and one more part on each of the largest groups of unexplained hull points."""
     if len(points) < _MIN_GROUP:
         return []
     outside = np.zeros(len(points), np.intp)
-    for camera, silhouette, box in zip(cameras, silhouettes, boxes):
-        object_pixels, covers, (x0, y0) = hull_covers([projected_outline(part, camera) for part in parts],
-                                                       silhouette, box)
+    for camera, (object_pixels, covers, (x0, y0)) in zip(rasters.cameras, rasters.drawn(parts)):
         if object_pixels is None:
             continue
         covered = np.any(np.stack(covers), axis=0).astype(np.uint8)
@@ -423,7 +479,7 @@ def _additions(parts, points: np.ndarray, cameras, silhouettes, boxes, plane) ->
         far = np.ones(len(points), bool)
         far[inside] = distance[row[inside], column[inside]] > _UNEXPLAINED_PX
         outside += far
-    return _grouped(parts, points[outside >= _views_to_pay(len(cameras))], plane)
+    return _grouped(parts, points[outside >= _views_to_pay(len(rasters.cameras))], plane)
 
 
 def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, ...]]:
@@ -464,4 +520,5 @@ def _upright(R: np.ndarray, normal: np.ndarray) -> np.ndarray:
     k = int(np.argmax(np.abs(normal @ R)))
     first = R[:, (k + 1) % 3] - (R[:, (k + 1) % 3] @ normal) * normal
     first /= np.linalg.norm(first)
-    return np.stack([first, np.cross(normal, first), normal], axis=1)
+    second = normal[[1, 2, 0]] * first[[2, 0, 1]] - normal[[2, 0, 1]] * first[[1, 2, 0]]  # normal x first
+    return np.stack([first, second, normal], axis=1)

@@ -40,9 +40,10 @@ def silhouette_iou(model, camera: Camera, silhouette: np.ndarray, box=None) -> f
     return union_hull_iou([projected_outline(part, camera) for part in parts], silhouette, box)
 
 
-def projected_outline(part: Superquadric, camera: Camera) -> np.ndarray:
-    """Pixels (N, 2) of the part's surface points in front of the camera: their hull is its outline."""
-    uv, depth = camera.project(surface_points(part))
+def projected_outline(part: Superquadric, camera: Camera, surface: np.ndarray | None = None) -> np.ndarray:
+    """Pixels (N, 2) of the part's surface points in front of the camera: their hull is its outline.
+    ``surface``: the part's :func:`core_cy.superquadric.surface_points`, if already taken (for another view)."""
+    uv, depth = camera.project(surface_points(part) if surface is None else surface)
     return uv[depth > 0]
 
 

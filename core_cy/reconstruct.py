@@ -121,6 +121,9 @@ class Reconstruction:
     ``timings_ms`` the wall time of each stage and the total;
     ``parts`` the model (DESIGN.md §1.11): the object is their union, one part for an object
     that is one superquadric. ``superquadric`` is the one superquadric closest to the whole.
+    ``evaluations`` counts the silhouette fits' evaluations of their cost, each part of a union
+    counted: ``"fit"`` the one superquadric's, ``"parts"`` the search's beyond it. Their work, which
+    unlike their time does not depend on the machine (not part of :meth:`to_dict`).
     """
 
     superquadric: Superquadric
@@ -132,6 +135,7 @@ class Reconstruction:
     residual: float
     timings_ms: dict[str, float] = field(default_factory=dict)
     parts: tuple[Superquadric, ...] = ()
+    evaluations: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.parts:
@@ -234,6 +238,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         last = now
 
     silhouettes, boxes, edges = [], [], []
+    evaluations: dict[str, int] = {}
     decoded = [_decoded(index, view) for index, view in enumerate(views)]
     found: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     if segmentation.method == "auto":
@@ -297,7 +302,9 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                       + [upright for upright, tilt in rested if tilt >= _RESTING_TILT]
                       + [upright_box(points, plane[:3])])
         lap("start")
-        superquadric = fit_to_silhouettes(starts, cameras, edges, support_plane=plane).superquadric
+        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane)
+        superquadric = fit.superquadric
+        evaluations["fit"] = fit.evaluations
         lap("fit")
         ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
         if min(ious) < _DISAGREE:
@@ -305,8 +312,10 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             # tilted start) or an object that is no superquadric. Every start goes to its end, and
             # the one that agrees best with all the silhouettes is kept (DESIGN.md §1.12).
             for other in starts:
-                fitted = fit_to_silhouettes(other, cameras, edges, support_plane=plane,
-                                            max_iterations=_RESTART_ITERATIONS).superquadric
+                restart = fit_to_silhouettes(other, cameras, edges, support_plane=plane,
+                                             max_iterations=_RESTART_ITERATIONS)
+                fitted = restart.superquadric
+                evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((fitted,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
                     superquadric, ious = fitted, other_ious
@@ -322,9 +331,11 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     parts: tuple[Superquadric, ...] = (superquadric,)
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
-                          support_plane=plane, max_parts=options.max_parts)
-        parts, ious = model.parts, model.silhouette_iou
+                          support_plane=plane, max_parts=options.max_parts,
+                          single_evaluations=evaluations["fit"])
+        parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
-    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts)
+    return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts,
+                          evaluations)

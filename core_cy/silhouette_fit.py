@@ -22,12 +22,12 @@ from a start (the point fit) minimises the sum.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from ._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
+from ._silhouette_fit_cy import normal_equations, outline_angles, part_planes
 from .errors import FitError
 from .least_squares import Descent
 from .superquadric import Superquadric, _rotation
@@ -39,6 +39,7 @@ __all__ = ["SilhouetteFit", "fit_to_silhouettes"]
 # as an ellipsoid's rim).
 _ETA = -np.pi / 2 + np.pi * np.arange(1, 17) / 17
 _OMEGA = -np.pi + 2 * np.pi * np.arange(40) / 40
+_ANGLES = outline_angles(_ETA, _OMEGA)  # the grid's trigonometry, once
 # Exponents above 1 pinch the shape (a diamond, a star): no object a robot picks, and a square
 # section seen as a diamond turned 45 degrees is a false minimum on the way to the box.
 _SHAPE_BOUNDS = (0.1, 1.0)
@@ -70,11 +71,15 @@ class SilhouetteFit:
         (read from the robust cost: exact when they are all alike).
     iterations : int
         Levenberg-Marquardt steps tried from the start that won.
+    evaluations : int
+        Evaluations of the cost over every start, each part of a union counted: the fit's work, by
+        which a later search can size its own (deterministic, unlike its time).
     """
 
     parts: tuple[Superquadric, ...]
     rms_px: float
     iterations: int
+    evaluations: int = 0
 
     @property
     def superquadric(self) -> Superquadric:
@@ -93,6 +98,12 @@ class _Views:
     rows: list  # slices of the planes array, per view
     count: int
     pixel_scale: float  # the views' mean f / depth: pixels per world unit at the object
+    # The same stacked for the kernel that draws a part's tangent planes in every view in one call.
+    all_samples: np.ndarray  # (N, 2)
+    starts: np.ndarray  # (V + 1,) view v's samples are all_samples[starts[v]:starts[v + 1]]
+    Ks: np.ndarray  # (V, 3, 3)
+    Rs: np.ndarray  # (V, 3, 3) camera to world
+    pixels_per_unit: np.ndarray  # (V,) 1 / the object's depth
 
     @classmethod
     def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
@@ -113,16 +124,22 @@ class _Views:
             rows.append(slice(row, row + len(view_samples)))
             row += len(view_samples)
         return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
-                   packed, samples, rows, row, float(np.mean(scales)))
+                   packed, samples, rows, row, float(np.mean(scales)),
+                   np.ascontiguousarray(np.concatenate(samples) if samples else np.empty((0, 2))),
+                   np.array([0] + [r.stop for r in rows], np.intp),
+                   np.ascontiguousarray([K for K, _, _, _ in packed], dtype=np.float64).reshape(-1, 3, 3),
+                   np.ascontiguousarray([R for _, R, _, _ in packed]).reshape(-1, 3, 3),
+                   np.array([scale for _, _, _, scale in packed], dtype=np.float64))
 
 
 class _Problem:
     """The silhouette fit of a union of parts about one start: parameters to tangent planes, cost
     and normal equations. Part p's 11 parameters are ``x[11 p: 11 p + 11]``."""
 
-    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale):
+    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale, tally: list[int] | None = None):
         parts = [start] if isinstance(start, Superquadric) else list(start)
         self.count = len(parts)
+        self.tally = [0] if tally is None else tally  # part evaluations so far, shared by a fitter's problems
         self.R0 = np.ascontiguousarray([part.T_world_object[:3, :3] for part in parts])
         self.t0 = np.ascontiguousarray([part.T_world_object[:3, 3] for part in parts])
         self.scale = np.array([float(np.mean(part.size)) for part in parts])
@@ -134,6 +151,8 @@ class _Problem:
         self.counts = np.empty(len(views.samples), np.intp)
         shape = (self.count, views.count, 9)
         self.planes, self.trial_planes = np.empty(shape), np.empty(shape)
+        # Which part answered for each sample last time: the kernel tries it first (only its time depends on it).
+        self.owner = np.zeros(views.count, np.intp)
         self.x0 = np.concatenate([np.concatenate([np.log(part.size), np.clip(part.shape, *_SHAPE_BOUNDS), np.zeros(6)])
                                   for part in parts])
         self.low, self.high = np.full(len(self.x0), -np.inf), np.full(len(self.x0), np.inf)
@@ -158,18 +177,14 @@ class _Problem:
 
     def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
         views, planes = self.views, self.trial_planes
+        self.tally[0] += self.count
         for p in range(self.count):
-            if not outline_points(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], _ETA, _OMEGA,
-                                  views.projections, views.centres, self.grid, self.uv, self.counts):
-                return np.inf  # the part reaches behind a camera
-            for v, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
-                    zip(views.samples, views.rows, views.cameras)):
-                hull = cv2.convexHull(self.uv[v, :self.counts[v]]).reshape(-1, 2)
-                if len(hull) < 3:
-                    return np.inf
-                tangent_planes(hull, samples, K, R, centre, pixels_per_unit, planes[p, rows])
+            if not part_planes(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], len(_ETA), _ANGLES,
+                               views.projections, views.centres, views.all_samples, views.starts, views.Ks,
+                               views.Rs, views.pixels_per_unit, self.grid, self.uv, self.counts, planes[p]):
+                return np.inf  # the part reaches behind a camera, or its outline in a view is no polygon
         return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
-                                self.plane_weight, _TILT, JtJ, Jtr)
+                                self.plane_weight, _TILT, JtJ, Jtr, True, self.owner)
 
     def keep(self, accepted: bool) -> None:
         if accepted:
@@ -206,14 +221,20 @@ class _Fitter:
         self.loss_scale = float(loss_scale)
         # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
         self.tolerance = 0.5 * 1e-4 * views.count
+        self.tally = [0]
+
+    @property
+    def evaluations(self) -> int:
+        """Evaluations of the cost so far, over every descent, each part of a union counted."""
+        return self.tally[0]
 
     def descent(self, start) -> Descent:
         """A descent from ``start`` (a Superquadric, or the parts of a union), not yet run."""
-        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale)
+        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale, self.tally)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
     def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
-                explained_px: float | None = None) -> Descent:
+                explained_px: float | None = None, within: Callable[[], bool] | None = None) -> Descent:
         """The start whose descent fits best: every start a few steps, the ``finalists`` best of
         them a few more, and the best of those on to convergence. Two bodies (a lying cylinder and a
         bar) may explain the views alike after a step or two, and only a few steps on tell apart.
@@ -221,7 +242,8 @@ class _Fitter:
         With ``explained_px``: while the winner's outlines stay farther than that (RMS) from the
         samples, the silhouettes disagree with it (a bad local minimum): the starts left behind go
         on, in the order of their cost, each a few more steps, and one that then fits better than
-        the winner goes on to convergence and wins if it ends lower (each start is tried once)."""
+        the winner goes on to convergence and wins if it ends lower (each start is tried once), while
+        ``within`` (a budget) says so."""
         alive = [self.descent(start) for start in starts]
         if len(alive) > 1:
             for descent in alive:
@@ -238,7 +260,7 @@ class _Fitter:
         if explained_px is None:
             return best
         for descent in alive:
-            if self.rms(best.cost) <= explained_px:
+            if self.rms(best.cost) <= explained_px or (within is not None and not within()):
                 break
             if descent is best or not np.isfinite(descent.cost):
                 continue
@@ -254,7 +276,8 @@ class _Fitter:
         return _rms(cost, self.views.count, self.loss_scale)
 
     def result(self, descent: Descent) -> SilhouetteFit:
-        return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations)
+        return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations,
+                             self.evaluations)
 
 
 def _first_part(start) -> Superquadric:

@@ -30,6 +30,7 @@ __all__ = [
     "LumpyFigure",
     "SimObject",
     "SuperquadricObject",
+    "YCB_LIKE",
     "box",
     "compound",
     "cylinder",
@@ -629,8 +630,104 @@ EVERYDAY = {
     "spray-bottle": _spray_bottle, "lamp": _table_lamp, "box-and-can": _box_and_can, "l-boxes": _l_of_boxes,
     "hammer": _hammer, "stacked-boxes": _stacked_boxes,
 }
+
+# Products of the YCB object set (Calli et al. 2015) as unions of superquadrics, at their published
+# sizes (full extents in mm in each docstring), standing or lying as they rest on a table; the sizes
+# are fixed (a product has one size), only the pose is drawn.
+
+
+def _mustard_bottle(rng: np.random.Generator) -> list[tuple]:
+    """006 mustard bottle, 96 x 58 x 190: a flattened rounded body and its cap, a little off-centre."""
+    body = (0.046, 0.029, 0.0775)
+    return [("rounded-box", body, np.eye(3), (0.0, 0.0, body[2])),
+            ("cylinder", (0.012, 0.012, 0.0175), np.eye(3), (0.012, 0.0, 2 * body[2] + 0.0175 - _SINK))]
+
+
+def _bleach_bottle(rng: np.random.Generator) -> list[tuple]:
+    """021 bleach cleanser, 98 x 65 x 250, as a jug: a rounded body, its cap to the front (+x) and
+    a handle of three bars at the back of its upper half."""
+    body = (0.049, 0.0325, 0.11)
+    reach, bar, wide, span = 0.024, 0.006, 0.01, 0.03
+    z = 2 * body[2] - span - 0.015
+    return [("rounded-box", body, np.eye(3), (0.0, 0.0, body[2])),
+            ("cylinder", (0.014, 0.014, 0.015), np.eye(3), (0.02, 0.0, 2 * body[2] + 0.015 - _SINK)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (-body[0] - (reach - 0.004) / 2, 0.0, z + span)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (-body[0] - (reach - 0.004) / 2, 0.0, z - span)),
+            ("rounded-box", (bar, wide, span + bar), np.eye(3), (-body[0] - reach + bar, 0.0, z))]
+
+
+def _cracker_box(rng: np.random.Generator) -> list[tuple]:
+    """003 cracker box, 60 x 158 x 210, standing."""
+    return [("box", (0.03, 0.079, 0.105), np.eye(3), (0.0, 0.0, 0.105))]
+
+
+def _sugar_box(rng: np.random.Generator) -> list[tuple]:
+    """004 sugar box, 38 x 89 x 175, standing."""
+    return [("box", (0.019, 0.0445, 0.0875), np.eye(3), (0.0, 0.0, 0.0875))]
+
+
+def _soup_can(rng: np.random.Generator) -> list[tuple]:
+    """005 tomato soup can, 66 x 101."""
+    return [("cylinder", (0.033, 0.033, 0.0505), np.eye(3), (0.0, 0.0, 0.0505))]
+
+
+def _tuna_can(rng: np.random.Generator) -> list[tuple]:
+    """007 tuna fish can, 85 x 33."""
+    return [("cylinder", (0.0425, 0.0425, 0.0165), np.eye(3), (0.0, 0.0, 0.0165))]
+
+
+def _potted_meat_can(rng: np.random.Generator) -> list[tuple]:
+    """010 potted meat can, 50 x 97 x 82: a box with well rounded edges, standing."""
+    return [((0.25, 0.25), (0.025, 0.0485, 0.041), np.eye(3), (0.0, 0.0, 0.041))]
+
+
+def _ycb_mug(rng: np.random.Generator) -> list[tuple]:
+    """025 mug, 80 across and 82 tall, its C-shaped handle reaching 37 out (117 in all)."""
+    r, h, reach, bar, wide, span = 0.04, 0.041, 0.037, 0.006, 0.008, 0.024
+    return [("cylinder", (r, r, h), np.eye(3), (0.0, 0.0, h)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (r + (reach - 0.004) / 2, 0.0, h + span)),
+            ("rounded-box", ((reach + 0.004) / 2, wide, bar), np.eye(3), (r + (reach - 0.004) / 2, 0.0, h - span)),
+            ("rounded-box", (bar, wide, span + bar), np.eye(3), (r + reach - bar, 0.0, h))]
+
+
+def _power_drill(rng: np.random.Generator) -> list[tuple]:
+    """035 power drill, 184 x 187 x 57, standing on its battery: the battery, the grip on it and
+    the barrel across the grip's top, reaching forward (+x)."""
+    battery, grip, barrel_r, barrel_half = (0.045, 0.0285, 0.02), (0.02, 0.0175, 0.05), 0.028, 0.092
+    grip_z = 2 * battery[2] + grip[2] - _SINK
+    return [("rounded-box", battery, np.eye(3), (0.0, 0.0, battery[2])),
+            ("rounded-box", grip, np.eye(3), (-0.015, 0.0, grip_z)),
+            ("cylinder", (barrel_r, barrel_r, barrel_half), _ALONG_X,
+             (barrel_half - 0.05, 0.0, grip_z + grip[2] + barrel_r - _SINK))]
+
+
+def _ycb_hammer(rng: np.random.Generator) -> list[tuple]:
+    """048 hammer, 330 long, its head 130 across: lying on the table, the handle along x."""
+    handle, head = (0.14, 0.014, 0.014), (0.018, 0.065, 0.017)
+    return [("rounded-box", handle, np.eye(3), (0.0, 0.0, handle[2])),
+            ("box", head, np.eye(3), (handle[0] + head[0] - _SINK, 0.0, head[2]))]
+
+
+def _banana(rng: np.random.Generator) -> list[tuple]:
+    """011 banana, 190 long and 36 thick, lying on the table: three round pieces bent in a flat arc
+    (each end piece turned 30 degrees from the middle one)."""
+    r, half = 0.018, 0.038
+    out = [("ellipsoid", (r, r, half + 0.006), _ALONG_X, (0.0, 0.0, r))]
+    for side in (-1.0, 1.0):
+        turn = rotation_z(side * 30.0)
+        centre = np.array([side * half, 0.0, r]) + turn @ np.array([side * (half - _SINK), 0.0, 0.0])
+        out.append(("ellipsoid", (r * 0.9, r * 0.9, half + 0.006), turn @ _ALONG_X, tuple(centre)))
+    return out
+
+
+#: YCB-like products (issue 21's "real products"): the YCB set's sizes, each a union of superquadrics.
+YCB_LIKE = {
+    "mustard-bottle": _mustard_bottle, "bleach-bottle": _bleach_bottle, "cracker-box": _cracker_box,
+    "sugar-box": _sugar_box, "soup-can": _soup_can, "tuna-can": _tuna_can, "potted-meat-can": _potted_meat_can,
+    "ycb-mug": _ycb_mug, "power-drill": _power_drill, "ycb-hammer": _ycb_hammer, "banana": _banana,
+}
 #: Every compound object :func:`compound` makes.
-COMPOUND_KINDS = {**COMPOUNDS, **EVERYDAY}
+COMPOUND_KINDS = {**COMPOUNDS, **EVERYDAY, **YCB_LIKE}
 
 
 def compound(name: str, position_xy: ArrayLike, yaw_deg: float = 0.0, seed: int = 0) -> CompoundObject:

@@ -43,6 +43,7 @@ __all__ = [
     "standard_set",
     "write_scan",
     "write_standard_set",
+    "ycb_like_set",
 ]
 
 #: The segmentation written into every simulated scan.json: red, hue wrapping round 0.
@@ -474,6 +475,22 @@ def compound_set(seed: int = 0, per_kind: int = 2, n_views: int = 3) -> list[Sca
             obj = compound(kind, (0.6 + rho * np.cos(phi), rho * np.sin(phi)), rng.uniform(0, 360),
                            seed=1000 * seed + 20 * kind_index + i)
             specs.append(make_spec(f"{kind}-{i:02d}", obj, seed=1000 * seed + 400 + 20 * kind_index + i,
+                                   n_views=n_views))
+    return specs
+
+
+def ycb_like_set(seed: int = 0, per_kind: int = 1, n_views: int = 3) -> list[ScanSpec]:
+    """``per_kind`` scans of each YCB-like product (:data:`workers.sim.objects.YCB_LIKE`), placed and
+    scanned as :func:`compound_set` does. Names are ``{kind}-{i:02d}``."""
+    from .objects import YCB_LIKE, compound
+
+    specs = []
+    for kind_index, kind in enumerate(YCB_LIKE):
+        for i in range(per_kind):
+            rng = np.random.default_rng([seed, 700 + kind_index, i])
+            rho, phi = 0.08 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            obj = compound(kind, (0.6 + rho * np.cos(phi), rho * np.sin(phi)), rng.uniform(0, 360))
+            specs.append(make_spec(f"{kind}-{i:02d}", obj, seed=1000 * seed + 700 + 20 * kind_index + i,
                                    n_views=n_views))
     return specs
 
