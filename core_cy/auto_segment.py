@@ -110,6 +110,8 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
+        self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
 
@@ -195,6 +197,114 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     # in the other views that would see it: NaN.
     evidence[~seen] = np.where(occluded[~seen], np.nan, 0.0)
     return evidence.reshape(ch, cw)
+
+
+#: The fine images' longer side, px, at most: a table's grain (wood, a weave) is a few pixels wide and
+#: the coarse images average it away; texture is compared here.
+FINE_SIDE = 800
+#: Window of the local correlation of textures, fine px.
+_TEXTURE_PATCH = 7
+#: A window's grey-level variance below this is flat: its correlation with another is noise.
+_TEXTURE_FLOOR = 25.0
+#: The texture's decorrelation on the table is taken to be at least this: JPEG and a fine pixel's worth of
+#: misregistration leave that much.
+_TEXTURE_NOISE_FLOOR = 0.15
+
+
+def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
+    """The view's image (or its empty workspace's) in grey at the fine scale (float32), kept once made."""
+    key = "background" if background else "image"
+    if key not in view.fine:
+        grey = cv2.cvtColor(view.full_background if background else view.image, cv2.COLOR_BGR2GRAY)
+        height, width = grey.shape
+        if view.fine_scale > 1.0:
+            grey = cv2.resize(grey, (round(width / view.fine_scale), round(height / view.fine_scale)),
+                              interpolation=cv2.INTER_AREA)
+        view.fine[key] = grey.astype(np.float32)
+    return view.fine[key]
+
+
+def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
+    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing)."""
+    window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
+    mean_a, mean_b = cv2.blur(a, window), cv2.blur(b, window)
+    var_a = np.maximum(cv2.blur(a * a, window) - mean_a * mean_a, 0.0)
+    var_b = np.maximum(cv2.blur(b * b, window) - mean_b * mean_b, 0.0)
+    correlation = (cv2.blur(a * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
+    return correlation, (var_a > _TEXTURE_FLOOR) & (var_b > _TEXTURE_FLOOR)
+
+
+def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
+                      standing: Sequence[np.ndarray | None]) -> np.ndarray:
+    """How little any other view, mapped through the support plane at the fine scale, shares each coarse
+    pixel's texture (1 less the best correlation; 0 where no other view sees the table point, or where the
+    textures are flat): the table's grain maps onto itself, a face above the plane shows another grain,
+    even of the table's own colour."""
+    grey = _fine_grey(view)
+    fh, fw = grey.shape
+    best = np.full((fh, fw), -1.0, np.float32)
+    seen = np.zeros((fh, fw), bool)
+    for other, hidden in zip(others, standing):
+        maps, inside_flat = view.mapping(other, plane)
+        inside = inside_flat.reshape(view.coarse_size[1], view.coarse_size[0])
+        if hidden is not None:
+            # Where the other view sees the object in front of the table point, it says nothing of it.
+            inside &= cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) == 0
+        # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
+        other_grey = _fine_grey(other)
+        fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)
+        fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
+        fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
+        warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        correlation, textured = _local_correlation(grey, warped)
+        known = textured & (cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST) > 0)
+        best = np.where(known, np.maximum(best, correlation), best)
+        seen |= known
+    decorrelation = np.where(seen, 1.0 - best, 0.0).astype(np.float32)
+    return cv2.resize(decorrelation, view.coarse_size, interpolation=cv2.INTER_AREA)
+
+
+def _texture_change(view: _View) -> np.ndarray:
+    """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
+    1: none; 0 where the grain does not stand clear of the noise): a shadow darkens the grain by the
+    same factor as its brightness, and its soft edge, a slope unrelated to the grain, does not weaken
+    it; a face that hides the grain, even one of the table's colour, loses it."""
+    image, empty = _fine_grey(view), _fine_grey(view, background=True)
+    image_grain, empty_grain = _grain(image), _grain(empty)
+    # How much of the empty workspace's grain the image still holds (the local regression's slope), over
+    # how much the light there is dimmed.
+    strength = cv2.GaussianBlur(empty_grain * empty_grain, (0, 0), _GRAIN_WINDOW)
+    slope = cv2.GaussianBlur(image_grain * empty_grain, (0, 0), _GRAIN_WINDOW) / np.maximum(strength, 1e-6)
+    dimmed = ((cv2.GaussianBlur(image, (0, 0), _GRAIN_WINDOW) + 1.0)
+              / (cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW) + 1.0))
+    kept = slope / np.maximum(dimmed, 0.05)
+    # The grain, dimmed as the image is, must stand clear of the noise (the two pictures' difference on
+    # most of the table), and of what JPEG drops: it keeps no grain fainter than a few grey levels.
+    noise = float(np.median(cv2.GaussianBlur((image_grain - empty_grain) ** 2, (0, 0), _GRAIN_WINDOW)))
+    faint = (_GRAIN_FLOOR * cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)) ** 2
+    expected = strength * np.minimum(dimmed, 1.0) ** 2
+    grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
+    lost = np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32)
+    return cv2.resize(lost, view.coarse_size, interpolation=cv2.INTER_AREA)
+
+
+def _grain(image: np.ndarray) -> np.ndarray:
+    """What varies over a few fine pixels only (the grain)."""
+    return image - cv2.GaussianBlur(image, (0, 0), _GRAIN_SIGMA)
+
+
+#: The grain's scale and the window its strength is measured over, fine px.
+_GRAIN_SIGMA = 1.5
+_GRAIN_WINDOW = 2.5
+#: A grain weaker than this (its relative contrast), or than this many times the noise, is no grain.
+_GRAIN_FLOOR = 0.02
+_GRAIN_CLEAR = 2.0
+#: Grey levels: the faintest grain that JPEG keeps.
+_GRAIN_VISIBLE = 3.0
+#: The grain lost on the table is taken to be at least this: JPEG and the sensor's noise leave that much.
+_GRAIN_NOISE_FLOOR = 0.2
 
 
 def _background_evidence(view: _View) -> np.ndarray:
@@ -675,6 +785,12 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), floor)
     score = evidence / noise
+    if plane is not None and view.background is None:
+        # A face of the table's colour differs from the table mapped through the plane by its grain alone.
+        texture = _texture_parallax(view, [v for v in views if v is not view], plane,
+                                    [standing[v.index] for v in views if v is not view])
+        texture_score = texture / max(_noise_level(texture), _TEXTURE_NOISE_FLOOR)
+        score = np.where(np.isnan(score), score, np.maximum(score, texture_score))
     if earlier is not None:
         score = np.where(np.isnan(score) & (earlier > _HIDDEN), earlier, score)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
@@ -889,23 +1005,26 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed = {}
+    changed, textures = {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        score = change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR)
+        texture = _texture_change(view)
+        # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
+        textures[view.index] = texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR)
+        score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -914,10 +1033,11 @@ _OCCLUSION_ROUNDS = 2
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
-                changed: dict[int, np.ndarray],
+                textures: dict[int, np.ndarray], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
-    where it does (0/255), the table behind ``occluders`` hidden."""
+    where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
+    grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -927,6 +1047,7 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # Where every other view has the table point behind the object, the pixel changed and nothing
         # says it is a shadow (the object's foot, or a face whose table points it covers).
         score = np.where(np.isnan(score), _HIDDEN, score)
+        score = np.maximum(score, textures[view.index])
         score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
         stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
         # A table point no other view sees (the top of a tall object maps far behind it, out of their
