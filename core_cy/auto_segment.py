@@ -112,6 +112,8 @@ class _View:
         self.full_background = background
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
+        # The texture's local correlation with another view mapped through a plane, and where it is known.
+        self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
 
@@ -235,43 +237,78 @@ def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nda
     return correlation, (var_a > _TEXTURE_FLOOR) & (var_b > _TEXTURE_FLOOR)
 
 
+def _aim_window(view: _View, centre: np.ndarray) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """The window around the aim (coarse pixel ``centre``) where the grain is compared: the views were
+    aimed at the object. As (rows, columns) slices of the coarse image and of the fine one."""
+    cw, ch = view.coarse_size
+    fh, fw = _fine_grey(view).shape
+    reach = int(np.ceil(_TEXTURE_REACH * np.hypot(cw, ch)))
+    x, y = int(round(centre[0])), int(round(centre[1]))
+    x0, x1 = min(max(x - reach, 0), cw), min(max(x + reach + 1, 0), cw)
+    y0, y1 = min(max(y - reach, 0), ch), min(max(y + reach + 1, 0), ch)
+    fine = (slice(round(y0 * fh / ch), round(y1 * fh / ch)), slice(round(x0 * fw / cw), round(x1 * fw / cw)))
+    return (slice(y0, y1), slice(x0, x1)), fine
+
+
+#: The window the grain is compared in reaches this share of the coarse image's diagonal from the aim.
+_TEXTURE_REACH = 0.2
+
+
+def _in_window(view: _View, window: tuple[slice, slice], fine: np.ndarray) -> np.ndarray:
+    """A fine map of the window, averaged into the coarse image's pixels (NaN outside the window)."""
+    cw, ch = view.coarse_size
+    coarse = np.full((ch, cw), np.nan, np.float32)
+    rows, columns = window
+    if rows.stop > rows.start and columns.stop > columns.start and fine.size:
+        coarse[window] = cv2.resize(fine, (columns.stop - columns.start, rows.stop - rows.start),
+                                    interpolation=cv2.INTER_AREA)
+    return coarse
+
+
 def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
-                      standing: Sequence[np.ndarray | None]) -> np.ndarray:
+                      standing: Sequence[np.ndarray | None], centre: np.ndarray) -> np.ndarray:
     """How little any other view, mapped through the support plane at the fine scale, shares each coarse
     pixel's texture (1 less the best correlation; 0 where no other view sees the table point, or where the
-    textures are flat): the table's grain maps onto itself, a face above the plane shows another grain,
-    even of the table's own colour."""
+    textures are flat; NaN out of the window around the aim, coarse pixel ``centre``): the table's grain
+    maps onto itself, a face above the plane shows another grain, even of the table's own colour."""
+    window, fine_window = _aim_window(view, centre)
     grey = _fine_grey(view)
     fh, fw = grey.shape
-    best = np.full((fh, fw), -1.0, np.float32)
-    seen = np.zeros((fh, fw), bool)
+    grey = grey[fine_window]
+    best = np.full(grey.shape, -1.0, np.float32)
+    seen = np.zeros(grey.shape, bool)
     for other, hidden in zip(others, standing):
         maps, inside_flat = view.mapping(other, plane)
         inside = inside_flat.reshape(view.coarse_size[1], view.coarse_size[0])
         if hidden is not None:
             # Where the other view sees the object in front of the table point, it says nothing of it.
             inside &= cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) == 0
-        # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
-        other_grey = _fine_grey(other)
-        fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)
-        fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
-        fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
-        warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
-        correlation, textured = _local_correlation(grey, warped)
-        known = textured & (cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST) > 0)
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in view.correlations:
+            # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
+            other_grey = _fine_grey(other)
+            fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
+            fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
+            fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
+            warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_REPLICATE)
+            view.correlations[key] = _local_correlation(grey, warped)
+        correlation, textured = view.correlations[key]
+        seeing = cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST)[fine_window] > 0
+        known = textured & seeing
         best = np.where(known, np.maximum(best, correlation), best)
         seen |= known
-    decorrelation = np.where(seen, 1.0 - best, 0.0).astype(np.float32)
-    return cv2.resize(decorrelation, view.coarse_size, interpolation=cv2.INTER_AREA)
+    return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
 
 
-def _texture_change(view: _View) -> np.ndarray:
+def _texture_change(view: _View, centre: np.ndarray) -> np.ndarray:
     """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
-    1: none; 0 where the grain does not stand clear of the noise): a shadow darkens the grain by the
-    same factor as its brightness, and its soft edge, a slope unrelated to the grain, does not weaken
-    it; a face that hides the grain, even one of the table's colour, loses it."""
-    image, empty = _fine_grey(view), _fine_grey(view, background=True)
+    1: none; 0 where the grain does not stand clear of the noise; NaN out of the window around the aim,
+    coarse pixel ``centre``): a shadow darkens the grain by the same factor as its brightness, and its
+    soft edge, a slope unrelated to the grain, does not weaken it; a face that hides the grain, even one
+    of the table's colour, loses it."""
+    window, fine_window = _aim_window(view, centre)
+    image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
     image_grain, empty_grain = _grain(image), _grain(empty)
     # How much of the empty workspace's grain the image still holds (the local regression's slope), over
     # how much the light there is dimmed.
@@ -286,8 +323,7 @@ def _texture_change(view: _View) -> np.ndarray:
     faint = (_GRAIN_FLOOR * cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)) ** 2
     expected = strength * np.minimum(dimmed, 1.0) ** 2
     grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
-    lost = np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32)
-    return cv2.resize(lost, view.coarse_size, interpolation=cv2.INTER_AREA)
+    return _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
 
 
 def _grain(image: np.ndarray) -> np.ndarray:
@@ -788,9 +824,9 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     if plane is not None and view.background is None:
         # A face of the table's colour differs from the table mapped through the plane by its grain alone.
         texture = _texture_parallax(view, [v for v in views if v is not view], plane,
-                                    [standing[v.index] for v in views if v is not view])
+                                    [standing[v.index] for v in views if v is not view], centre)
         texture_score = texture / max(_noise_level(texture), _TEXTURE_NOISE_FLOOR)
-        score = np.where(np.isnan(score), score, np.maximum(score, texture_score))
+        score = np.where(np.isnan(score), score, np.fmax(score, texture_score))
     if earlier is not None:
         score = np.where(np.isnan(score) & (earlier > _HIDDEN), earlier, score)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
@@ -820,7 +856,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # beside it, and leaves its inside (table-coloured against table-coloured) out: a silhouette has
         # no holes, so what the evidence encloses is the object's too.
         region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
-    cut = _graph_cut(view, region, score)
+    try:
+        cut = _graph_cut(view, region, score)
+    except SilhouetteError:
+        cut = np.zeros_like(region)  # the colour models gave it all to the table: the evidence decides below
     standing_out = cv2.bitwise_and(region, differs)
     if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
         # The colour models could not tell object from table (an object of the table's own colour and
@@ -1008,9 +1047,9 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     changed, textures = {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        texture = _texture_change(view)
+        texture = _texture_change(view, _coarse_aim(view, aim))
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
-        textures[view.index] = texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR)
+        textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
         score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
