@@ -172,8 +172,18 @@ _CHANNEL_SUM = np.ones((1, 3), np.float32)
 _CHANNEL_MEAN = np.full((1, 3), 0.5, np.float32)
 
 
+def _chroma_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-pixel difference of two float32 BGR images' tints, blind to brightness: ``b`` brought to
+    ``a``'s brightness, the grey levels between them (summed over the channels). In grey levels, not
+    as a ratio, because the sensor's noise is in grey levels: a dark pixel's tint is mostly noise."""
+    a, b = a + _CHROMA_OFFSET, b + _CHROMA_OFFSET
+    gain = cv2.transform(a, _CHANNEL_SUM) / cv2.transform(b, _CHANNEL_SUM)
+    return cv2.transform(cv2.absdiff(a, b * gain[..., None]), _CHANNEL_SUM)
+
+
 def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
-                       standing: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+                       standing: Sequence[np.ndarray | None] | None = None,
+                       difference_of=_relative_difference) -> np.ndarray:
     """How little any other view, mapped through the support plane, agrees with each coarse pixel of
     ``view``: the smallest difference over the others (NaN where no other view sees that table point).
 
@@ -192,7 +202,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
             behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
             occluded |= inside & behind
             inside &= ~behind
-        difference = _relative_difference(view.coarse, warped).ravel()
+        difference = difference_of(view.coarse, warped).ravel()
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
@@ -821,6 +831,24 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), floor)
     score = evidence / noise
+    if plane is not None and view.background is None and earlier is not None:
+        # A face as bright as the table (a white box's top under the lamp, on white laminate) differs from
+        # the table point behind it only in its tint; the brightness of one table point differs more from
+        # view to view (the light's fall-off, a sheen) than its tint does, which buries a tint in the noise
+        # of the colour difference. Measured apart, against its own noise, the tint stands out. Only on the
+        # second look: on the first, the other views' objects are known only in part, and the table beside
+        # this object's foot, which they see behind their object, takes that object's tint.
+        tint = _parallax_evidence(view, [v for v in views if v is not view], plane,
+                                  [standing[v.index] for v in views if v is not view], _chroma_difference)
+        tint_score = tint / max(_noise_level(tint), _TINT_NOISE_FLOOR)
+        # JPEG keeps the colour in blocks of 16 pixels, at half the resolution: a coloured object's tint
+        # runs onto the table beside it, and a block's tint goes astray here and there. A tint that stands
+        # out over less than a block is JPEG's, not a face's.
+        block = 2 * int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale)) + 1
+        wide = cv2.morphologyEx(np.where(tint_score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN,
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (block, block)))
+        tint_score = np.where(wide > 0, tint_score, 0.0)
+        score = np.where(np.isnan(score), score, np.fmax(score, tint_score))
     if plane is not None and view.background is None:
         # A face of the table's colour differs from the table mapped through the plane by its grain alone.
         texture = _texture_parallax(view, [v for v in views if v is not view], plane,
@@ -866,6 +894,14 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # grain): the evidence alone draws the silhouette.
         cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
     return cut, score
+
+
+#: The tint's difference on the table is taken to be at least this many grey levels (over the three
+#: channels): on an even grey table most of it is exactly 0, and the pixels' rounding to whole grey
+#: levels leaves about one.
+_TINT_NOISE_FLOOR = 1.0
+#: The side of JPEG's colour blocks, full-resolution px (8 samples of colour at half the resolution).
+_JPEG_COLOUR_BLOCK = 16
 
 
 #: A graph cut that keeps less than this share of what stands out near the aim failed to model it.
