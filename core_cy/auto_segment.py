@@ -840,14 +840,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # this object's foot, which they see behind their object, takes that object's tint.
         tint = _parallax_evidence(view, [v for v in views if v is not view], plane,
                                   [standing[v.index] for v in views if v is not view], _chroma_difference)
-        tint_score = tint / max(_noise_level(tint), _TINT_NOISE_FLOOR)
-        # JPEG keeps the colour in blocks of 16 pixels, at half the resolution: a coloured object's tint
-        # runs onto the table beside it, and a block's tint goes astray here and there. A tint that stands
-        # out over less than a block is JPEG's, not a face's.
-        block = 2 * int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale)) + 1
-        wide = cv2.morphologyEx(np.where(tint_score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN,
-                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (block, block)))
-        tint_score = np.where(wide > 0, tint_score, 0.0)
+        tint_score = _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
         score = np.where(np.isnan(score), score, np.fmax(score, tint_score))
     if plane is not None and view.background is None:
         # A face of the table's colour differs from the table mapped through the plane by its grain alone.
@@ -902,6 +895,33 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
 _TINT_NOISE_FLOOR = 1.0
 #: The side of JPEG's colour blocks, full-resolution px (8 samples of colour at half the resolution).
 _JPEG_COLOUR_BLOCK = 16
+
+
+def _over_a_block(view: _View, tint_score: np.ndarray) -> np.ndarray:
+    """A tint's score (in units of its noise) where it stands out over a JPEG colour block at least, 0
+    elsewhere. JPEG keeps the colour in blocks, at half the resolution: a coloured object's tint runs onto
+    the table beside it, and a block's tint goes astray here and there. A tint that stands out over less
+    than a block is JPEG's, not a face's."""
+    block = 2 * int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale)) + 1
+    wide = cv2.morphologyEx(np.where(tint_score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN,
+                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (block, block)))
+    return np.where(wide > 0, tint_score, 0.0).astype(np.float32)
+
+
+def _tint_change(view: _View) -> np.ndarray:
+    """How far each coarse pixel's tint has moved from the empty workspace's (in units of its noise),
+    where the pixel is no darker than the empty workspace: a shadow only takes light away, and under a
+    coloured lamp it takes the lamp's tint away too, so a tint that changed where no light was lost is
+    no shadow's. A face as bright as the table differs from it in its tint only."""
+    assert view.background is not None
+    tint = _chroma_difference(view.coarse, view.background)
+    score = tint / max(_noise_level(tint), _TINT_NOISE_FLOOR)
+    brightness, ground = _brightness(view.coarse), _brightness(view.background)
+    return _over_a_block(view, np.where(brightness < _SHADOW_DARKENING * ground, 0.0, score))
+
+
+#: A pixel darker than the empty workspace by this factor or more may be in a shadow.
+_SHADOW_DARKENING = 0.95
 
 
 #: A graph cut that keeps less than this share of what stands out near the aim failed to model it.
@@ -1087,6 +1107,9 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
         score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
+        # A face as bright as the table changed its tint only (the other views judge whether the table
+        # itself took that tint: the glow of a coloured object beside it).
+        score = np.maximum(score, _tint_change(view))
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
@@ -1123,6 +1146,15 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # says it is a shadow (the object's foot, or a face whose table points it covers).
         score = np.where(np.isnan(score), _HIDDEN, score)
         score = np.maximum(score, textures[view.index])
+        if occluders is not None:
+            # The tint against the other views' through the plane, as without a background (_first_cut):
+            # the table's glow beside a coloured object, and a shadow under a coloured lamp, are the same
+            # from every view; a face as bright as the table is not. Once the objects in the other views
+            # are known: before, the table beside this object's foot takes their object's tint.
+            tint = _parallax_evidence(view, others, plane, [occluders[v.index] for v in others],
+                                      _chroma_difference)
+            score = np.maximum(score, _over_a_block(view, np.nan_to_num(
+                tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))))
         score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
         stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
         # A table point no other view sees (the top of a tall object maps far behind it, out of their
