@@ -32,7 +32,7 @@ ground, or a photograph whose background is not a plane.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -115,6 +115,8 @@ class _View:
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        # Each other view's image mapped through a plane and compared with this one, per comparison.
+        self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -195,14 +197,18 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
         maps, inside = view.mapping(other, plane)
-        warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
         if hidden is not None:
             behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
             occluded |= inside & behind
             inside &= ~behind
-        difference = difference_of(view.coarse, warped).ravel()
+        # The images do not change from one look to the next, only what is taken to stand in front.
+        key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
+        if key not in view.differences:
+            warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_REPLICATE)
+            view.differences[key] = difference_of(view.coarse, warped).ravel()
+        difference = view.differences[key]
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
@@ -1076,11 +1082,16 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
     for other in others:
         maps, inside_flat = view.mapping(other, plane)
         inside = inside_flat.reshape(ch, cw)
-        # A pixel's worth of misregistration: the other view's range of values around the point.
-        low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
-        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        disagreement = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+        key = (other.index, np.asarray(plane, np.float64).tobytes(), _ratio_parallax)
+        if key not in view.differences:
+            # A pixel's worth of misregistration: the other view's range of values around the point.
+            low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
+            warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_REPLICATE)
+            warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                                    borderMode=cv2.BORDER_REPLICATE)
+            view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+        disagreement = view.differences[key]
         if occluders is not None:
             behind = cv2.remap(occluders[other.index], maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
                                borderValue=0) > 0
