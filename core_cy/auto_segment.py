@@ -32,7 +32,7 @@ ground, or a photograph whose background is not a plane.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -110,7 +110,13 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
+        self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
+        # The texture's local correlation with another view mapped through a plane, and where it is known.
+        self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        # Each other view's image mapped through a plane and compared with this one, per comparison.
+        self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,8 +174,18 @@ _CHANNEL_SUM = np.ones((1, 3), np.float32)
 _CHANNEL_MEAN = np.full((1, 3), 0.5, np.float32)
 
 
+def _chroma_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-pixel difference of two float32 BGR images' tints, blind to brightness: ``b`` brought to
+    ``a``'s brightness, the grey levels between them (summed over the channels). In grey levels, not
+    as a ratio, because the sensor's noise is in grey levels: a dark pixel's tint is mostly noise."""
+    a, b = a + _CHROMA_OFFSET, b + _CHROMA_OFFSET
+    gain = cv2.transform(a, _CHANNEL_SUM) / cv2.transform(b, _CHANNEL_SUM)
+    return cv2.transform(cv2.absdiff(a, b * gain[..., None]), _CHANNEL_SUM)
+
+
 def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
-                       standing: Sequence[np.ndarray | None] | None = None) -> np.ndarray:
+                       standing: Sequence[np.ndarray | None] | None = None,
+                       difference_of=_relative_difference) -> np.ndarray:
     """How little any other view, mapped through the support plane, agrees with each coarse pixel of
     ``view``: the smallest difference over the others (NaN where no other view sees that table point).
 
@@ -181,20 +197,166 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     occluded = np.zeros(cw * ch, bool)
     for number, other in enumerate(others):
         maps, inside = view.mapping(other, plane)
-        warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
         hidden = None if standing is None else standing[number]
         if hidden is not None:
             behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
             occluded |= inside & behind
             inside &= ~behind
-        difference = _relative_difference(view.coarse, warped).ravel()
+        # The images do not change from one look to the next, only what is taken to stand in front.
+        key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
+        if key not in view.differences:
+            warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_REPLICATE)
+            view.differences[key] = difference_of(view.coarse, warped).ravel()
+        difference = view.differences[key]
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
     # in the other views that would see it: NaN.
     evidence[~seen] = np.where(occluded[~seen], np.nan, 0.0)
     return evidence.reshape(ch, cw)
+
+
+#: The fine images' longer side, px, at most: a table's grain (wood, a weave) is a few pixels wide and
+#: the coarse images average it away; texture is compared here.
+FINE_SIDE = 800
+#: Window of the local correlation of textures, fine px.
+_TEXTURE_PATCH = 7
+#: A window's grey-level variance below this is flat: its correlation with another is noise.
+_TEXTURE_FLOOR = 25.0
+#: The texture's decorrelation on the table is taken to be at least this: JPEG and a fine pixel's worth of
+#: misregistration leave that much.
+_TEXTURE_NOISE_FLOOR = 0.15
+
+
+def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
+    """The view's image (or its empty workspace's) in grey at the fine scale (float32), kept once made."""
+    key = "background" if background else "image"
+    if key not in view.fine:
+        grey = cv2.cvtColor(view.full_background if background else view.image, cv2.COLOR_BGR2GRAY)
+        height, width = grey.shape
+        if view.fine_scale > 1.0:
+            grey = cv2.resize(grey, (round(width / view.fine_scale), round(height / view.fine_scale)),
+                              interpolation=cv2.INTER_AREA)
+        view.fine[key] = grey.astype(np.float32)
+    return view.fine[key]
+
+
+def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
+    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing)."""
+    window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
+    mean_a, mean_b = cv2.blur(a, window), cv2.blur(b, window)
+    var_a = np.maximum(cv2.blur(a * a, window) - mean_a * mean_a, 0.0)
+    var_b = np.maximum(cv2.blur(b * b, window) - mean_b * mean_b, 0.0)
+    correlation = (cv2.blur(a * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
+    return correlation, (var_a > _TEXTURE_FLOOR) & (var_b > _TEXTURE_FLOOR)
+
+
+def _aim_window(view: _View, centre: np.ndarray) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """The window around the aim (coarse pixel ``centre``) where the grain is compared: the views were
+    aimed at the object. As (rows, columns) slices of the coarse image and of the fine one."""
+    cw, ch = view.coarse_size
+    fh, fw = _fine_grey(view).shape
+    reach = int(np.ceil(_TEXTURE_REACH * np.hypot(cw, ch)))
+    x, y = int(round(centre[0])), int(round(centre[1]))
+    x0, x1 = min(max(x - reach, 0), cw), min(max(x + reach + 1, 0), cw)
+    y0, y1 = min(max(y - reach, 0), ch), min(max(y + reach + 1, 0), ch)
+    fine = (slice(round(y0 * fh / ch), round(y1 * fh / ch)), slice(round(x0 * fw / cw), round(x1 * fw / cw)))
+    return (slice(y0, y1), slice(x0, x1)), fine
+
+
+#: The window the grain is compared in reaches this share of the coarse image's diagonal from the aim.
+_TEXTURE_REACH = 0.2
+
+
+def _in_window(view: _View, window: tuple[slice, slice], fine: np.ndarray) -> np.ndarray:
+    """A fine map of the window, averaged into the coarse image's pixels (NaN outside the window)."""
+    cw, ch = view.coarse_size
+    coarse = np.full((ch, cw), np.nan, np.float32)
+    rows, columns = window
+    if rows.stop > rows.start and columns.stop > columns.start and fine.size:
+        coarse[window] = cv2.resize(fine, (columns.stop - columns.start, rows.stop - rows.start),
+                                    interpolation=cv2.INTER_AREA)
+    return coarse
+
+
+def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
+                      standing: Sequence[np.ndarray | None], centre: np.ndarray) -> np.ndarray:
+    """How little any other view, mapped through the support plane at the fine scale, shares each coarse
+    pixel's texture (1 less the best correlation; 0 where no other view sees the table point, or where the
+    textures are flat; NaN out of the window around the aim, coarse pixel ``centre``): the table's grain
+    maps onto itself, a face above the plane shows another grain, even of the table's own colour."""
+    window, fine_window = _aim_window(view, centre)
+    grey = _fine_grey(view)
+    fh, fw = grey.shape
+    grey = grey[fine_window]
+    best = np.full(grey.shape, -1.0, np.float32)
+    seen = np.zeros(grey.shape, bool)
+    for other, hidden in zip(others, standing):
+        maps, inside_flat = view.mapping(other, plane)
+        inside = inside_flat.reshape(view.coarse_size[1], view.coarse_size[0])
+        if hidden is not None:
+            # Where the other view sees the object in front of the table point, it says nothing of it.
+            inside &= cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) == 0
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in view.correlations:
+            # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
+            other_grey = _fine_grey(other)
+            fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
+            fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
+            fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
+            warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_REPLICATE)
+            view.correlations[key] = _local_correlation(grey, warped)
+        correlation, textured = view.correlations[key]
+        seeing = cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST)[fine_window] > 0
+        known = textured & seeing
+        best = np.where(known, np.maximum(best, correlation), best)
+        seen |= known
+    return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
+
+
+def _texture_change(view: _View, centre: np.ndarray) -> np.ndarray:
+    """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
+    1: none; 0 where the grain does not stand clear of the noise; NaN out of the window around the aim,
+    coarse pixel ``centre``): a shadow darkens the grain by the same factor as its brightness, and its
+    soft edge, a slope unrelated to the grain, does not weaken it; a face that hides the grain, even one
+    of the table's colour, loses it."""
+    window, fine_window = _aim_window(view, centre)
+    image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
+    image_grain, empty_grain = _grain(image), _grain(empty)
+    # How much of the empty workspace's grain the image still holds (the local regression's slope), over
+    # how much the light there is dimmed.
+    strength = cv2.GaussianBlur(empty_grain * empty_grain, (0, 0), _GRAIN_WINDOW)
+    slope = cv2.GaussianBlur(image_grain * empty_grain, (0, 0), _GRAIN_WINDOW) / np.maximum(strength, 1e-6)
+    dimmed = ((cv2.GaussianBlur(image, (0, 0), _GRAIN_WINDOW) + 1.0)
+              / (cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW) + 1.0))
+    kept = slope / np.maximum(dimmed, 0.05)
+    # The grain, dimmed as the image is, must stand clear of the noise (the two pictures' difference on
+    # most of the table), and of what JPEG drops: it keeps no grain fainter than a few grey levels.
+    noise = float(np.median(cv2.GaussianBlur((image_grain - empty_grain) ** 2, (0, 0), _GRAIN_WINDOW)))
+    faint = (_GRAIN_FLOOR * cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)) ** 2
+    expected = strength * np.minimum(dimmed, 1.0) ** 2
+    grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
+    return _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
+
+
+def _grain(image: np.ndarray) -> np.ndarray:
+    """What varies over a few fine pixels only (the grain)."""
+    return image - cv2.GaussianBlur(image, (0, 0), _GRAIN_SIGMA)
+
+
+#: The grain's scale and the window its strength is measured over, fine px.
+_GRAIN_SIGMA = 1.5
+_GRAIN_WINDOW = 2.5
+#: A grain weaker than this (its relative contrast), or than this many times the noise, is no grain.
+_GRAIN_FLOOR = 0.02
+_GRAIN_CLEAR = 2.0
+#: Grey levels: the faintest grain that JPEG keeps.
+_GRAIN_VISIBLE = 3.0
+#: The grain lost on the table is taken to be at least this: JPEG and the sensor's noise leave that much.
+_GRAIN_NOISE_FLOOR = 0.2
 
 
 def _background_evidence(view: _View) -> np.ndarray:
@@ -675,6 +837,23 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         return _cut_around_aim(view, centre), None
     noise = max(_noise_level(evidence), floor)
     score = evidence / noise
+    if plane is not None and view.background is None and earlier is not None:
+        # A face as bright as the table (a white box's top under the lamp, on white laminate) differs from
+        # the table point behind it only in its tint; the brightness of one table point differs more from
+        # view to view (the light's fall-off, a sheen) than its tint does, which buries a tint in the noise
+        # of the colour difference. Measured apart, against its own noise, the tint stands out. Only on the
+        # second look: on the first, the other views' objects are known only in part, and the table beside
+        # this object's foot, which they see behind their object, takes that object's tint.
+        tint = _parallax_evidence(view, [v for v in views if v is not view], plane,
+                                  [standing[v.index] for v in views if v is not view], _chroma_difference)
+        tint_score = _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
+        score = np.where(np.isnan(score), score, np.fmax(score, tint_score))
+    if plane is not None and view.background is None:
+        # A face of the table's colour differs from the table mapped through the plane by its grain alone.
+        texture = _texture_parallax(view, [v for v in views if v is not view], plane,
+                                    [standing[v.index] for v in views if v is not view], centre)
+        texture_score = texture / max(_noise_level(texture), _TEXTURE_NOISE_FLOOR)
+        score = np.where(np.isnan(score), score, np.fmax(score, texture_score))
     if earlier is not None:
         score = np.where(np.isnan(score) & (earlier > _HIDDEN), earlier, score)
     # Where the object hides the table point behind a pixel from every other view, the pixel is next
@@ -704,13 +883,51 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # beside it, and leaves its inside (table-coloured against table-coloured) out: a silhouette has
         # no holes, so what the evidence encloses is the object's too.
         region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
-    cut = _graph_cut(view, region, score)
+    try:
+        cut = _graph_cut(view, region, score)
+    except SilhouetteError:
+        cut = np.zeros_like(region)  # the colour models gave it all to the table: the evidence decides below
     standing_out = cv2.bitwise_and(region, differs)
     if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
         # The colour models could not tell object from table (an object of the table's own colour and
         # grain): the evidence alone draws the silhouette.
         cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
     return cut, score
+
+
+#: The tint's difference on the table is taken to be at least this many grey levels (over the three
+#: channels): on an even grey table most of it is exactly 0, and the pixels' rounding to whole grey
+#: levels leaves about one.
+_TINT_NOISE_FLOOR = 1.0
+#: The side of JPEG's colour blocks, full-resolution px (8 samples of colour at half the resolution).
+_JPEG_COLOUR_BLOCK = 16
+
+
+def _over_a_block(view: _View, tint_score: np.ndarray) -> np.ndarray:
+    """A tint's score (in units of its noise) where it stands out over a JPEG colour block at least, 0
+    elsewhere. JPEG keeps the colour in blocks, at half the resolution: a coloured object's tint runs onto
+    the table beside it, and a block's tint goes astray here and there. A tint that stands out over less
+    than a block is JPEG's, not a face's."""
+    block = 2 * int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale)) + 1
+    wide = cv2.morphologyEx(np.where(tint_score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN,
+                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (block, block)))
+    return np.where(wide > 0, tint_score, 0.0).astype(np.float32)
+
+
+def _tint_change(view: _View) -> np.ndarray:
+    """How far each coarse pixel's tint has moved from the empty workspace's (in units of its noise),
+    where the pixel is no darker than the empty workspace: a shadow only takes light away, and under a
+    coloured lamp it takes the lamp's tint away too, so a tint that changed where no light was lost is
+    no shadow's. A face as bright as the table differs from it in its tint only."""
+    assert view.background is not None
+    tint = _chroma_difference(view.coarse, view.background)
+    score = tint / max(_noise_level(tint), _TINT_NOISE_FLOOR)
+    brightness, ground = _brightness(view.coarse), _brightness(view.background)
+    return _over_a_block(view, np.where(brightness < _SHADOW_DARKENING * ground, 0.0, score))
+
+
+#: A pixel darker than the empty workspace by this factor or more may be in a shadow.
+_SHADOW_DARKENING = 0.95
 
 
 #: A graph cut that keeps less than this share of what stands out near the aim failed to model it.
@@ -865,11 +1082,16 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
     for other in others:
         maps, inside_flat = view.mapping(other, plane)
         inside = inside_flat.reshape(ch, cw)
-        # A pixel's worth of misregistration: the other view's range of values around the point.
-        low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
-        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        disagreement = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+        key = (other.index, np.asarray(plane, np.float64).tobytes(), _ratio_parallax)
+        if key not in view.differences:
+            # A pixel's worth of misregistration: the other view's range of values around the point.
+            low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
+            warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_REPLICATE)
+            warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                                    borderMode=cv2.BORDER_REPLICATE)
+            view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+        disagreement = view.differences[key]
         if occluders is not None:
             behind = cv2.remap(occluders[other.index], maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
                                borderValue=0) > 0
@@ -889,23 +1111,29 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed = {}
+    changed, textures = {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        score = change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR)
+        texture = _texture_change(view, _coarse_aim(view, aim))
+        # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
+        textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
+        score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
+        # A face as bright as the table changed its tint only (the other views judge whether the table
+        # itself took that tint: the glow of a coloured object beside it).
+        score = np.maximum(score, _tint_change(view))
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -914,10 +1142,11 @@ _OCCLUSION_ROUNDS = 2
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
-                changed: dict[int, np.ndarray],
+                textures: dict[int, np.ndarray], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
-    where it does (0/255), the table behind ``occluders`` hidden."""
+    where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
+    grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -927,6 +1156,16 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # Where every other view has the table point behind the object, the pixel changed and nothing
         # says it is a shadow (the object's foot, or a face whose table points it covers).
         score = np.where(np.isnan(score), _HIDDEN, score)
+        score = np.maximum(score, textures[view.index])
+        if occluders is not None:
+            # The tint against the other views' through the plane, as without a background (_first_cut):
+            # the table's glow beside a coloured object, and a shadow under a coloured lamp, are the same
+            # from every view; a face as bright as the table is not. Once the objects in the other views
+            # are known: before, the table beside this object's foot takes their object's tint.
+            tint = _parallax_evidence(view, others, plane, [occluders[v.index] for v in others],
+                                      _chroma_difference)
+            score = np.maximum(score, _over_a_block(view, np.nan_to_num(
+                tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))))
         score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
         stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
         # A table point no other view sees (the top of a tall object maps far behind it, out of their
