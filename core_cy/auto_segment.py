@@ -180,7 +180,7 @@ def _chroma_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     as a ratio, because the sensor's noise is in grey levels: a dark pixel's tint is mostly noise."""
     a, b = a + _CHROMA_OFFSET, b + _CHROMA_OFFSET
     gain = cv2.transform(a, _CHANNEL_SUM) / cv2.transform(b, _CHANNEL_SUM)
-    return cv2.transform(cv2.absdiff(a, b * gain[..., None]), _CHANNEL_SUM)
+    return cv2.transform(cv2.absdiff(a, np.asarray(b * gain[..., None], np.float32)), _CHANNEL_SUM)
 
 
 def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
@@ -233,7 +233,9 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
     """The view's image (or its empty workspace's) in grey at the fine scale (float32), kept once made."""
     key = "background" if background else "image"
     if key not in view.fine:
-        grey = cv2.cvtColor(view.full_background if background else view.image, cv2.COLOR_BGR2GRAY)
+        source = view.full_background if background else view.image
+        assert source is not None, "the empty workspace's grain is asked only of a view that has one"
+        grey = cv2.cvtColor(source, cv2.COLOR_BGR2GRAY)
         height, width = grey.shape
         if view.fine_scale > 1.0:
             grey = cv2.resize(grey, (round(width / view.fine_scale), round(height / view.fine_scale)),
