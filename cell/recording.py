@@ -183,11 +183,11 @@ class JobRecording:
 
     def log_silhouette(self, index: int, png: bytes) -> None:
         """View ``index``'s silhouette as a worker sends it: a PNG of the view's size, white where
-        the object is; drawn over its image, half transparent. It is logged as it came, never
-        decoded here: decoding three of them cost the recorder more than the rest of a model's
-        drawing, which a success waits for (the viewer decodes them), and a PNG is a thousandth
-        of the pixels it holds. Only its header is read: a PNG that declares another size than
-        the view's image, or more pixels than may be decoded, is refused (``ValueError``)."""
+        the object is; drawn over its image, partly transparent. It is logged as it came, never
+        decoded here (the viewer decodes it): decoding a scan's silhouettes was about half of the
+        drawing of its model, which a success waits for. Only its header is read: a PNG that
+        declares another size than the view's image, or more pixels than may be decoded, is
+        refused (``ValueError``)."""
         png = bytes(png)
         size = png_size(png)
         if size is None:

@@ -326,6 +326,8 @@ class AsyncCellClient:
                                           heard_from_start=True, want_result=True)
         if isinstance(final, ScanResult):
             return final
+        if final.state is JobState.SUCCEEDED:  # and no result to be had: the daemon's answer says why
+            return await self.result(final.job_id)
         raise JobFailed(f"job {final.job_id} {final.state.value}: {final.error or 'no reason given'}", status=final)
 
 
