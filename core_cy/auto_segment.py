@@ -865,6 +865,21 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     score = np.where(hidden, _HIDDEN, score)
     differs = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
     differs[hidden] = 0
+    if plane is not None and view.background is None:
+        # A table point no other view sees (the top of a tall object maps far behind it, out of their
+        # pictures) says nothing: beside what stands out near the aim, it is hidden, for the graph cut to decide.
+        seen = np.zeros(cw * ch, bool)
+        for other in views:
+            if other is not view:
+                seen |= view.mapping(other, plane)[1]
+        near = _component_near(differs, centre, reach=0.25 * np.hypot(cw, ch))
+        if near is not None:
+            _, _, w, h = cv2.boundingRect(near)
+            reach = max(2, int(round(_BESIDE * max(w, h))))
+            beside = cv2.dilate(near, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+            attached = beside & ~seen.reshape(ch, cw)
+            score = np.where(attached, _HIDDEN, score)
+            hidden |= attached
     joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
     region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
     # A pixel is hidden only where the other views' first look saw something stand in front of its
