@@ -168,10 +168,13 @@ def test_a_silent_gateway_times_out_and_the_client_recovers():
 def test_a_dropped_connection_is_reported_and_the_next_call_connects_again():
     async def scenario():
         async with SimKuka("opc") as sim, client_for(sim) as client:
+            before = await client.read(["RC_OVERRIDE"])
             sim.controller.inject("drop")
             with pytest.raises(KukaConnectionError, match="writing RC_OVERRIDE"):
                 await client.write([("RC_OVERRIDE", "5")])
             # A new connection is a new OpcDaClient on the gateway: the client must connect() it again.
+            # The dropped write was never carried out (it cannot land after the next one).
+            assert await client.read(["RC_OVERRIDE"]) == before
             await client.write([("RC_OVERRIDE", "6")])
             assert await client.read(["RC_OVERRIDE"]) == {"RC_OVERRIDE": "6"}
 

@@ -69,7 +69,10 @@ class SimOpcDaClient:
     def _serve(self, what: str) -> None:
         """Faults of the gateway itself; and openopc2 fails every call before connect()."""
         if self._controller.take("drop"):
-            Pyro5.callcontext.current_context.client.close()  # the reply cannot be sent: the client sees EOF
+            # The connection drops before the gateway acts on the call, as the KVP simulator's does:
+            # the client sees EOF, and no write of the dropped call lands after the client's next one.
+            Pyro5.callcontext.current_context.client.close()
+            raise OPCError(f"{what}: the connection dropped")
         if "hang" in self._controller.faults:
             self._controller.unhung.wait(_HANG_LIMIT_S)
         if what != "connect" and not self.connected:
