@@ -133,6 +133,19 @@ class _View:
         maps, inside = self._mappings[key]
         return maps, inside.copy()
 
+    def sees(self, other: _View, plane: np.ndarray,
+             hidden: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`mapping`'s maps, and (h, w) where ``other`` sees each coarse pixel's table point and
+        where it would but has it behind ``hidden`` (0/255 in ``other``'s coarse image: what stands
+        there, in front of the table point, so that ``other`` says nothing of it)."""
+        cw, ch = self.coarse_size
+        maps, inside_flat = self.mapping(other, plane)
+        inside = inside_flat.reshape(ch, cw)
+        if hidden is None:
+            return maps, inside, np.zeros_like(inside)
+        behind = inside & (cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) > 0)
+        return maps, inside & ~behind, behind
+
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
         """Full-resolution pixel coordinates (N, 2) to coarse ones (pixel centres on integers)."""
         return np.column_stack([(uv[:, 0] + 0.5) / self.sx - 0.5, (uv[:, 1] + 0.5) / self.sy - 0.5])
@@ -192,29 +205,25 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     ``standing``, per other view, what stands out in it (0/255, or None): where the plane point lies
     behind the object in another view, that view sees the object, not the table, and says nothing."""
     cw, ch = view.coarse_size
-    evidence = np.full(cw * ch, np.inf, np.float32)
-    seen = np.zeros(cw * ch, bool)
-    occluded = np.zeros(cw * ch, bool)
+    evidence = np.full((ch, cw), np.inf, np.float32)
+    seen = np.zeros((ch, cw), bool)
+    occluded = np.zeros((ch, cw), bool)
     for number, other in enumerate(others):
-        maps, inside = view.mapping(other, plane)
-        hidden = None if standing is None else standing[number]
-        if hidden is not None:
-            behind = cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0).ravel() > 0
-            occluded |= inside & behind
-            inside &= ~behind
+        maps, inside, behind = view.sees(other, plane, None if standing is None else standing[number])
+        occluded |= behind
         # The images do not change from one look to the next, only what is taken to stand in front.
         key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
         if key not in view.differences:
             warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
-            view.differences[key] = difference_of(view.coarse, warped).ravel()
+            view.differences[key] = difference_of(view.coarse, warped)
         difference = view.differences[key]
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
     # in the other views that would see it: NaN.
     evidence[~seen] = np.where(occluded[~seen], np.nan, 0.0)
-    return evidence.reshape(ch, cw)
+    return evidence
 
 
 #: The fine images' longer side, px, at most: a table's grain (wood, a weave) is a few pixels wide and
@@ -296,11 +305,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     best = np.full(grey.shape, -1.0, np.float32)
     seen = np.zeros(grey.shape, bool)
     for other, hidden in zip(others, standing):
-        maps, inside_flat = view.mapping(other, plane)
-        inside = inside_flat.reshape(view.coarse_size[1], view.coarse_size[0])
-        if hidden is not None:
-            # Where the other view sees the object in front of the table point, it says nothing of it.
-            inside &= cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) == 0
+        maps, inside, _ = view.sees(other, plane, hidden)
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
             # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
@@ -399,7 +404,10 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
     contradicted = np.zeros((ch, cw), bool)
     ratio = _darkening(view)
     for other in others:
-        maps, inside = view.mapping(other, plane)
+        hidden = standing[other.index]
+        # Where the other view sees the object in front of the table point, it says nothing of it.
+        maps, inside, _ = view.sees(other, plane, None if hidden is None else
+                                    cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         other_shadow = _shadow_of_table(other).astype(np.uint8)
         # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
         other_ratio = _darkening(other).astype(np.float32)
@@ -409,12 +417,7 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
         warped_shadow = cv2.remap(cv2.dilate(other_shadow, _SMALL), maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
                                   borderValue=0) > 0
         agrees = warped_shadow & (ratio >= warped_low - _SHADOW_AGREEMENT) & (ratio <= warped_high + _SHADOW_AGREEMENT)
-        hidden = standing[other.index]
-        if hidden is not None:
-            # Where the other view sees the object in front of the table point, it says nothing of it.
-            inside &= cv2.remap(cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN), maps[..., 0], maps[..., 1],
-                                cv2.INTER_NEAREST, borderValue=0).ravel() == 0
-        contradicted |= inside.reshape(ch, cw) & ~agrees
+        contradicted |= inside & ~agrees
     return contradicted
 
 
@@ -868,16 +871,16 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     if plane is not None and view.background is None:
         # A table point no other view sees (the top of a tall object maps far behind it, out of their
         # pictures) says nothing: beside what stands out near the aim, it is hidden, for the graph cut to decide.
-        seen = np.zeros(cw * ch, bool)
+        seen = np.zeros((ch, cw), bool)
         for other in views:
             if other is not view:
-                seen |= view.mapping(other, plane)[1]
+                seen |= view.sees(other, plane)[1]
         near = _component_near(differs, centre, reach=0.25 * np.hypot(cw, ch))
         if near is not None:
             _, _, w, h = cv2.boundingRect(near)
             reach = max(2, int(round(_BESIDE * max(w, h))))
             beside = cv2.dilate(near, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
-            attached = beside & ~seen.reshape(ch, cw)
+            attached = beside & ~seen
             score = np.where(attached, _HIDDEN, score)
             hidden |= attached
     joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
@@ -1097,8 +1100,8 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
     seen = np.zeros((ch, cw), bool)
     occluded = np.zeros((ch, cw), bool)
     for other in others:
-        maps, inside_flat = view.mapping(other, plane)
-        inside = inside_flat.reshape(ch, cw)
+        maps, inside, behind = view.sees(other, plane, None if occluders is None else occluders[other.index])
+        occluded |= behind
         key = (other.index, np.asarray(plane, np.float64).tobytes(), _ratio_parallax)
         if key not in view.differences:
             # A pixel's worth of misregistration: the other view's range of values around the point.
@@ -1109,11 +1112,6 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
                                     borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
         disagreement = view.differences[key]
-        if occluders is not None:
-            behind = cv2.remap(occluders[other.index], maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
-                               borderValue=0) > 0
-            occluded |= inside & behind
-            inside &= ~behind
         best = np.where(inside, np.minimum(best, disagreement), best)
         seen |= inside
     # Hidden behind what stands there in the other views that would see it: NaN; out of every other view's
