@@ -6,6 +6,8 @@ from libc.math cimport acos, atan2, cos, erf, erfc, fabs, log, pow, sin, sqrt, I
 
 from ._superquadric_cy cimport _level
 
+import numpy as np
+
 
 cdef enum:
     _MAX_GRID = 32  # samples across or along a finger's face
@@ -628,20 +630,39 @@ def in_finger_path(const double[:, ::1] offsets not None, const double[:, :, ::1
 
 
 cdef inline bint _in_union(double px, double py, double pz, const double[:, :, ::1] R, const double[:, ::1] t,
-                           const double[:, ::1] sizes, const double[:, ::1] shapes, double factor) noexcept nogil:
-    """Whether the point lies inside a part taken ``factor`` times as large (see union_inside)."""
+                           const double[:, ::1] box, const double[:, ::1] log_sizes, const double[:, ::1] shapes,
+                           const double[::1] limit) noexcept nogil:
+    """Whether the point lies inside a part taken some factor times as large (see union_inside), with
+    what :func:`_part_constants` made of the parts for that factor."""
     cdef Py_ssize_t p
     cdef double x, y, z
     for p in range(R.shape[0]):
         x = fabs(R[p, 0, 0] * px + R[p, 0, 1] * py + R[p, 0, 2] * pz + t[p, 0])
         y = fabs(R[p, 1, 0] * px + R[p, 1, 1] * py + R[p, 1, 2] * pz + t[p, 1])
         z = fabs(R[p, 2, 0] * px + R[p, 2, 1] * py + R[p, 2, 2] * pz + t[p, 2])
-        if x > sizes[p, 0] * factor or y > sizes[p, 1] * factor or z > sizes[p, 2] * factor:
+        if x > box[p, 0] or y > box[p, 1] or z > box[p, 2]:
             continue  # outside the part's box: outside the part
-        if _level(x, y, z, log(sizes[p, 0]), log(sizes[p, 1]), log(sizes[p, 2]), shapes[p, 0],
-                  shapes[p, 1]) < pow(factor, 2.0 / shapes[p, 0]):
+        if _level(x, y, z, log_sizes[p, 0], log_sizes[p, 1], log_sizes[p, 2], shapes[p, 0], shapes[p, 1]) < limit[p]:
             return True
     return False
+
+
+def _part_constants(const double[:, ::1] sizes, const double[:, ::1] shapes, double factor):
+    """What :func:`_in_union` asks of each part at every sample, made once per call (with the C
+    library's log and pow, as it made them at every sample before): its box taken ``factor`` times
+    as large (P, 3), the logs of its sizes (P, 3), and the level below which a point is inside it
+    taken so (P,)."""
+    cdef Py_ssize_t p, k, count = sizes.shape[0]
+    box, log_sizes, limit = np.empty((count, 3)), np.empty((count, 3)), np.empty(count)
+    cdef double[:, ::1] box_view = box
+    cdef double[:, ::1] log_view = log_sizes
+    cdef double[::1] limit_view = limit
+    for p in range(count):
+        for k in range(3):
+            box_view[p, k] = sizes[p, k] * factor
+            log_view[p, k] = log(sizes[p, k])
+        limit_view[p] = pow(factor, 2.0 / shapes[p, 0])
+    return box, log_sizes, limit
 
 
 def union_inside(const double[:, ::1] points not None, const double[:, :, ::1] R not None,
@@ -657,9 +678,13 @@ def union_inside(const double[:, ::1] points not None, const double[:, :, ::1] R
     """
     cdef Py_ssize_t i
     cdef bint found = False
+    cdef const double[:, ::1] box
+    cdef const double[:, ::1] log_sizes
+    cdef const double[::1] limit
+    box, log_sizes, limit = _part_constants(sizes, shapes, factor)
     with nogil:
         for i in range(points.shape[0]):
-            if _in_union(points[i, 0], points[i, 1], points[i, 2], R, t, sizes, shapes, factor):
+            if _in_union(points[i, 0], points[i, 1], points[i, 2], R, t, box, log_sizes, shapes, limit):
                 found = True
                 break
     return found
@@ -675,16 +700,21 @@ def line_extents(const double[:, :, ::1] lines not None, const double[:, :, ::1]
     stops at the union, so only the samples outside it are evaluated, and one inside at each end.
     """
     cdef Py_ssize_t c, j, first, last, n = lines.shape[1]
+    cdef const double[:, ::1] box
+    cdef const double[:, ::1] log_sizes
+    cdef const double[::1] limit
+    box, log_sizes, limit = _part_constants(sizes, shapes, factor)
     with nogil:
         for c in range(lines.shape[0]):
             first, last = -1, -1
             for j in range(n):
-                if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, sizes, shapes, factor):
+                if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, box, log_sizes, shapes, limit):
                     first = j
                     break
             if first >= 0:
                 for j in range(n - 1, first - 1, -1):
-                    if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, sizes, shapes, factor):
+                    if _in_union(lines[c, j, 0], lines[c, j, 1], lines[c, j, 2], R, t, box, log_sizes, shapes,
+                                 limit):
                         last = j
                         break
             extents[c, 0], extents[c, 1] = first, last
