@@ -231,8 +231,9 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
 FINE_SIDE = 800
 #: Window of the local correlation of textures, fine px.
 _TEXTURE_PATCH = 7
-#: A window's grey-level variance below this is flat: its correlation with another is noise.
-_TEXTURE_FLOOR = 25.0
+#: A window's grey-level variance below this is flat whatever its brightness: its correlation with another
+#: is the sensor's noise and JPEG's.
+_TEXTURE_FLOOR = 3.0 ** 2
 #: The texture's decorrelation on the table is taken to be at least this: JPEG and a fine pixel's worth of
 #: misregistration leave that much.
 _TEXTURE_NOISE_FLOOR = 0.15
@@ -261,7 +262,12 @@ def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nda
     var_a = np.maximum(cv2.blur(a * a, window) - mean_a * mean_a, 0.0)
     var_b = np.maximum(cv2.blur(b * b, window) - mean_b * mean_b, 0.0)
     correlation = (cv2.blur(a * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
-    return correlation, (var_a > _TEXTURE_FLOOR) & (var_b > _TEXTURE_FLOOR)
+    # A shadow darkens the grain with the light and keeps its contrast (the table's dark face-coloured shadow
+    # beside a dark face keeps the table's grain, the face shows its own), so a grain counts by its contrast;
+    # but it must stand clear of the sensor's noise and of what JPEG drops, a few grey levels whatever the light.
+    floor_a = np.maximum((_TEXTURE_CONTRAST * mean_a) ** 2, _TEXTURE_FLOOR)
+    floor_b = np.maximum((_TEXTURE_CONTRAST * mean_b) ** 2, _TEXTURE_FLOOR)
+    return correlation, (var_a > floor_a) & (var_b > floor_b)
 
 
 def _aim_window(view: _View, centre: np.ndarray) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
@@ -305,7 +311,10 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     best = np.full(grey.shape, -1.0, np.float32)
     seen = np.zeros(grey.shape, bool)
     for other, hidden in zip(others, standing):
-        maps, inside, _ = view.sees(other, plane, hidden)
+        # The grain is compared at a finer scale than the object's outline is known: the table points just
+        # behind its edge in the other view are taken for hidden too.
+        maps, inside, _ = view.sees(other, plane, None if hidden is None else
+                                    cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
             # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.

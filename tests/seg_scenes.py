@@ -32,7 +32,7 @@ class Scene:
     position: tuple[float, float] = (0.0, 0.0)
     yaw: float = 0.3
     object_bgr: tuple[float, float, float] = (40.0, 60.0, 200.0)
-    object_print: str = "flat"             # "flat" or "label"
+    object_print: str = "flat"             # "flat", "label" or "wood"
     table_bgr: tuple[float, float, float] = (150.0, 170.0, 190.0)
     table_texture: str = "flat"            # "flat", "wood" or "grid"
     light: tuple[float, float, float] = (0.5, -0.3, 0.8)
@@ -126,6 +126,10 @@ def _object_colour(scene: Scene, local: np.ndarray) -> np.ndarray:
     base = np.asarray(scene.object_bgr, dtype=np.float64)
     if scene.object_print == "flat":
         return np.broadcast_to(base, (len(local), 3)).copy()
+    if scene.object_print == "wood":  # a grain of its own, running up its sides and across its top
+        along = local[:, 2] * 0.8 + local[:, 0] * 0.5 + local[:, 1] * 0.3
+        shade = 1.0 - 0.3 * np.sin(along * 2 * np.pi / 0.008) ** 2
+        return base * shade[:, None]
     z = local[:, 2] / scene.size[2]
     angle = np.arctan2(local[:, 1], local[:, 0])
     colour = np.broadcast_to(base, (len(local), 3)).copy()
