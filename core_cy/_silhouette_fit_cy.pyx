@@ -105,10 +105,10 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
     cdef double t[3]
     cdef double c[3]
     cdef double w[3]
-    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz, g
+    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz
     cdef double[::1] co = trig[:n_omega], so = trig[n_omega:2 * n_omega]
     cdef double[::1] nco = trig[2 * n_omega:3 * n_omega], nso = trig[3 * n_omega:]
-    cdef bint in_front = True, candidate
+    cdef bint in_front = True, candidate, front
     _pose(x, R0, t0, scale, R, dR, a, t)
     # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
     for j in range(n_omega):
@@ -145,21 +145,30 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
             facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
                            + grid[row, 5] * (grid[row, 2] - c[2]))
         count = 0
+        # Row by row of the grid (i, j), its neighbours along omega wrapping round, along eta ending
+        # at the poles; then the poles, always candidates.
+        i = 0
+        j = 0
         for row in range(n_grid + 2):
             if row >= n_grid:
                 candidate = True
             else:
-                i = row // n_omega
-                j = row % n_omega
-                g = facing[row]
-                other = i * n_omega + (j + 1) % n_omega
-                candidate = (g > 0) != (facing[other] > 0)
-                other = i * n_omega + (j + n_omega - 1) % n_omega
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
-                other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
-                other = (i - 1) * n_omega + j if i > 0 else n_grid
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
+                front = facing[row] > 0
+                other = row + 1 if j + 1 < n_omega else row + 1 - n_omega
+                candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row - 1 if j > 0 else row + n_omega - 1
+                    candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row + n_omega if i + 1 < n_eta else n_grid + 1
+                    candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row - n_omega if i > 0 else n_grid
+                    candidate = front != (facing[other] > 0)
+                j += 1
+                if j == n_omega:
+                    j = 0
+                    i += 1
             if not candidate:
                 continue
             for k in range(3):
