@@ -12,7 +12,6 @@ orientation ``R = R0 Rz(gamma) Ry(beta) Rx(alpha)``, as in the point fit.
 import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
-from libc.stdlib cimport qsort
 
 from ._superquadric_cy cimport _rotation, _support, _support_value
 
@@ -105,10 +104,10 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
     cdef double t[3]
     cdef double c[3]
     cdef double w[3]
-    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz, g
+    cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz
     cdef double[::1] co = trig[:n_omega], so = trig[n_omega:2 * n_omega]
     cdef double[::1] nco = trig[2 * n_omega:3 * n_omega], nso = trig[3 * n_omega:]
-    cdef bint in_front = True, candidate
+    cdef bint in_front = True, candidate, front
     _pose(x, R0, t0, scale, R, dR, a, t)
     # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
     for j in range(n_omega):
@@ -145,21 +144,30 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
             facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
                            + grid[row, 5] * (grid[row, 2] - c[2]))
         count = 0
+        # Row by row of the grid (i, j), its neighbours along omega wrapping round, along eta ending
+        # at the poles; then the poles, always candidates.
+        i = 0
+        j = 0
         for row in range(n_grid + 2):
             if row >= n_grid:
                 candidate = True
             else:
-                i = row // n_omega
-                j = row % n_omega
-                g = facing[row]
-                other = i * n_omega + (j + 1) % n_omega
-                candidate = (g > 0) != (facing[other] > 0)
-                other = i * n_omega + (j + n_omega - 1) % n_omega
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
-                other = (i + 1) * n_omega + j if i + 1 < n_eta else n_grid + 1
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
-                other = (i - 1) * n_omega + j if i > 0 else n_grid
-                candidate = candidate or ((g > 0) != (facing[other] > 0))
+                front = facing[row] > 0
+                other = row + 1 if j + 1 < n_omega else row + 1 - n_omega
+                candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row - 1 if j > 0 else row + n_omega - 1
+                    candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row + n_omega if i + 1 < n_eta else n_grid + 1
+                    candidate = front != (facing[other] > 0)
+                if not candidate:
+                    other = row - n_omega if i > 0 else n_grid
+                    candidate = front != (facing[other] > 0)
+                j += 1
+                if j == n_omega:
+                    j = 0
+                    i += 1
             if not candidate:
                 continue
             for k in range(3):
@@ -374,14 +382,65 @@ ctypedef struct _Point:
     float y
 
 
-cdef int _by_x_then_y(const void* a, const void* b) noexcept nogil:
-    cdef const _Point* p = <const _Point*>a
-    cdef const _Point* q = <const _Point*>b
-    if p.x != q.x:
-        return -1 if p.x < q.x else 1
-    if p.y != q.y:
-        return -1 if p.y < q.y else 1
-    return 0
+cdef inline bint _before(_Point p, _Point q) noexcept nogil:
+    """p comes before q in (x, y) order."""
+    return p.x < q.x or (p.x == q.x and p.y < q.y)
+
+
+cdef void _sort_points(_Point* points, Py_ssize_t n) noexcept nogil:
+    """Sort the points in (x, y) order, in place: a quicksort (median of three) leaving short runs to
+    insertion sort, with no call per comparison (points alike in x and y are the same point, so
+    any sort gives the same array)."""
+    cdef Py_ssize_t stack[128]
+    cdef Py_ssize_t top = 0, low, high, i, j, middle
+    cdef _Point pivot, swap
+    stack[0] = 0
+    stack[1] = n - 1
+    top = 2
+    while top > 0:
+        top -= 2
+        low = stack[top]
+        high = stack[top + 1]
+        while high - low > 12:
+            middle = low + (high - low) // 2
+            if _before(points[middle], points[low]):
+                swap = points[middle]; points[middle] = points[low]; points[low] = swap
+            if _before(points[high], points[low]):
+                swap = points[high]; points[high] = points[low]; points[low] = swap
+            if _before(points[high], points[middle]):
+                swap = points[high]; points[high] = points[middle]; points[middle] = swap
+            pivot = points[middle]
+            i = low
+            j = high
+            while i <= j:
+                while _before(points[i], pivot):
+                    i += 1
+                while _before(pivot, points[j]):
+                    j -= 1
+                if i <= j:
+                    swap = points[i]; points[i] = points[j]; points[j] = swap
+                    i += 1
+                    j -= 1
+            # The larger side waits on the stack, the smaller is sorted next: the stack stays shallow.
+            if j - low < high - i:
+                if i < high:
+                    stack[top] = i
+                    stack[top + 1] = high
+                    top += 2
+                high = j
+            else:
+                if low < j:
+                    stack[top] = low
+                    stack[top + 1] = j
+                    top += 2
+                low = i
+        for i in range(low + 1, high + 1):
+            swap = points[i]
+            j = i - 1
+            while j >= low and _before(swap, points[j]):
+                points[j + 1] = points[j]
+                j -= 1
+            points[j + 1] = swap
 
 
 cdef inline double _turn(_Point o, _Point a, _Point b) noexcept nogil:
@@ -399,7 +458,7 @@ cdef Py_ssize_t _convex_hull(_Point* points, Py_ssize_t n, _Point* hull) noexcep
     cdef Py_ssize_t i, k = 0, lower
     if n < 3:
         return 0
-    qsort(points, n, sizeof(_Point), _by_x_then_y)
+    _sort_points(points, n)
     for i in range(n - 1, -1, -1):
         while k >= 2 and _turn(hull[k - 2], hull[k - 1], points[i]) <= 0:
             k -= 1

@@ -10,13 +10,13 @@ import pytest
 from robocell.workers.sim.objects import SuperquadricObject
 from robocell.workers.sim.render import render
 from robocell.workers.sim.scans import default_K, plan_views
-from robocell.core_cy._silhouette_fit_cy import normal_equations, outline_points, tangent_planes
+from robocell.core_cy._silhouette_fit_cy import normal_equations, outline_points, part_planes, tangent_planes
 from robocell.core_cy.camera import Camera
 from robocell.core_cy.edges import edge_samples
 from robocell.core_cy.errors import FitError
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.segment import mask_with_outline
-from robocell.core_cy.silhouette_fit import _ETA, _OMEGA, _Problem, _Views, fit_to_silhouettes
+from robocell.core_cy.silhouette_fit import _ANGLES, _ETA, _OMEGA, _Problem, _Views, fit_to_silhouettes
 from robocell.core_cy.superquadric import Superquadric, surface_points
 
 OBJECTS = {  # on the table at (0.6, 0), turned 25 degrees: family, half-sizes (m), lying on its side
@@ -164,6 +164,30 @@ def test_the_outline_is_the_hull_of_the_whole_surface():
         uv, _ = camera.project(problem.grid[:, :3] @ truth.T_world_object[:3, :3].T + truth.T_world_object[:3, 3])
         every = cv2.contourArea(cv2.convexHull(uv.astype(np.float32)))
         assert kept == pytest.approx(every, rel=1e-5)  # float32 pixels
+
+
+@pytest.mark.parametrize("name", ["rounded-box", "cylinder", "ellipsoid"])
+def test_part_planes_draw_the_outline_cv2_draws(name):
+    """The one-call kernel's own hull of the outline points (sorted and chained without cv2) gives every
+    sample the plane that cv2.convexHull's polygon gives it, in every view."""
+    import cv2
+
+    truth, cameras, edges = _ideal_scan(name, 3)
+    views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
+    problem = _Problem(truth, views, np.zeros(4), 0.0, 1.0)
+    x = problem.x0 + np.array([0.1, -0.05, 0.0, -0.2, 0.1, 0.02, -0.01, 0.0, 0.1, -0.05, 0.3])  # a general pose
+    planes = np.empty((views.count, 9))
+    assert part_planes(x, problem.R0[0], problem.t0[0], problem.scale[0], len(_ETA), _ANGLES, views.projections,
+                       views.centres, views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit,
+                       problem.grid, problem.uv, problem.counts, planes)
+    assert outline_points(x, problem.R0[0], problem.t0[0], problem.scale[0], _ETA, _OMEGA, views.projections,
+                          views.centres, problem.grid, problem.uv, problem.counts)
+    for view, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
+            zip(views.samples, views.rows, views.cameras)):
+        hull = cv2.convexHull(problem.uv[view, :problem.counts[view]]).reshape(-1, 2)
+        expected = np.empty((len(samples), 9))
+        tangent_planes(hull, samples, K, R, centre, pixels_per_unit, expected)
+        np.testing.assert_allclose(planes[rows], expected, rtol=1e-9, atol=1e-12)
 
 
 def test_residuals_are_distances_to_the_outline_in_pixels():
