@@ -22,8 +22,11 @@ def vertex_normals(vertices, triangles) -> np.ndarray:
         raise ValueError(f"need vertices (V, 3) and triangles (F, 3), got {vertices.shape} and {triangles.shape}")
     corners = vertices[triangles]
     face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # length: twice the area
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
+    # Each face's normal summed into its three corners: bincount does the scattered sum at once
+    # (np.add.at does it one element at a time).
+    corner_of = triangles.ravel()
+    face_thrice = np.repeat(face, 3, axis=0)
+    normals = np.stack([np.bincount(corner_of, weights=face_thrice[:, axis], minlength=len(vertices))
+                        for axis in range(3)], axis=1)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return normals / np.where(length > 0, length, 1.0)

@@ -399,14 +399,17 @@ def camera():
 
 def test_camera_probe(camera, capsys, monkeypatch):
     monkeypatch.setenv("PROBE_PW", PASSWORD)
-    status, out, _ = run(capsys, "camera", "probe", camera.url, "--user", "root", "--password-env", "PROBE_PW")
+    # The simulated camera renders its scene for each snapshot: on a busy machine (the suite runs its
+    # files side by side) that can take longer than a real camera's answer, which --timeout allows for.
+    status, out, _ = run(capsys, "camera", "probe", camera.url, "--user", "root", "--password-env", "PROBE_PW",
+                         "--timeout", "60")
     assert status == 0, out
     assert f"camera       {camera.url}" in out
     assert "resolutions  1280x960, 1024x768, 800x600, 640x480, 480x360, 320x240, 240x180, 160x120" in out
     assert "snapshot     ok: 640x480 JPEG" in out
 
     status, out, _ = run(capsys, "camera", "probe", camera.url, "--user", "root", "--password-env", "PROBE_PW",
-                         "--resolution", "320x240", "--json")
+                         "--resolution", "320x240", "--json", "--timeout", "60")
     result = json.loads(out)
     assert status == 0 and result["snapshot"]["ok"] and (result["snapshot"]["width"], result["snapshot"]["height"]) \
         == (320, 240) and result["snapshot"]["time_ms"] > 0 and [320, 240] in result["resolutions"]
