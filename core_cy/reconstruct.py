@@ -29,7 +29,7 @@ __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
 
 _JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
 # A view whose silhouette IoU stays below this clearly disagrees with the one-superquadric fit:
-# every start is then taken to its end (at most this many steps each).
+# the other starts' descents are judged by their agreement, and the best goes on (at most this many steps).
 _DISAGREE = 0.8
 _RESTART_ITERATIONS = 20
 _RESTING_TILT = 30.0  # degrees
@@ -309,16 +309,20 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         ious, _ = union_ious((superquadric,), cameras, silhouettes, boxes)
         if min(ious) < _DISAGREE:
             # A view clearly disagrees with the model: a bad local minimum (a slab seen edge-on, a
-            # tilted start) or an object that is no superquadric. Every start goes to its end, and
-            # the one that agrees best with all the silhouettes is kept (DESIGN.md §1.12).
-            for other in starts:
-                restart = fit_to_silhouettes(other, cameras, edges, support_plane=plane,
+            # tilted start) or an object that is no superquadric. The descents from the other starts,
+            # each some steps on already (the fit went on with them, the silhouettes unexplained), are
+            # judged by how well they agree with all the silhouettes; the one that agrees best goes on
+            # to its end, and is kept if it then agrees better than the fit (DESIGN.md §1.12).
+            agreement = [(float(np.mean(union_ious(other, cameras, silhouettes, boxes)[0])), other[0])
+                         for other in fit.others]
+            if agreement:
+                _, agreeing = max(agreement, key=lambda pair: pair[0])
+                restart = fit_to_silhouettes(agreeing, cameras, edges, support_plane=plane,
                                              max_iterations=_RESTART_ITERATIONS)
-                fitted = restart.superquadric
                 evaluations["fit"] += restart.evaluations
-                other_ious, _ = union_ious((fitted,), cameras, silhouettes, boxes)
+                other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
-                    superquadric, ious = fitted, other_ious
+                    superquadric, ious = restart.superquadric, other_ious
             lap("fit")
     else:
         superquadric = fit_superquadric(points[::stride], inside_weight=options.inside_weight,

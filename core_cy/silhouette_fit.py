@@ -74,12 +74,17 @@ class SilhouetteFit:
     evaluations : int
         Evaluations of the cost over every start, each part of a union counted: the fit's work, by
         which a later search can size its own (deterministic, unlike its time).
+    others : tuple of tuple of Superquadric
+        Where the descents from the other starts stopped, best (lowest edge cost) first: models
+        that a judge other than the edges (how well all silhouettes agree) may prefer, each
+        already some steps on from its start.
     """
 
     parts: tuple[Superquadric, ...]
     rms_px: float
     iterations: int
     evaluations: int = 0
+    others: tuple[tuple[Superquadric, ...], ...] = ()
 
     @property
     def superquadric(self) -> Superquadric:
@@ -222,6 +227,7 @@ class _Fitter:
         # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
         self.tolerance = 0.5 * 1e-4 * views.count
         self.tally = [0]
+        self.descents: list[Descent] = []  # the last search's, one per start
 
     @property
     def evaluations(self) -> int:
@@ -245,6 +251,7 @@ class _Fitter:
         the winner goes on to convergence and wins if it ends lower (each start is tried once), while
         ``within`` (a budget) says so."""
         alive = [self.descent(start) for start in starts]
+        self.descents = alive
         if len(alive) > 1:
             for descent in alive:
                 descent.run(_SEARCH_ITERATIONS)
@@ -270,14 +277,15 @@ class _Fitter:
                 descent.run(max_iterations)
                 if descent.cost < best.cost:
                     best = descent
+        self.descents = alive
         return best
 
     def rms(self, cost: float) -> float:
         return _rms(cost, self.views.count, self.loss_scale)
 
-    def result(self, descent: Descent) -> SilhouetteFit:
+    def result(self, descent: Descent, others: tuple[Descent, ...] = ()) -> SilhouetteFit:
         return SilhouetteFit(descent.problem.parts(descent.x), self.rms(descent.cost), descent.iterations,
-                             self.evaluations)
+                             self.evaluations, tuple(other.problem.parts(other.x) for other in others))
 
 
 def _first_part(start) -> Superquadric:
@@ -326,6 +334,7 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         raise FitError("need at least one start")
     fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale)
     best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
+    descents = fitter.descents
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
     # with another of its axes as z can only be reached by a jump, so try both, each going on only
     # if a few steps bring it below the best so far. Not needed where the outlines already run
@@ -335,7 +344,9 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
             other = fitter.descent(turned).run(_SEARCH_ITERATIONS)
             if other.cost < best.cost:
                 best = other.run(max_iterations)
-    return fitter.result(best)
+    others = sorted((descent for descent in descents if descent is not best and np.isfinite(descent.cost)),
+                    key=lambda descent: descent.cost)
+    return fitter.result(best, tuple(others))
 
 
 def _rms(cost: float, count: int, loss_scale: float) -> float:

@@ -122,6 +122,17 @@ def test_the_best_of_several_starts_wins():
     assert volumetric_iou(fit.superquadric, truth) > 0.98
 
 
+def test_the_other_starts_are_reported_where_their_descents_stopped():
+    """A judge other than the edges (the silhouettes' agreement) may prefer another start's model:
+    the fit hands over where each other descent stopped, some steps on from its start."""
+    truth, cameras, edges = _ideal_scan("box", 3)
+    far_off = Superquadric(truth.size * 3.0, [1.0, 1.0], truth.T_world_object)
+    fit = fit_to_silhouettes([far_off, _perturbed(truth, seed=5)], cameras, edges, support_plane=[0, 0, 1, 0])
+    assert len(fit.others) == 1 and len(fit.others[0]) == 1
+    assert volumetric_iou(fit.others[0][0], truth) > volumetric_iou(far_off, truth) + 0.1
+    assert fit_to_silhouettes(far_off, cameras, edges, support_plane=[0, 0, 1, 0]).others == ()
+
+
 def test_a_cylinder_started_on_its_side_is_turned_upright():
     """The z axis is the superquadric's odd one out; only a jump puts it on another axis."""
     truth, cameras, edges = _ideal_scan("cylinder", 3)
