@@ -126,10 +126,13 @@ class _View:
         plane_key = np.asarray(plane, np.float64).tobytes()
         key = (other.index, plane_key)
         if key not in self._mappings:
-            if plane_key not in self._points:
-                self._points[plane_key] = _plane_points(self, plane)
-            points, valid = self._points[plane_key]
-            self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
+            if self.camera.dist is None and other.camera.dist is None:
+                self._mappings[key] = _plane_homography_maps(self, other, plane)
+            else:
+                if plane_key not in self._points:
+                    self._points[plane_key] = _plane_points(self, plane)
+                points, valid = self._points[plane_key]
+                self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
         maps, inside = self._mappings[key]
         return maps, inside.copy()
 
@@ -254,19 +257,28 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
     return view.fine[key]
 
 
-def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
-    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing)."""
+def _window_statistics(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A grey image, and its mean and variance over :data:`_TEXTURE_PATCH` windows at every pixel, and the
+    variance below which its window is flat (:func:`_local_correlation`)."""
     window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
-    mean_a, mean_b = cv2.blur(a, window), cv2.blur(b, window)
-    var_a = np.maximum(cv2.blur(a * a, window) - mean_a * mean_a, 0.0)
-    var_b = np.maximum(cv2.blur(b * b, window) - mean_b * mean_b, 0.0)
-    correlation = (cv2.blur(a * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
+    mean = cv2.blur(image, window)
+    variance = np.maximum(cv2.blur(image * image, window) - mean * mean, 0.0)
     # A shadow darkens the grain with the light and keeps its contrast (the table's dark face-coloured shadow
     # beside a dark face keeps the table's grain, the face shows its own), so a grain counts by its contrast;
     # but it must stand clear of the sensor's noise and of what JPEG drops, a few grey levels whatever the light.
-    floor_a = np.maximum((_TEXTURE_CONTRAST * mean_a) ** 2, _TEXTURE_FLOOR)
-    floor_b = np.maximum((_TEXTURE_CONTRAST * mean_b) ** 2, _TEXTURE_FLOOR)
+    floor = np.maximum((_TEXTURE_CONTRAST * mean) ** 2, _TEXTURE_FLOOR)
+    return image, mean, variance, floor
+
+
+def _local_correlation(a: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                       b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
+    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing). ``a``
+    comes as its :func:`_window_statistics`, made once for every image it is compared with."""
+    window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
+    a_image, mean_a, var_a, floor_a = a
+    _, mean_b, var_b, floor_b = _window_statistics(b)
+    correlation = (cv2.blur(a_image * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
     return correlation, (var_a > floor_a) & (var_b > floor_b)
 
 
@@ -310,6 +322,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     grey = grey[fine_window]
     best = np.full(grey.shape, -1.0, np.float32)
     seen = np.zeros(grey.shape, bool)
+    own = None  # the window's own statistics, shared by every other view's comparison
     for other, hidden in zip(others, standing):
         # The grain is compared at a finer scale than the object's outline is known: the table points just
         # behind its edge in the other view are taken for hidden too.
@@ -317,14 +330,12 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
                                     cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
-            # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
-            other_grey = _fine_grey(other)
-            fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
-            fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
-            fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
-            warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+            fine_maps = _fine_window_maps(view, other, plane, maps, fine_window)
+            warped = cv2.remap(_fine_grey(other), fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
-            view.correlations[key] = _local_correlation(grey, warped)
+            if own is None:
+                own = _window_statistics(grey)
+            view.correlations[key] = _local_correlation(own, warped)
         correlation, textured = view.correlations[key]
         seeing = cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST)[fine_window] > 0
         known = textured & seeing
@@ -478,6 +489,81 @@ def _plane_maps(other: _View, points: np.ndarray, valid: np.ndarray,
         (coarse_uv[:, 0] <= ow - 1) & (coarse_uv[:, 1] <= oh - 1)
     return coarse_uv.reshape(ch, cw, 2), inside
 
+
+
+def _plane_homography(view: _View, other: _View, plane: np.ndarray,
+                      to_full: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """For two pinhole cameras without distortion, the plane's homography from pixels of ``view`` (on a grid
+    that ``to_full``, 3x3, takes to full-resolution pixels) to ``other``'s full-resolution pixels.
+
+    A pixel x of the grid has the ray d = R K^-1 to_full x from the centre c; the ray meets the plane at
+    c + t d with t = -h / (n . d) (h the centre's height over the plane). Projected by the other camera
+    (M, p) and multiplied through by n . d, its homogeneous pixel is H x = ((M c + p) n^T - h M) d; its
+    third coordinate, over n . d, is the depth. Returns H, the row vector ``across`` with n . d =
+    across . x, and h."""
+    normal, offset = np.asarray(plane[:3], np.float64), float(plane[3])
+    centre = view.camera.center
+    height = float(normal @ centre + offset)
+    to_ray = view.camera.T_world_cam[:3, :3] @ np.linalg.inv(view.camera.K) @ to_full
+    projection = other.camera.projection
+    M, p = projection[:, :3], projection[:, 3]
+    across = normal @ to_ray
+    return np.outer(M @ centre + p, across) - height * (M @ to_ray), across, height
+
+
+def _homography_maps(H: np.ndarray, across: np.ndarray, height: float, columns: np.ndarray,
+                     rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the grid's pixels (``columns`` x ``rows``) fall through :func:`_plane_homography`'s ``H``:
+    (h, w) float64 u and v, and where the ray meets the plane in front of both cameras."""
+    i, j = columns[None, :], rows[:, None]
+    x, y, z = (H[k, 0] * i + H[k, 1] * j + H[k, 2] for k in range(3))
+    meets = across[0] * i + across[1] * j + across[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -height / meets
+        u, v = x / z, y / z
+        valid = np.isfinite(t) & (t > 0) & (z / meets > 0)
+    return u, v, valid
+
+
+def _plane_homography_maps(view: _View, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_plane_maps` of :func:`_plane_points` for two pinhole cameras without distortion, in closed
+    form: through a plane, one view's pixels map onto another's by a homography, so the table point of
+    each coarse pixel need not be found and projected one by one."""
+    cw, ch = view.coarse_size
+    to_full = np.array([[view.sx, 0.0, 0.5 * view.sx - 0.5], [0.0, view.sy, 0.5 * view.sy - 0.5], [0.0, 0.0, 1.0]])
+    H, across, height = _plane_homography(view, other, plane, to_full)
+    u, v, valid = _homography_maps(H, across, height, np.arange(cw, dtype=np.float64),
+                                   np.arange(ch, dtype=np.float64))
+    coarse_u = ((u + 0.5) / other.sx - 0.5).astype(np.float32)
+    coarse_v = ((v + 0.5) / other.sy - 0.5).astype(np.float32)
+    ow, oh = other.coarse_size
+    inside = valid & (coarse_u >= 0) & (coarse_v >= 0) & (coarse_u <= ow - 1) & (coarse_v <= oh - 1)
+    return np.stack([coarse_u, coarse_v], axis=-1), inside.ravel()
+
+
+def _fine_window_maps(view: _View, other: _View, plane: np.ndarray, maps: np.ndarray,
+                      fine_window: tuple[slice, slice]) -> np.ndarray:
+    """(h, w, 2) float32: where each fine pixel of ``view``'s window falls in ``other``'s fine image through
+    the plane. Without distortion the homography places each one exactly; through a lens the coarse
+    ``maps`` (:meth:`_View.mapping`), interpolated, do: the plane's mapping is smooth."""
+    grey, other_grey = _fine_grey(view), _fine_grey(other)
+    fh, fw = grey.shape
+    ofh, ofw = other_grey.shape
+    if view.camera.dist is None and other.camera.dist is None:
+        height, width = view.image.shape[:2]
+        fx, fy = width / fw, height / fh
+        to_full = np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0.0, 0.0, 1.0]])
+        H, across, h = _plane_homography(view, other, plane, to_full)
+        rows, columns = fine_window
+        u, v, _ = _homography_maps(H, across, h, np.arange(columns.start, columns.stop, dtype=np.float64),
+                                   np.arange(rows.start, rows.stop, dtype=np.float64))
+        other_height, other_width = other.image.shape[:2]
+        return np.stack([(u + 0.5) * (ofw / other_width) - 0.5, (v + 0.5) * (ofh / other_height) - 0.5],
+                        axis=-1).astype(np.float32)
+    fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
+    fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
+    fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
+    return fine_maps
 
 
 _CHROMA_OFFSET = 12.0
@@ -992,7 +1078,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
     cw, ch = view.coarse_size
     x, y, w, h = cv2.boundingRect(region)
-    margin = max(8, int(0.5 * max(w, h)))
+    margin = max(8, int(_CUT_MARGIN * max(w, h)))
     x0, y0, x1, y1 = max(0, x - margin), max(0, y - margin), min(cw, x + w + margin), min(ch, y + h + margin)
     mask = np.full((y1 - y0, x1 - x0), cv2.GC_PR_BGD, np.uint8)
     crop = (slice(y0, y1), slice(x0, x1))
@@ -1026,6 +1112,10 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     if outside is not None:
         mask[outside[crop] > 0] = cv2.GC_BGD
     return _run_grabcut(view, mask, (x0, y0, x1, y1))
+
+
+#: The graph cut's box reaches this share of the region's size beyond it: table enough for its colour model.
+_CUT_MARGIN = 0.5
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
