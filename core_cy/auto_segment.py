@@ -37,6 +37,7 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
+from ._auto_segment_cy import median_and_spread
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -146,7 +147,7 @@ class _View:
         inside = inside_flat.reshape(ch, cw)
         if hidden is None:
             return maps, inside, np.zeros_like(inside)
-        behind = inside & (cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) > 0)
+        behind = inside & (_remapped(hidden, maps, cv2.INTER_NEAREST, borderValue=0) > 0)
         return maps, inside & ~behind, behind
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
@@ -177,6 +178,12 @@ class _View:
                                         P=self.camera.K).reshape(-1, 2)
             uv = ideal
         return self.camera.pixel_rays(uv)
+
+
+def _remapped(image: np.ndarray, maps: np.ndarray, interpolation: int, **border) -> np.ndarray:
+    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives), by cv2.remap. The
+    two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV copies first."""
+    return cv2.remap(image, maps, None, interpolation, **border)  # type: ignore[call-overload]  # stubs want map2
 
 
 def _relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -217,7 +224,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         # The images do not change from one look to the next, only what is taken to stand in front.
         key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
         if key not in view.differences:
-            warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+            warped = _remapped(other.coarse, maps, cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = difference_of(view.coarse, warped)
         difference = view.differences[key]
@@ -331,7 +338,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
             fine_maps = _fine_window_maps(view, other, plane, maps, fine_window)
-            warped = cv2.remap(_fine_grey(other), fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+            warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
             if own is None:
                 own = _window_statistics(grey)
@@ -432,9 +439,9 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
         # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
         other_ratio = _darkening(other).astype(np.float32)
         high, low = cv2.dilate(other_ratio, _SMALL), cv2.erode(other_ratio, _SMALL)
-        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_shadow = cv2.remap(cv2.dilate(other_shadow, _SMALL), maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
+        warped_high = _remapped(high, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_low = _remapped(low, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_shadow = _remapped(cv2.dilate(other_shadow, _SMALL), maps, cv2.INTER_NEAREST,
                                   borderValue=0) > 0
         agrees = warped_shadow & (ratio >= warped_low - _SHADOW_AGREEMENT) & (ratio <= warped_high + _SHADOW_AGREEMENT)
         contradicted |= inside & ~agrees
@@ -586,11 +593,13 @@ def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndar
 
 def _noise_level(evidence: np.ndarray) -> float:
     """A robust scale of the evidence on the table (most of the image): its median plus spread."""
-    values = evidence[np.isfinite(evidence)]
-    if not len(values):
+    evidence = np.asarray(evidence)
+    if evidence.dtype != np.float32:
+        evidence = evidence.astype(np.float64)
+    found = median_and_spread(np.ascontiguousarray(evidence).ravel())
+    if found is None:
         return 0.05
-    median = float(np.median(values))
-    spread = float(np.median(np.abs(values - median)))
+    median, spread = found
     return median + 3.0 * 1.4826 * spread
 
 
@@ -1205,9 +1214,9 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
         if key not in view.differences:
             # A pixel's worth of misregistration: the other view's range of values around the point.
             low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
-            warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+            warped_low = _remapped(low, maps, cv2.INTER_LINEAR,
                                    borderMode=cv2.BORDER_REPLICATE)
-            warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+            warped_high = _remapped(high, maps, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
         disagreement = view.differences[key]
