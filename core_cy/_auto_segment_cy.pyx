@@ -4,7 +4,7 @@
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
-from libc.math cimport isfinite, fabs
+from libc.math cimport fabs, isfinite, rint
 from libcpp.algorithm cimport nth_element
 
 import numpy as np
@@ -50,3 +50,72 @@ def median_and_spread(floating[::1] evidence not None):
     if count == 0:
         return None
     return float(median), float(spread)
+
+
+def plane_homography_maps(const double[:, ::1] H not None, const double[::1] across not None, double height,
+                          Py_ssize_t column0, Py_ssize_t row0, double unit_u, double unit_v,
+                          float[:, :, ::1] maps not None, unsigned char[:, ::1] valid not None):
+    """Fill ``maps`` ((h, w, 2) float32) with where each pixel (column0 + c, row0 + r) of a grid falls in
+    another view through a plane's homography ``H`` (3x3, to the other's full-resolution pixels, scaled by
+    the ray's n . d = ``across`` . x), in units of ``unit_u`` x ``unit_v`` full-resolution pixels with
+    pixel centres on integers; and ``valid`` ((h, w) uint8) with 1 where the pixel's ray meets the plane
+    in front of both cameras (t = -``height`` / n . d > 0, and a positive depth in the other).
+
+    The same arithmetic, in the same order, as NumPy on the whole grid: u = (H[0, 0] c + H[0, 1] r +
+    H[0, 2]) / (H[2, 0] c + ...), then ((u + 0.5) / unit_u - 0.5) rounded to float32."""
+    cdef Py_ssize_t rows = maps.shape[0], columns = maps.shape[1], r, c
+    cdef double i, j, x, y, z, meets, t
+    if maps.shape[2] != 2 or valid.shape[0] != rows or valid.shape[1] != columns:
+        raise ValueError("maps must be (h, w, 2) and valid (h, w)")
+    if H.shape[0] != 3 or H.shape[1] != 3 or across.shape[0] != 3:
+        raise ValueError("H must be 3x3 and across of length 3")
+    with nogil:
+        for r in range(rows):
+            j = <double>(row0 + r)
+            for c in range(columns):
+                i = <double>(column0 + c)
+                x = H[0, 0] * i + H[0, 1] * j + H[0, 2]
+                y = H[1, 0] * i + H[1, 1] * j + H[1, 2]
+                z = H[2, 0] * i + H[2, 1] * j + H[2, 2]
+                meets = across[0] * i + across[1] * j + across[2]
+                t = -height / meets
+                valid[r, c] = isfinite(t) and t > 0 and z / meets > 0
+                maps[r, c, 0] = <float>((x / z + 0.5) / unit_u - 0.5)
+                maps[r, c, 1] = <float>((y / z + 0.5) / unit_v - 0.5)
+
+
+def project_into_mask(const double[:, ::1] points not None, const double[:, ::1] projection not None,
+                      double sx, double sy, const unsigned char[:, ::1] mask not None,
+                      long long[:, ::1] pixels not None, unsigned char[::1] seen not None,
+                      double[::1] depth not None, unsigned char[::1] hit not None):
+    """Project world ``points`` (N, 3) by a pinhole ``projection`` (3, 4) into the coarse image of ``mask``
+    (h, w; coarse pixels ``sx`` x ``sy`` full-resolution ones, centres on integers), filling per point:
+    ``pixels`` (N, 2) the nearest coarse pixel (column, row; rounded half to even), ``depth`` (N,),
+    ``seen`` (N,) 1 where the point is in front of the camera and within the image, and ``hit`` (N,) 1
+    where it is seen inside the mask or not seen at all (a point out of a view's image is not carved)."""
+    cdef Py_ssize_t n = points.shape[0], k
+    cdef Py_ssize_t height = mask.shape[0], width = mask.shape[1]
+    cdef double x, y, z, hu, hv, hz, u, v
+    cdef long long column, row
+    if points.shape[1] != 3 or projection.shape[0] != 3 or projection.shape[1] != 4:
+        raise ValueError("points must be (N, 3) and projection (3, 4)")
+    if pixels.shape[0] != n or pixels.shape[1] != 2 or seen.shape[0] != n or depth.shape[0] != n or hit.shape[0] != n:
+        raise ValueError("pixels must be (N, 2) and seen, depth and hit (N,)")
+    with nogil:
+        for k in range(n):
+            x, y, z = points[k, 0], points[k, 1], points[k, 2]
+            hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
+            hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
+            hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
+            depth[k] = hz
+            u = rint((hu / hz + 0.5) / sx - 0.5)
+            v = rint((hv / hz + 0.5) / sy - 0.5)
+            if hz > 0 and isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height:
+                column, row = <long long>u, <long long>v
+                pixels[k, 0], pixels[k, 1] = column, row
+                seen[k] = 1
+                hit[k] = mask[row, column] > 0
+            else:
+                pixels[k, 0], pixels[k, 1] = -1, -1
+                seen[k] = 0
+                hit[k] = 1

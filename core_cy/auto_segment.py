@@ -37,7 +37,7 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
-from ._auto_segment_cy import median_and_spread
+from ._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -119,6 +119,7 @@ class _View:
         # Each other view's image mapped through a plane and compared with this one, per comparison.
         self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
+        self._warped: dict[tuple[int, bytes], np.ndarray] = {}
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
@@ -136,6 +137,15 @@ class _View:
                 self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
         maps, inside = self._mappings[key]
         return maps, inside.copy()
+
+    def warped(self, other: _View, plane: np.ndarray) -> np.ndarray:
+        """``other``'s coarse image mapped through ``plane`` onto this view's (float32 BGR): each colour
+        comparison of the two starts from it, so it is made once per pair of views."""
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in self._warped:
+            maps, _ = self.mapping(other, plane)
+            self._warped[key] = _remapped(other.coarse, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return self._warped[key]
 
     def sees(self, other: _View, plane: np.ndarray,
              hidden: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,9 +234,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         # The images do not change from one look to the next, only what is taken to stand in front.
         key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
         if key not in view.differences:
-            warped = _remapped(other.coarse, maps, cv2.INTER_LINEAR,
-                               borderMode=cv2.BORDER_REPLICATE)
-            view.differences[key] = difference_of(view.coarse, warped)
+            view.differences[key] = difference_of(view.coarse, view.warped(other, plane))
         difference = view.differences[key]
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
@@ -518,18 +526,16 @@ def _plane_homography(view: _View, other: _View, plane: np.ndarray,
     return np.outer(M @ centre + p, across) - height * (M @ to_ray), across, height
 
 
-def _homography_maps(H: np.ndarray, across: np.ndarray, height: float, columns: np.ndarray,
-                     rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the grid's pixels (``columns`` x ``rows``) fall through :func:`_plane_homography`'s ``H``:
-    (h, w) float64 u and v, and where the ray meets the plane in front of both cameras."""
-    i, j = columns[None, :], rows[:, None]
-    x, y, z = (H[k, 0] * i + H[k, 1] * j + H[k, 2] for k in range(3))
-    meets = across[0] * i + across[1] * j + across[2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -height / meets
-        u, v = x / z, y / z
-        valid = np.isfinite(t) & (t > 0) & (z / meets > 0)
-    return u, v, valid
+def _homography_maps(H: np.ndarray, across: np.ndarray, height: float, columns: slice, rows: slice,
+                     unit: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Where the grid's pixels (``columns`` x ``rows``) fall through :func:`_plane_homography`'s ``H``, in
+    pixels of ``unit`` (u, v) full-resolution pixels: (h, w, 2) float32 maps for cv2.remap, and (h, w) where
+    the ray meets the plane in front of both cameras."""
+    maps = np.empty((rows.stop - rows.start, columns.stop - columns.start, 2), np.float32)
+    valid = np.empty(maps.shape[:2], np.uint8)
+    plane_homography_maps(np.ascontiguousarray(H, np.float64), np.ascontiguousarray(across, np.float64),
+                          float(height), columns.start, rows.start, float(unit[0]), float(unit[1]), maps, valid)
+    return maps, valid.view(bool)
 
 
 def _plane_homography_maps(view: _View, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -539,13 +545,11 @@ def _plane_homography_maps(view: _View, other: _View, plane: np.ndarray) -> tupl
     cw, ch = view.coarse_size
     to_full = np.array([[view.sx, 0.0, 0.5 * view.sx - 0.5], [0.0, view.sy, 0.5 * view.sy - 0.5], [0.0, 0.0, 1.0]])
     H, across, height = _plane_homography(view, other, plane, to_full)
-    u, v, valid = _homography_maps(H, across, height, np.arange(cw, dtype=np.float64),
-                                   np.arange(ch, dtype=np.float64))
-    coarse_u = ((u + 0.5) / other.sx - 0.5).astype(np.float32)
-    coarse_v = ((v + 0.5) / other.sy - 0.5).astype(np.float32)
+    maps, valid = _homography_maps(H, across, height, slice(0, cw), slice(0, ch), (other.sx, other.sy))
+    coarse_u, coarse_v = maps[..., 0], maps[..., 1]
     ow, oh = other.coarse_size
     inside = valid & (coarse_u >= 0) & (coarse_v >= 0) & (coarse_u <= ow - 1) & (coarse_v <= oh - 1)
-    return np.stack([coarse_u, coarse_v], axis=-1), inside.ravel()
+    return maps, inside.ravel()
 
 
 def _fine_window_maps(view: _View, other: _View, plane: np.ndarray, maps: np.ndarray,
@@ -562,11 +566,8 @@ def _fine_window_maps(view: _View, other: _View, plane: np.ndarray, maps: np.nda
         to_full = np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0.0, 0.0, 1.0]])
         H, across, h = _plane_homography(view, other, plane, to_full)
         rows, columns = fine_window
-        u, v, _ = _homography_maps(H, across, h, np.arange(columns.start, columns.stop, dtype=np.float64),
-                                   np.arange(rows.start, rows.stop, dtype=np.float64))
         other_height, other_width = other.image.shape[:2]
-        return np.stack([(u + 0.5) * (ofw / other_width) - 0.5, (v + 0.5) * (ofh / other_height) - 0.5],
-                        axis=-1).astype(np.float32)
+        return _homography_maps(H, across, h, columns, rows, (other_width / ofw, other_height / ofh))[0]
     fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
     fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
     fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
@@ -814,13 +815,24 @@ class _Hulls:
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        grid = np.ascontiguousarray(grid)
         for view, mask in zip(views, masks):
-            uv, depth = view.project(grid)
-            coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-            cw, ch = view.coarse_size
-            seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
-            hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
-            hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+            if view.camera.dist is None:
+                # One pass over the voxels instead of one array operation after another.
+                coarse = np.empty((len(grid), 2), np.int64)
+                seen, hit = np.empty(len(grid), np.uint8), np.empty(len(grid), np.uint8)
+                depth = np.empty(len(grid))
+                project_into_mask(grid, view.camera.projection, view.sx, view.sy, np.ascontiguousarray(mask),
+                                  coarse, seen, depth, hit)
+                seen, hit = seen.view(bool), hit.view(bool)
+            else:
+                uv, depth = view.project(grid)
+                coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+                cw, ch = view.coarse_size
+                seen = ((depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw)
+                        & (coarse[:, 1] < ch))
+                hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
+                hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
             self.inside.append(hit)
             self.pixels.append((coarse, seen, depth))
         self.shape = [mask.shape for mask in masks]

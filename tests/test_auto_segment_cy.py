@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocell.core_cy._auto_segment_cy import median_and_spread
+from robocell.core_cy._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -36,3 +36,64 @@ def test_median_and_spread_of_nothing_finite_is_none():
 def test_median_and_spread_by_hand():
     # Sorted: 0, 1, 2, 4 -> median 1.5; distances 1.5, 0.5, 0.5, 2.5 -> median 1.0.
     assert median_and_spread(np.array([4.0, np.nan, 0.0, 2.0, 1.0])) == (1.5, 1.0)
+
+
+def test_plane_homography_maps_is_the_numpy_formula_on_random_homographies():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        H, across = rng.normal(size=(3, 3)), rng.normal(size=3)
+        height, column0, row0 = float(rng.normal()), int(rng.integers(0, 50)), int(rng.integers(0, 50))
+        unit = rng.uniform(0.5, 4.0, size=2)
+        maps = np.empty((int(rng.integers(1, 30)), int(rng.integers(1, 30)), 2), np.float32)
+        valid = np.empty(maps.shape[:2], np.uint8)
+        plane_homography_maps(H, across, height, column0, row0, unit[0], unit[1], maps, valid)
+        i = np.arange(column0, column0 + maps.shape[1], dtype=np.float64)[None, :]
+        j = np.arange(row0, row0 + maps.shape[0], dtype=np.float64)[:, None]
+        x, y, z = (H[k, 0] * i + H[k, 1] * j + H[k, 2] for k in range(3))
+        meets = across[0] * i + across[1] * j + across[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -height / meets
+            expected_valid = np.isfinite(t) & (t > 0) & (z / meets > 0)
+            expected_u = ((x / z + 0.5) / unit[0] - 0.5).astype(np.float32)
+            expected_v = ((y / z + 0.5) / unit[1] - 0.5).astype(np.float32)
+        np.testing.assert_array_equal(valid.astype(bool), expected_valid)
+        np.testing.assert_array_equal(maps[..., 0], expected_u)
+        np.testing.assert_array_equal(maps[..., 1], expected_v)
+
+
+def test_plane_homography_maps_of_the_identity_by_hand():
+    # H the identity, the plane met everywhere (n . d = 1 > 0 with height -1): each pixel maps onto
+    # itself; in units of 2 px, pixel 3 (centre on 3) is at (3 + 0.5) / 2 - 0.5 = 1.25.
+    maps = np.empty((1, 2, 2), np.float32)
+    valid = np.empty((1, 2), np.uint8)
+    plane_homography_maps(np.eye(3), np.array([0.0, 0.0, 1.0]), -1.0, 3, 5, 2.0, 1.0, maps, valid)
+    assert maps.tolist() == [[[1.25, 5.0], [1.75, 5.0]]]
+    assert valid.tolist() == [[1, 1]]
+
+
+def test_project_into_mask_is_the_numpy_projection_and_lookup_on_random_points():
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        projection = rng.normal(size=(3, 4))
+        projection[2, 3] += 3.0  # most points in front of the camera, some behind
+        points = rng.normal(size=(int(rng.integers(1, 400)), 3))
+        mask = np.where(rng.random((int(rng.integers(1, 20)), int(rng.integers(1, 20)))) < 0.5, 255, 0).astype(np.uint8)
+        sx, sy = rng.uniform(0.05, 0.3, size=2)
+        n = len(points)
+        pixels, seen = np.empty((n, 2), np.int64), np.empty(n, np.uint8)
+        depth, hit = np.empty(n), np.empty(n, np.uint8)
+        project_into_mask(points, projection, sx, sy, mask, pixels, seen, depth, hit)
+        homogeneous = points @ projection[:, :3].T + projection[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = homogeneous[:, :2] / homogeneous[:, 2:]
+        coarse = np.rint(np.column_stack([(uv[:, 0] + 0.5) / sx - 0.5, (uv[:, 1] + 0.5) / sy - 0.5]))
+        height, width = mask.shape
+        expected_seen = ((homogeneous[:, 2] > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0)
+                         & (coarse[:, 0] < width) & (coarse[:, 1] < height))
+        expected_hit = np.ones(n, bool)
+        inside = coarse[expected_seen].astype(np.int64)
+        expected_hit[expected_seen] = mask[inside[:, 1], inside[:, 0]] > 0
+        np.testing.assert_allclose(depth, homogeneous[:, 2], rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(seen.astype(bool), expected_seen)
+        np.testing.assert_array_equal(hit.astype(bool), expected_hit)
+        np.testing.assert_array_equal(pixels[expected_seen], inside)
