@@ -1094,7 +1094,8 @@ _CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
-def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None) -> np.ndarray:
+def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None,
+               iterations: int | None = None) -> np.ndarray:
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
     evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
     cw, ch = view.coarse_size
@@ -1132,7 +1133,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     mask[rim & (mask != cv2.GC_FGD)] = cv2.GC_BGD
     if outside is not None:
         mask[outside[crop] > 0] = cv2.GC_BGD
-    return _run_grabcut(view, mask, (x0, y0, x1, y1))
+    return _run_grabcut(view, mask, (x0, y0, x1, y1), iterations)
 
 
 #: The graph cut's box reaches this share of the region's size beyond it: table enough for its colour model.
@@ -1150,7 +1151,8 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     return (np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
 
 
-def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
+                 iterations: int | None = None) -> np.ndarray:
     cw, ch = view.coarse_size
     x0, y0, x1, y1 = box
     result = np.zeros((ch, cw), np.uint8)
@@ -1162,7 +1164,8 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) 
         image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
         background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
         cv2.setRNGSeed(0)  # GrabCut's k-means starts from OpenCV's global generator
-        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model, _GC_ITERATIONS,
+        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model,
+                    _GC_ITERATIONS if iterations is None else iterations,
                     cv2.GC_INIT_WITH_MASK)  # the box is unused: the mask seeds it
     result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
     return _filled_region(result, view)
@@ -1264,7 +1267,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
     scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
-        cuts = _background_cut(views, aim, scores, standing)
+        cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
@@ -1274,6 +1277,9 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
 
 #: How many times the silhouettes cut from the evidence hide the table behind them for the next evidence.
 _OCCLUSION_ROUNDS = 2
+#: The graph cut's iterations in those rounds: their silhouettes, shrunk by a pixel, only say where the
+#: table is hidden for the next evidence, which the last cut, with all its iterations, then draws from.
+_OCCLUDER_ITERATIONS = 1
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
@@ -1317,8 +1323,10 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
 
 
 def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, np.ndarray],
-                    standing: dict[int, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray | None]]:
-    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence."""
+                    standing: dict[int, np.ndarray],
+                    iterations: int | None = None) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence;
+    ``iterations``, the graph cut's (default :data:`_GC_ITERATIONS`)."""
     cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
     for view in views:
         cw, ch = view.coarse_size
@@ -1330,7 +1338,7 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
             raise SilhouetteError(_NOTHING, view=view.index)
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
         region = _holes_filled(_joined_within_outline(near))
-        cut = _graph_cut(view, region, score)
+        cut = _graph_cut(view, region, score, iterations=iterations)
         if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))
