@@ -345,7 +345,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
                                     cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
-            fine_maps = _fine_window_maps(view, other, plane, maps, fine_window)
+            fine_maps = _fine_window_maps(view, other, maps, fine_window)
             warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
             if own is None:
@@ -552,22 +552,12 @@ def _plane_homography_maps(view: _View, other: _View, plane: np.ndarray) -> tupl
     return maps, inside.ravel()
 
 
-def _fine_window_maps(view: _View, other: _View, plane: np.ndarray, maps: np.ndarray,
-                      fine_window: tuple[slice, slice]) -> np.ndarray:
+def _fine_window_maps(view: _View, other: _View, maps: np.ndarray, fine_window: tuple[slice, slice]) -> np.ndarray:
     """(h, w, 2) float32: where each fine pixel of ``view``'s window falls in ``other``'s fine image through
-    the plane. Without distortion the homography places each one exactly; through a lens the coarse
-    ``maps`` (:meth:`_View.mapping`), interpolated, do: the plane's mapping is smooth."""
-    grey, other_grey = _fine_grey(view), _fine_grey(other)
-    fh, fw = grey.shape
-    ofh, ofw = other_grey.shape
-    if view.camera.dist is None and other.camera.dist is None:
-        height, width = view.image.shape[:2]
-        fx, fy = width / fw, height / fh
-        to_full = np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0.0, 0.0, 1.0]])
-        H, across, h = _plane_homography(view, other, plane, to_full)
-        rows, columns = fine_window
-        other_height, other_width = other.image.shape[:2]
-        return _homography_maps(H, across, h, columns, rows, (other_width / ofw, other_height / ofh))[0]
+    the plane. The plane's mapping is smooth: the coarse ``maps`` (:meth:`_View.mapping`), interpolated,
+    place the fine pixels."""
+    fh, fw = _fine_grey(view).shape
+    ofh, ofw = _fine_grey(other).shape
     fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
     fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
     fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
