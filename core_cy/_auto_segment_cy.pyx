@@ -4,7 +4,7 @@
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
-from libc.math cimport fabs, isfinite, rint
+from libc.math cimport fabs, isfinite, rint, sqrtf
 from libcpp.algorithm cimport nth_element
 
 import numpy as np
@@ -119,3 +119,45 @@ def project_into_mask(const double[:, ::1] points not None, const double[:, ::1]
                 pixels[k, 0], pixels[k, 1] = -1, -1
                 seen[k] = 0
                 hit[k] = 1
+
+
+cdef inline bint _same_shape(const float[:, ::1] array, Py_ssize_t rows, Py_ssize_t columns) noexcept:
+    return array.shape[0] == rows and array.shape[1] == columns
+
+
+def windowed_correlation(const float[:, ::1] mean_a not None, const float[:, ::1] variance_a not None,
+                         const float[:, ::1] flat_a not None, const float[:, ::1] mean_b not None,
+                         const float[:, ::1] square_mean_b not None, const float[:, ::1] product_mean not None,
+                         float contrast, float flat, float[:, ::1] correlation not None,
+                         unsigned char[:, ::1] textured not None):
+    """Fill ``correlation`` with the normalised cross-correlation of two grey images over a window, and
+    ``textured`` with 1 where both windows hold a texture that stands clear of the noise, from the windows'
+    means: of ``a`` (its mean, variance and the variance below which it is flat, made once for every image
+    it is compared with), of ``b`` and of ``b * b``, and of ``a * b``. ``b``'s window is flat below
+    max((``contrast`` x its mean)^2, ``flat``). All (h, w) float32; in float32, in NumPy's order:
+
+        variance_b = maximum(square_mean_b - mean_b * mean_b, 0)
+        correlation = (product_mean - mean_a * mean_b) / sqrt(variance_a * variance_b + 1e-6)
+        textured = (variance_a > flat_a) & (variance_b > maximum((contrast * mean_b) ** 2, flat))"""
+    cdef Py_ssize_t rows = correlation.shape[0], columns = correlation.shape[1], r, c
+    cdef float mb, variance_b, spread, floor_b, tiny = 1e-6
+    if not (_same_shape(mean_a, rows, columns) and _same_shape(variance_a, rows, columns)
+            and _same_shape(flat_a, rows, columns) and _same_shape(mean_b, rows, columns)
+            and _same_shape(square_mean_b, rows, columns) and _same_shape(product_mean, rows, columns)
+            and textured.shape[0] == rows and textured.shape[1] == columns):
+        raise ValueError("every array must have correlation's shape")
+    with nogil:
+        for r in range(rows):
+            for c in range(columns):
+                mb = mean_b[r, c]
+                variance_b = square_mean_b[r, c] - mb * mb
+                # NumPy's maximum keeps its first argument when the two compare equal, or when it is NaN.
+                if not (variance_b >= 0 or variance_b != variance_b):
+                    variance_b = 0
+                spread = contrast * mb
+                floor_b = spread * spread
+                if not (floor_b >= flat or floor_b != floor_b):
+                    floor_b = flat
+                correlation[r, c] = (product_mean[r, c] - mean_a[r, c] * mb) / sqrtf(
+                    variance_a[r, c] * variance_b + tiny)
+                textured[r, c] = variance_a[r, c] > flat_a[r, c] and variance_b > floor_b

@@ -37,7 +37,7 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
-from ._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask
+from ._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask, windowed_correlation
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -292,9 +292,12 @@ def _local_correlation(a: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     comes as its :func:`_window_statistics`, made once for every image it is compared with."""
     window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
     a_image, mean_a, var_a, floor_a = a
-    _, mean_b, var_b, floor_b = _window_statistics(b)
-    correlation = (cv2.blur(a_image * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
-    return correlation, (var_a > floor_a) & (var_b > floor_b)
+    correlation = np.empty(b.shape, np.float32)
+    textured = np.empty(b.shape, np.uint8)
+    # The window sums by OpenCV's box filter; the dozen operations that combine them, in one pass.
+    windowed_correlation(mean_a, var_a, floor_a, cv2.blur(b, window), cv2.blur(b * b, window),
+                         cv2.blur(a_image * b, window), _TEXTURE_CONTRAST, _TEXTURE_FLOOR, correlation, textured)
+    return correlation, textured.view(bool)
 
 
 def _aim_window(view: _View, centre: np.ndarray) -> tuple[tuple[slice, slice], tuple[slice, slice]]:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocell.core_cy._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask
+from robocell.core_cy._auto_segment_cy import (median_and_spread, plane_homography_maps, project_into_mask,
+                                               windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -97,3 +98,33 @@ def test_project_into_mask_is_the_numpy_projection_and_lookup_on_random_points()
         np.testing.assert_array_equal(seen.astype(bool), expected_seen)
         np.testing.assert_array_equal(hit.astype(bool), expected_hit)
         np.testing.assert_array_equal(pixels[expected_seen], inside)
+
+
+def test_windowed_correlation_is_the_numpy_formula_on_random_window_means():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)))
+        mean_a, mean_b = (rng.uniform(0, 255, size=shape).astype(np.float32) for _ in range(2))
+        # Variances and sums of squares about the means' scale, some below the means' square (flat windows).
+        variance_a = np.maximum(rng.normal(20, 40, size=shape), 0).astype(np.float32)
+        flat_a = rng.uniform(0, 60, size=shape).astype(np.float32)
+        square_mean_b = (mean_b * mean_b + rng.normal(20, 40, size=shape)).astype(np.float32)
+        product_mean = (mean_a * mean_b + rng.normal(0, 30, size=shape)).astype(np.float32)
+        correlation, textured = np.empty(shape, np.float32), np.empty(shape, np.uint8)
+        windowed_correlation(mean_a, variance_a, flat_a, mean_b, square_mean_b, product_mean, 0.03, 9.0,
+                             correlation, textured)
+        variance_b = np.maximum(square_mean_b - mean_b * mean_b, 0.0)
+        expected = (product_mean - mean_a * mean_b) / np.sqrt(variance_a * variance_b + 1e-6)
+        expected_textured = (variance_a > flat_a) & (variance_b > np.maximum((0.03 * mean_b) ** 2, 9.0))
+        np.testing.assert_array_equal(correlation, expected)
+        np.testing.assert_array_equal(textured.astype(bool), expected_textured)
+
+
+def test_windowed_correlation_of_a_window_with_itself_is_one():
+    # b = a: the product's mean is the mean square, so the correlation is var / sqrt(var^2 + 1e-6).
+    mean, square_mean = np.array([[10.0]], np.float32), np.array([[116.0]], np.float32)  # variance 16
+    correlation, textured = np.empty((1, 1), np.float32), np.empty((1, 1), np.uint8)
+    windowed_correlation(mean, np.array([[16.0]], np.float32), np.array([[9.0]], np.float32), mean, square_mean,
+                         square_mean, 0.03, 9.0, correlation, textured)
+    assert abs(float(correlation[0, 0]) - 1.0) < 1e-6
+    assert textured[0, 0] == 1
