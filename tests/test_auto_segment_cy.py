@@ -5,6 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from robocell.core_cy import auto_segment
+from robocell.core_cy.camera import Camera
+
 from robocell.core_cy._auto_segment_cy import (median_and_spread, plane_homography_maps, project_into_mask,
                                                windowed_correlation)
 
@@ -128,3 +131,30 @@ def test_windowed_correlation_of_a_window_with_itself_is_one():
                          square_mean, 0.03, 9.0, correlation, textured)
     assert abs(float(correlation[0, 0]) - 1.0) < 1e-6
     assert textured[0, 0] == 1
+
+
+def _looking_at_origin(position) -> Camera:
+    z = -np.asarray(position, float) / np.linalg.norm(position)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = position
+    return Camera(K=[[520, 0, 318], [0, 515, 243], [0, 0, 1]], T_world_cam=T)
+
+
+def test_the_planes_closed_form_maps_are_those_of_each_table_point_projected():
+    # Two views of a table (z = 0) from either side: the homography's maps against finding each coarse
+    # pixel's table point and projecting it into the other view, the way a lens with distortion still goes.
+    image = np.zeros((480, 640, 3), np.uint8)
+    views = [auto_segment._View(i, image, _looking_at_origin(p), None)
+             for i, p in enumerate([[0.5, -0.1, 0.45], [-0.2, 0.5, 0.6]])]
+    plane = np.array([0.0, 0.0, 1.0, 0.0])
+    for view, other in [(views[0], views[1]), (views[1], views[0])]:
+        maps, inside = auto_segment._plane_homography_maps(view, other, plane)
+        points, valid = auto_segment._plane_points(view, plane)
+        expected_maps, expected_inside = auto_segment._plane_maps(other, points, valid, view.coarse_size)
+        assert inside.any() and not inside.all()
+        np.testing.assert_array_equal(inside, expected_inside)
+        np.testing.assert_allclose(maps[inside.reshape(maps.shape[:2])],
+                                   expected_maps[expected_inside.reshape(maps.shape[:2])], atol=1e-3)
