@@ -27,6 +27,19 @@ cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogi
     return (lower + upper) / 2
 
 
+def median(floating[::1] values not None):
+    """NumPy's ``np.median`` of ``values`` (1-D, contiguous, finite, at least one), by selection in a copy."""
+    cdef Py_ssize_t n = values.shape[0]
+    if n == 0:
+        raise ValueError("the median of no values")
+    buffer = np.array(values, copy=True)
+    cdef floating[::1] copy = buffer
+    cdef floating found
+    with nogil:
+        found = _median_in_place(&copy[0], n)
+    return float(found)
+
+
 def median_and_spread(floating[::1] evidence not None):
     """(median, median absolute deviation) of the finite values of ``evidence`` (1-D, contiguous), or None
     when none is finite. Equal to NumPy's ``np.median`` of the finite values and of their absolute

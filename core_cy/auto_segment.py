@@ -37,7 +37,8 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
-from ._auto_segment_cy import median_and_spread, plane_homography_maps, project_into_mask, windowed_correlation
+from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
+                               windowed_correlation)
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -1139,8 +1140,8 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     chroma = image / brightness[..., None]
     if not table.any():
         return np.zeros(brightness.shape, bool)
-    table_chroma = np.median(chroma[table], axis=0)
-    table_brightness = float(np.median(brightness[table]))
+    table_chroma = np.array([median(np.ascontiguousarray(chroma[..., k][table])) for k in range(3)], chroma.dtype)
+    table_brightness = median(brightness[table])
     return (np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
 
 

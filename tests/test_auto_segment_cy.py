@@ -8,7 +8,7 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (median_and_spread, plane_homography_maps, project_into_mask,
+from robocell.core_cy._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
                                                windowed_correlation)
 
 
@@ -20,16 +20,35 @@ def _reference(values: np.ndarray) -> tuple[float, float] | None:
     return median, float(np.median(np.abs(finite - median)))
 
 
+def _evidence_like(rng: np.random.Generator, trial: int, dtype, finite: bool = False) -> np.ndarray:
+    """Random values with ties (the many exact zeros of an evidence map) and, unless ``finite``, values
+    that carry no evidence (NaN, infinity)."""
+    values = rng.normal(size=int(rng.integers(1, 60))).astype(dtype)
+    values[rng.random(len(values)) < 0.3 * (trial % 2)] = 0.0
+    if not finite:
+        values[rng.random(len(values)) < 0.1 * (trial % 3)] = np.nan
+        values[rng.random(len(values)) < 0.1 * (trial % 5 == 0)] = np.inf
+    return values
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_median_and_spread_is_numpys_median_of_the_finite_values(dtype):
     rng = np.random.default_rng(0)
     for trial in range(2000):
-        values = rng.normal(size=int(rng.integers(1, 60))).astype(dtype)
-        # Ties (the many exact zeros of an evidence map), and values that carry no evidence.
-        values[rng.random(len(values)) < 0.3 * (trial % 2)] = 0.0
-        values[rng.random(len(values)) < 0.1 * (trial % 3)] = np.nan
-        values[rng.random(len(values)) < 0.1 * (trial % 5 == 0)] = np.inf
+        values = _evidence_like(rng, trial, dtype)
         assert median_and_spread(values) == _reference(values)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_is_numpys_and_leaves_its_input_alone(dtype):
+    rng = np.random.default_rng(1)
+    for trial in range(500):
+        values = _evidence_like(rng, trial, dtype, finite=True)
+        before = values.copy()
+        assert median(values) == float(np.median(values))
+        np.testing.assert_array_equal(values, before)
+    with pytest.raises(ValueError):
+        median(np.zeros(0))
 
 
 def test_median_and_spread_of_nothing_finite_is_none():
