@@ -71,4 +71,4 @@ contract: $(STAMP)
 
 # Every Python's venv: they all use the kernels built in core_cy/.
 clean:
-	rm -rf .venv .venv-* $(VENV) build *.egg-info core_cy/*.so core_cy/_*_cy.c core_cy/_*_cy.cpp
+	rm -rf .venv .venv-* $(VENV) build *.egg-info core_cy/*.so core_cy/_*_cy.c

@@ -1,13 +1,46 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
-# distutils: language = c++
 """Kernel of the ``auto`` segmentation's noise level: the median of an evidence map's finite values and the
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
 from libc.math cimport fabs, isfinite, rint, sqrtf
-from libcpp.algorithm cimport nth_element
 
 import numpy as np
+
+
+cdef void _select(floating* values, Py_ssize_t count, Py_ssize_t k) noexcept nogil:
+    """Reorder ``values[:count]`` so that ``values[k]`` is the value a sort would put there, none before it
+    greater and none after it smaller (Hoare's quickselect, pivot the median of three; plain C, so that the
+    kernels need no C++ compiler)."""
+    cdef Py_ssize_t low = 0, high = count - 1, i, j, middle
+    cdef floating pivot, swap
+    while high > low:
+        middle = low + (high - low) // 2
+        # The median of three as the pivot; the smaller and larger stay at the ends, where they stop the scans.
+        if values[middle] < values[low]:
+            swap = values[middle]; values[middle] = values[low]; values[low] = swap
+        if values[high] < values[low]:
+            swap = values[high]; values[high] = values[low]; values[low] = swap
+        if values[high] < values[middle]:
+            swap = values[high]; values[high] = values[middle]; values[middle] = swap
+        pivot = values[middle]
+        i, j = low, high
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                swap = values[i]; values[i] = values[j]; values[j] = swap
+                i += 1
+                j -= 1
+        # Now values[low..j] <= pivot <= values[i..high], and every value between them equals the pivot.
+        if k <= j:
+            high = j
+        elif k >= i:
+            low = i
+        else:
+            return
 
 
 cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogil:
@@ -15,7 +48,7 @@ cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogi
     middle values, summed and halved in the values' own precision as NumPy's median does."""
     cdef Py_ssize_t middle = count // 2, k
     cdef floating upper, lower
-    nth_element(values, values + middle, values + count)
+    _select(values, count, middle)
     upper = values[middle]
     if count % 2:
         return upper
