@@ -3,7 +3,8 @@ import numpy as np
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 
-KERNELS = ["_carve_cy", "_edges_cy", "_grasp_cy", "_least_squares_cy", "_silhouette_fit_cy", "_superquadric_cy"]
+KERNELS = ["_auto_segment_cy", "_carve_cy", "_edges_cy", "_grasp_cy", "_least_squares_cy", "_silhouette_fit_cy",
+           "_superquadric_cy"]
 
 extensions = [
     Extension(

@@ -37,6 +37,8 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
+from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
+                               windowed_correlation)
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -118,6 +120,7 @@ class _View:
         # Each other view's image mapped through a plane and compared with this one, per comparison.
         self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
+        self._warped: dict[tuple[int, bytes], np.ndarray] = {}
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
@@ -126,12 +129,24 @@ class _View:
         plane_key = np.asarray(plane, np.float64).tobytes()
         key = (other.index, plane_key)
         if key not in self._mappings:
-            if plane_key not in self._points:
-                self._points[plane_key] = _plane_points(self, plane)
-            points, valid = self._points[plane_key]
-            self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
+            if self.camera.dist is None and other.camera.dist is None:
+                self._mappings[key] = _plane_homography_maps(self, other, plane)
+            else:
+                if plane_key not in self._points:
+                    self._points[plane_key] = _plane_points(self, plane)
+                points, valid = self._points[plane_key]
+                self._mappings[key] = _plane_maps(other, points, valid, self.coarse_size)
         maps, inside = self._mappings[key]
         return maps, inside.copy()
+
+    def warped(self, other: _View, plane: np.ndarray) -> np.ndarray:
+        """``other``'s coarse image mapped through ``plane`` onto this view's (float32 BGR): each colour
+        comparison of the two starts from it, so it is made once per pair of views."""
+        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        if key not in self._warped:
+            maps, _ = self.mapping(other, plane)
+            self._warped[key] = _remapped(other.coarse, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return self._warped[key]
 
     def sees(self, other: _View, plane: np.ndarray,
              hidden: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,7 +158,7 @@ class _View:
         inside = inside_flat.reshape(ch, cw)
         if hidden is None:
             return maps, inside, np.zeros_like(inside)
-        behind = inside & (cv2.remap(hidden, maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=0) > 0)
+        behind = inside & (_remapped(hidden, maps, cv2.INTER_NEAREST, borderValue=0) > 0)
         return maps, inside & ~behind, behind
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
@@ -174,6 +189,12 @@ class _View:
                                         P=self.camera.K).reshape(-1, 2)
             uv = ideal
         return self.camera.pixel_rays(uv)
+
+
+def _remapped(image: np.ndarray, maps: np.ndarray, interpolation: int, **border) -> np.ndarray:
+    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives), by cv2.remap. The
+    two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV copies first."""
+    return cv2.remap(image, maps, None, interpolation, **border)  # type: ignore[call-overload]  # stubs want map2
 
 
 def _relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -214,9 +235,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         # The images do not change from one look to the next, only what is taken to stand in front.
         key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
         if key not in view.differences:
-            warped = cv2.remap(other.coarse, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
-                               borderMode=cv2.BORDER_REPLICATE)
-            view.differences[key] = difference_of(view.coarse, warped)
+            view.differences[key] = difference_of(view.coarse, view.warped(other, plane))
         difference = view.differences[key]
         evidence = np.where(inside, np.minimum(evidence, difference), evidence)
         seen |= inside
@@ -254,20 +273,32 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
     return view.fine[key]
 
 
-def _local_correlation(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
-    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing)."""
+def _window_statistics(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A grey image, and its mean and variance over :data:`_TEXTURE_PATCH` windows at every pixel, and the
+    variance below which its window is flat (:func:`_local_correlation`)."""
     window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
-    mean_a, mean_b = cv2.blur(a, window), cv2.blur(b, window)
-    var_a = np.maximum(cv2.blur(a * a, window) - mean_a * mean_a, 0.0)
-    var_b = np.maximum(cv2.blur(b * b, window) - mean_b * mean_b, 0.0)
-    correlation = (cv2.blur(a * b, window) - mean_a * mean_b) / np.sqrt(var_a * var_b + 1e-6)
+    mean = cv2.blur(image, window)
+    variance = np.maximum(cv2.blur(image * image, window) - mean * mean, 0.0)
     # A shadow darkens the grain with the light and keeps its contrast (the table's dark face-coloured shadow
     # beside a dark face keeps the table's grain, the face shows its own), so a grain counts by its contrast;
     # but it must stand clear of the sensor's noise and of what JPEG drops, a few grey levels whatever the light.
-    floor_a = np.maximum((_TEXTURE_CONTRAST * mean_a) ** 2, _TEXTURE_FLOOR)
-    floor_b = np.maximum((_TEXTURE_CONTRAST * mean_b) ** 2, _TEXTURE_FLOOR)
-    return correlation, (var_a > floor_a) & (var_b > floor_b)
+    floor = np.maximum((_TEXTURE_CONTRAST * mean) ** 2, _TEXTURE_FLOOR)
+    return image, mean, variance, floor
+
+
+def _local_correlation(a: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                       b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
+    where both windows hold a texture that stands clear of the noise (elsewhere it says nothing). ``a``
+    comes as its :func:`_window_statistics`, made once for every image it is compared with."""
+    window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
+    a_image, mean_a, var_a, floor_a = a
+    correlation = np.empty(b.shape, np.float32)
+    textured = np.empty(b.shape, np.uint8)
+    # The window sums by OpenCV's box filter; the dozen operations that combine them, in one pass.
+    windowed_correlation(mean_a, var_a, floor_a, cv2.blur(b, window), cv2.blur(b * b, window),
+                         cv2.blur(a_image * b, window), _TEXTURE_CONTRAST, _TEXTURE_FLOOR, correlation, textured)
+    return correlation, textured.view(bool)
 
 
 def _aim_window(view: _View, centre: np.ndarray) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
@@ -310,6 +341,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     grey = grey[fine_window]
     best = np.full(grey.shape, -1.0, np.float32)
     seen = np.zeros(grey.shape, bool)
+    own = None  # the window's own statistics, shared by every other view's comparison
     for other, hidden in zip(others, standing):
         # The grain is compared at a finer scale than the object's outline is known: the table points just
         # behind its edge in the other view are taken for hidden too.
@@ -317,14 +349,12 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
                                     cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         key = (other.index, np.asarray(plane, np.float64).tobytes())
         if key not in view.correlations:
-            # The plane's mapping is smooth: the coarse one, interpolated, places the fine pixels.
-            other_grey = _fine_grey(other)
-            fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
-            fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (other_grey.shape[1] / other.coarse_size[0]) - 0.5
-            fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (other_grey.shape[0] / other.coarse_size[1]) - 0.5
-            warped = cv2.remap(other_grey, fine_maps[..., 0], fine_maps[..., 1], cv2.INTER_LINEAR,
+            fine_maps = _fine_window_maps(view, other, maps, fine_window)
+            warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
-            view.correlations[key] = _local_correlation(grey, warped)
+            if own is None:
+                own = _window_statistics(grey)
+            view.correlations[key] = _local_correlation(own, warped)
         correlation, textured = view.correlations[key]
         seeing = cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST)[fine_window] > 0
         known = textured & seeing
@@ -421,9 +451,9 @@ def _darkening_contradicted(view: _View, others: Sequence[_View], plane: np.ndar
         # A pixel's worth of misregistration: the other view's nearest agreeing value around the point.
         other_ratio = _darkening(other).astype(np.float32)
         high, low = cv2.dilate(other_ratio, _SMALL), cv2.erode(other_ratio, _SMALL)
-        warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        warped_shadow = cv2.remap(cv2.dilate(other_shadow, _SMALL), maps[..., 0], maps[..., 1], cv2.INTER_NEAREST,
+        warped_high = _remapped(high, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_low = _remapped(low, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        warped_shadow = _remapped(cv2.dilate(other_shadow, _SMALL), maps, cv2.INTER_NEAREST,
                                   borderValue=0) > 0
         agrees = warped_shadow & (ratio >= warped_low - _SHADOW_AGREEMENT) & (ratio <= warped_high + _SHADOW_AGREEMENT)
         contradicted |= inside & ~agrees
@@ -480,6 +510,64 @@ def _plane_maps(other: _View, points: np.ndarray, valid: np.ndarray,
 
 
 
+def _plane_homography(view: _View, other: _View, plane: np.ndarray,
+                      to_full: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """For two pinhole cameras without distortion, the plane's homography from pixels of ``view`` (on a grid
+    that ``to_full``, 3x3, takes to full-resolution pixels) to ``other``'s full-resolution pixels.
+
+    A pixel x of the grid has the ray d = R K^-1 to_full x from the centre c; the ray meets the plane at
+    c + t d with t = -h / (n . d) (h the centre's height over the plane). Projected by the other camera
+    (M, p) and multiplied through by n . d, its homogeneous pixel is H x = ((M c + p) n^T - h M) d; its
+    third coordinate, over n . d, is the depth. Returns H, the row vector ``across`` with n . d =
+    across . x, and h."""
+    normal, offset = np.asarray(plane[:3], np.float64), float(plane[3])
+    centre = view.camera.center
+    height = float(normal @ centre + offset)
+    to_ray = view.camera.T_world_cam[:3, :3] @ np.linalg.inv(view.camera.K) @ to_full
+    projection = other.camera.projection
+    M, p = projection[:, :3], projection[:, 3]
+    across = normal @ to_ray
+    return np.outer(M @ centre + p, across) - height * (M @ to_ray), across, height
+
+
+def _homography_maps(H: np.ndarray, across: np.ndarray, height: float, columns: slice, rows: slice,
+                     unit: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Where the grid's pixels (``columns`` x ``rows``) fall through :func:`_plane_homography`'s ``H``, in
+    pixels of ``unit`` (u, v) full-resolution pixels: (h, w, 2) float32 maps for cv2.remap, and (h, w) where
+    the ray meets the plane in front of both cameras."""
+    maps = np.empty((rows.stop - rows.start, columns.stop - columns.start, 2), np.float32)
+    valid = np.empty(maps.shape[:2], np.uint8)
+    plane_homography_maps(np.ascontiguousarray(H, np.float64), np.ascontiguousarray(across, np.float64),
+                          float(height), columns.start, rows.start, float(unit[0]), float(unit[1]), maps, valid)
+    return maps, valid.view(bool)
+
+
+def _plane_homography_maps(view: _View, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_plane_maps` of :func:`_plane_points` for two pinhole cameras without distortion, in closed
+    form: through a plane, one view's pixels map onto another's by a homography, so the table point of
+    each coarse pixel need not be found and projected one by one."""
+    cw, ch = view.coarse_size
+    to_full = np.array([[view.sx, 0.0, 0.5 * view.sx - 0.5], [0.0, view.sy, 0.5 * view.sy - 0.5], [0.0, 0.0, 1.0]])
+    H, across, height = _plane_homography(view, other, plane, to_full)
+    maps, valid = _homography_maps(H, across, height, slice(0, cw), slice(0, ch), (other.sx, other.sy))
+    coarse_u, coarse_v = maps[..., 0], maps[..., 1]
+    ow, oh = other.coarse_size
+    inside = valid & (coarse_u >= 0) & (coarse_v >= 0) & (coarse_u <= ow - 1) & (coarse_v <= oh - 1)
+    return maps, inside.ravel()
+
+
+def _fine_window_maps(view: _View, other: _View, maps: np.ndarray, fine_window: tuple[slice, slice]) -> np.ndarray:
+    """(h, w, 2) float32: where each fine pixel of ``view``'s window falls in ``other``'s fine image through
+    the plane. The plane's mapping is smooth: the coarse ``maps`` (:meth:`_View.mapping`), interpolated,
+    place the fine pixels."""
+    fh, fw = _fine_grey(view).shape
+    ofh, ofw = _fine_grey(other).shape
+    fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
+    fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
+    fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
+    return fine_maps
+
+
 _CHROMA_OFFSET = 12.0
 #: How far a shadow's chromaticity may move from the lit table's (a warm lamp's colour leaves it):
 #: less than an object's print of another colour does.
@@ -500,11 +588,13 @@ def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndar
 
 def _noise_level(evidence: np.ndarray) -> float:
     """A robust scale of the evidence on the table (most of the image): its median plus spread."""
-    values = evidence[np.isfinite(evidence)]
-    if not len(values):
+    evidence = np.asarray(evidence)
+    if evidence.dtype != np.float32:
+        evidence = evidence.astype(np.float64)
+    found = median_and_spread(np.ascontiguousarray(evidence).ravel())
+    if found is None:
         return 0.05
-    median = float(np.median(values))
-    spread = float(np.median(np.abs(values - median)))
+    median, spread = found
     return median + 3.0 * 1.4826 * spread
 
 
@@ -719,13 +809,24 @@ class _Hulls:
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        grid = np.ascontiguousarray(grid)
         for view, mask in zip(views, masks):
-            uv, depth = view.project(grid)
-            coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-            cw, ch = view.coarse_size
-            seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
-            hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
-            hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+            if view.camera.dist is None:
+                # One pass over the voxels instead of one array operation after another.
+                coarse = np.empty((len(grid), 2), np.int64)
+                seen, hit = np.empty(len(grid), np.uint8), np.empty(len(grid), np.uint8)
+                depth = np.empty(len(grid))
+                project_into_mask(grid, view.camera.projection, view.sx, view.sy, np.ascontiguousarray(mask),
+                                  coarse, seen, depth, hit)
+                seen, hit = seen.view(bool), hit.view(bool)
+            else:
+                uv, depth = view.project(grid)
+                coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+                cw, ch = view.coarse_size
+                seen = ((depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw)
+                        & (coarse[:, 1] < ch))
+                hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
+                hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
             self.inside.append(hit)
             self.pixels.append((coarse, seen, depth))
         self.shape = [mask.shape for mask in masks]
@@ -987,12 +1088,13 @@ _CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
 _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
-def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None) -> np.ndarray:
+def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None,
+               iterations: int | None = None) -> np.ndarray:
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
     evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
     cw, ch = view.coarse_size
     x, y, w, h = cv2.boundingRect(region)
-    margin = max(8, int(0.5 * max(w, h)))
+    margin = max(8, int(_CUT_MARGIN * max(w, h)))
     x0, y0, x1, y1 = max(0, x - margin), max(0, y - margin), min(cw, x + w + margin), min(ch, y + h + margin)
     mask = np.full((y1 - y0, x1 - x0), cv2.GC_PR_BGD, np.uint8)
     crop = (slice(y0, y1), slice(x0, x1))
@@ -1025,7 +1127,11 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     mask[rim & (mask != cv2.GC_FGD)] = cv2.GC_BGD
     if outside is not None:
         mask[outside[crop] > 0] = cv2.GC_BGD
-    return _run_grabcut(view, mask, (x0, y0, x1, y1))
+    return _run_grabcut(view, mask, (x0, y0, x1, y1), iterations)
+
+
+#: The graph cut's box reaches this share of the region's size beyond it: table enough for its colour model.
+_CUT_MARGIN = 0.5
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -1034,12 +1140,13 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     chroma = image / brightness[..., None]
     if not table.any():
         return np.zeros(brightness.shape, bool)
-    table_chroma = np.median(chroma[table], axis=0)
-    table_brightness = float(np.median(brightness[table]))
+    table_chroma = np.array([median(np.ascontiguousarray(chroma[..., k][table])) for k in range(3)], chroma.dtype)
+    table_brightness = median(brightness[table])
     return (np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
 
 
-def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
+                 iterations: int | None = None) -> np.ndarray:
     cw, ch = view.coarse_size
     x0, y0, x1, y1 = box
     result = np.zeros((ch, cw), np.uint8)
@@ -1051,7 +1158,8 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int]) 
         image = np.ascontiguousarray(np.clip(view.coarse[y0:y1, x0:x1], 0, 255).astype(np.uint8))
         background_model, object_model = np.zeros((1, 65)), np.zeros((1, 65))
         cv2.setRNGSeed(0)  # GrabCut's k-means starts from OpenCV's global generator
-        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model, _GC_ITERATIONS,
+        cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model,
+                    _GC_ITERATIONS if iterations is None else iterations,
                     cv2.GC_INIT_WITH_MASK)  # the box is unused: the mask seeds it
     result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
     return _filled_region(result, view)
@@ -1115,9 +1223,9 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
         if key not in view.differences:
             # A pixel's worth of misregistration: the other view's range of values around the point.
             low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)
-            warped_low = cv2.remap(low, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+            warped_low = _remapped(low, maps, cv2.INTER_LINEAR,
                                    borderMode=cv2.BORDER_REPLICATE)
-            warped_high = cv2.remap(high, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+            warped_high = _remapped(high, maps, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
         disagreement = view.differences[key]
@@ -1153,7 +1261,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
     scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
-        cuts = _background_cut(views, aim, scores, standing)
+        cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
@@ -1163,6 +1271,9 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
 
 #: How many times the silhouettes cut from the evidence hide the table behind them for the next evidence.
 _OCCLUSION_ROUNDS = 2
+#: The graph cut's iterations in those rounds: their silhouettes, shrunk by a pixel, only say where the
+#: table is hidden for the next evidence, which the last cut, with all its iterations, then draws from.
+_OCCLUDER_ITERATIONS = 1
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
@@ -1206,8 +1317,10 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
 
 
 def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, np.ndarray],
-                    standing: dict[int, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray | None]]:
-    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence."""
+                    standing: dict[int, np.ndarray],
+                    iterations: int | None = None) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence;
+    ``iterations``, the graph cut's (default :data:`_GC_ITERATIONS`)."""
     cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
     for view in views:
         cw, ch = view.coarse_size
@@ -1219,7 +1332,7 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
             raise SilhouetteError(_NOTHING, view=view.index)
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
         region = _holes_filled(_joined_within_outline(near))
-        cut = _graph_cut(view, region, score)
+        cut = _graph_cut(view, region, score, iterations=iterations)
         if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))

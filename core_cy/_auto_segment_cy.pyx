@@ -1,0 +1,209 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Kernel of the ``auto`` segmentation's noise level: the median of an evidence map's finite values and the
+median of their distances from it, each found by selection in one copy of the values, not by sorting."""
+
+from cython cimport floating
+from libc.math cimport fabs, isfinite, rint, sqrtf
+
+import numpy as np
+
+
+cdef void _select(floating* values, Py_ssize_t count, Py_ssize_t k) noexcept nogil:
+    """Reorder ``values[:count]`` so that ``values[k]`` is the value a sort would put there, none before it
+    greater and none after it smaller (Hoare's quickselect, pivot the median of three; plain C, so that the
+    kernels need no C++ compiler)."""
+    cdef Py_ssize_t low = 0, high = count - 1, i, j, middle
+    cdef floating pivot, swap
+    while high > low:
+        middle = low + (high - low) // 2
+        # The median of three as the pivot; the smaller and larger stay at the ends, where they stop the scans.
+        if values[middle] < values[low]:
+            swap = values[middle]; values[middle] = values[low]; values[low] = swap
+        if values[high] < values[low]:
+            swap = values[high]; values[high] = values[low]; values[low] = swap
+        if values[high] < values[middle]:
+            swap = values[high]; values[high] = values[middle]; values[middle] = swap
+        pivot = values[middle]
+        i, j = low, high
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                swap = values[i]; values[i] = values[j]; values[j] = swap
+                i += 1
+                j -= 1
+        # Now values[low..j] <= pivot <= values[i..high], and every value between them equals the pivot.
+        if k <= j:
+            high = j
+        elif k >= i:
+            low = i
+        else:
+            return
+
+
+cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogil:
+    """The median of ``values[:count]`` (count >= 1), reordering them; of an even count, the mean of the two
+    middle values, summed and halved in the values' own precision as NumPy's median does."""
+    cdef Py_ssize_t middle = count // 2, k
+    cdef floating upper, lower
+    _select(values, count, middle)
+    upper = values[middle]
+    if count % 2:
+        return upper
+    # After the selection every value below the middle one is no greater: the largest of them is the other.
+    lower = values[0]
+    for k in range(1, middle):
+        if values[k] > lower:
+            lower = values[k]
+    return (lower + upper) / 2
+
+
+def median(floating[::1] values not None):
+    """NumPy's ``np.median`` of ``values`` (1-D, contiguous, finite, at least one), by selection in a copy."""
+    cdef Py_ssize_t n = values.shape[0]
+    if n == 0:
+        raise ValueError("the median of no values")
+    buffer = np.array(values, copy=True)
+    cdef floating[::1] copy = buffer
+    cdef floating found
+    with nogil:
+        found = _median_in_place(&copy[0], n)
+    return float(found)
+
+
+def median_and_spread(floating[::1] evidence not None):
+    """(median, median absolute deviation) of the finite values of ``evidence`` (1-D, contiguous), or None
+    when none is finite. Equal to NumPy's ``np.median`` of the finite values and of their absolute
+    differences from that median, computed in the values' precision."""
+    cdef Py_ssize_t n = evidence.shape[0], count = 0, k
+    buffer = np.empty(n, dtype=np.float32 if floating is float else np.float64)
+    cdef floating[::1] values = buffer
+    cdef floating median, spread
+    with nogil:
+        for k in range(n):
+            if isfinite(evidence[k]):
+                values[count] = evidence[k]
+                count += 1
+        if count == 0:
+            median = 0
+        else:
+            median = _median_in_place(&values[0], count)
+            for k in range(count):
+                values[k] = fabs(values[k] - median)
+            spread = _median_in_place(&values[0], count)
+    if count == 0:
+        return None
+    return float(median), float(spread)
+
+
+def plane_homography_maps(const double[:, ::1] H not None, const double[::1] across not None, double height,
+                          Py_ssize_t column0, Py_ssize_t row0, double unit_u, double unit_v,
+                          float[:, :, ::1] maps not None, unsigned char[:, ::1] valid not None):
+    """Fill ``maps`` ((h, w, 2) float32) with where each pixel (column0 + c, row0 + r) of a grid falls in
+    another view through a plane's homography ``H`` (3x3, to the other's full-resolution pixels, scaled by
+    the ray's n . d = ``across`` . x), in units of ``unit_u`` x ``unit_v`` full-resolution pixels with
+    pixel centres on integers; and ``valid`` ((h, w) uint8) with 1 where the pixel's ray meets the plane
+    in front of both cameras (t = -``height`` / n . d > 0, and a positive depth in the other).
+
+    The same arithmetic, in the same order, as NumPy on the whole grid: u = (H[0, 0] c + H[0, 1] r +
+    H[0, 2]) / (H[2, 0] c + ...), then ((u + 0.5) / unit_u - 0.5) rounded to float32."""
+    cdef Py_ssize_t rows = maps.shape[0], columns = maps.shape[1], r, c
+    cdef double i, j, x, y, z, meets, t
+    if maps.shape[2] != 2 or valid.shape[0] != rows or valid.shape[1] != columns:
+        raise ValueError("maps must be (h, w, 2) and valid (h, w)")
+    if H.shape[0] != 3 or H.shape[1] != 3 or across.shape[0] != 3:
+        raise ValueError("H must be 3x3 and across of length 3")
+    with nogil:
+        for r in range(rows):
+            j = <double>(row0 + r)
+            for c in range(columns):
+                i = <double>(column0 + c)
+                x = H[0, 0] * i + H[0, 1] * j + H[0, 2]
+                y = H[1, 0] * i + H[1, 1] * j + H[1, 2]
+                z = H[2, 0] * i + H[2, 1] * j + H[2, 2]
+                meets = across[0] * i + across[1] * j + across[2]
+                t = -height / meets
+                valid[r, c] = isfinite(t) and t > 0 and z / meets > 0
+                maps[r, c, 0] = <float>((x / z + 0.5) / unit_u - 0.5)
+                maps[r, c, 1] = <float>((y / z + 0.5) / unit_v - 0.5)
+
+
+def project_into_mask(const double[:, ::1] points not None, const double[:, ::1] projection not None,
+                      double sx, double sy, const unsigned char[:, ::1] mask not None,
+                      long long[:, ::1] pixels not None, unsigned char[::1] seen not None,
+                      double[::1] depth not None, unsigned char[::1] hit not None):
+    """Project world ``points`` (N, 3) by a pinhole ``projection`` (3, 4) into the coarse image of ``mask``
+    (h, w; coarse pixels ``sx`` x ``sy`` full-resolution ones, centres on integers), filling per point:
+    ``pixels`` (N, 2) the nearest coarse pixel (column, row; rounded half to even), ``depth`` (N,),
+    ``seen`` (N,) 1 where the point is in front of the camera and within the image, and ``hit`` (N,) 1
+    where it is seen inside the mask or not seen at all (a point out of a view's image is not carved)."""
+    cdef Py_ssize_t n = points.shape[0], k
+    cdef Py_ssize_t height = mask.shape[0], width = mask.shape[1]
+    cdef double x, y, z, hu, hv, hz, u, v
+    cdef long long column, row
+    if points.shape[1] != 3 or projection.shape[0] != 3 or projection.shape[1] != 4:
+        raise ValueError("points must be (N, 3) and projection (3, 4)")
+    if pixels.shape[0] != n or pixels.shape[1] != 2 or seen.shape[0] != n or depth.shape[0] != n or hit.shape[0] != n:
+        raise ValueError("pixels must be (N, 2) and seen, depth and hit (N,)")
+    with nogil:
+        for k in range(n):
+            x, y, z = points[k, 0], points[k, 1], points[k, 2]
+            hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
+            hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
+            hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
+            depth[k] = hz
+            u = rint((hu / hz + 0.5) / sx - 0.5)
+            v = rint((hv / hz + 0.5) / sy - 0.5)
+            if hz > 0 and isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height:
+                column, row = <long long>u, <long long>v
+                pixels[k, 0], pixels[k, 1] = column, row
+                seen[k] = 1
+                hit[k] = mask[row, column] > 0
+            else:
+                pixels[k, 0], pixels[k, 1] = -1, -1
+                seen[k] = 0
+                hit[k] = 1
+
+
+cdef inline bint _same_shape(const float[:, ::1] array, Py_ssize_t rows, Py_ssize_t columns) noexcept:
+    return array.shape[0] == rows and array.shape[1] == columns
+
+
+def windowed_correlation(const float[:, ::1] mean_a not None, const float[:, ::1] variance_a not None,
+                         const float[:, ::1] flat_a not None, const float[:, ::1] mean_b not None,
+                         const float[:, ::1] square_mean_b not None, const float[:, ::1] product_mean not None,
+                         float contrast, float flat, float[:, ::1] correlation not None,
+                         unsigned char[:, ::1] textured not None):
+    """Fill ``correlation`` with the normalised cross-correlation of two grey images over a window, and
+    ``textured`` with 1 where both windows hold a texture that stands clear of the noise, from the windows'
+    means: of ``a`` (its mean, variance and the variance below which it is flat, made once for every image
+    it is compared with), of ``b`` and of ``b * b``, and of ``a * b``. ``b``'s window is flat below
+    max((``contrast`` x its mean)^2, ``flat``). All (h, w) float32; in float32, in NumPy's order:
+
+        variance_b = maximum(square_mean_b - mean_b * mean_b, 0)
+        correlation = (product_mean - mean_a * mean_b) / sqrt(variance_a * variance_b + 1e-6)
+        textured = (variance_a > flat_a) & (variance_b > maximum((contrast * mean_b) ** 2, flat))"""
+    cdef Py_ssize_t rows = correlation.shape[0], columns = correlation.shape[1], r, c
+    cdef float mb, variance_b, spread, floor_b, tiny = 1e-6
+    if not (_same_shape(mean_a, rows, columns) and _same_shape(variance_a, rows, columns)
+            and _same_shape(flat_a, rows, columns) and _same_shape(mean_b, rows, columns)
+            and _same_shape(square_mean_b, rows, columns) and _same_shape(product_mean, rows, columns)
+            and textured.shape[0] == rows and textured.shape[1] == columns):
+        raise ValueError("every array must have correlation's shape")
+    with nogil:
+        for r in range(rows):
+            for c in range(columns):
+                mb = mean_b[r, c]
+                variance_b = square_mean_b[r, c] - mb * mb
+                # NumPy's maximum keeps its first argument when the two compare equal, or when it is NaN.
+                if not (variance_b >= 0 or variance_b != variance_b):
+                    variance_b = 0
+                spread = contrast * mb
+                floor_b = spread * spread
+                if not (floor_b >= flat or floor_b != floor_b):
+                    floor_b = flat
+                correlation[r, c] = (product_mean[r, c] - mean_a[r, c] * mb) / sqrtf(
+                    variance_a[r, c] * variance_b + tiny)
+                textured[r, c] = variance_a[r, c] > flat_a[r, c] and variance_b > floor_b

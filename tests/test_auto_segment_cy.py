@@ -1,0 +1,179 @@
+"""The ``auto`` segmentation's kernel against plain NumPy on random inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robocell.core_cy import auto_segment
+from robocell.core_cy.camera import Camera
+
+from robocell.core_cy._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
+                                               windowed_correlation)
+
+
+def _reference(values: np.ndarray) -> tuple[float, float] | None:
+    finite = values[np.isfinite(values)]
+    if not len(finite):
+        return None
+    median = float(np.median(finite))
+    return median, float(np.median(np.abs(finite - median)))
+
+
+def _evidence_like(rng: np.random.Generator, trial: int, dtype, finite: bool = False) -> np.ndarray:
+    """Random values with ties (the many exact zeros of an evidence map) and, unless ``finite``, values
+    that carry no evidence (NaN, infinity)."""
+    values = rng.normal(size=int(rng.integers(1, 60))).astype(dtype)
+    values[rng.random(len(values)) < 0.3 * (trial % 2)] = 0.0
+    if not finite:
+        values[rng.random(len(values)) < 0.1 * (trial % 3)] = np.nan
+        values[rng.random(len(values)) < 0.1 * (trial % 5 == 0)] = np.inf
+    return values
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_and_spread_is_numpys_median_of_the_finite_values(dtype):
+    rng = np.random.default_rng(0)
+    for trial in range(2000):
+        values = _evidence_like(rng, trial, dtype)
+        assert median_and_spread(values) == _reference(values)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_is_numpys_and_leaves_its_input_alone(dtype):
+    rng = np.random.default_rng(1)
+    for trial in range(500):
+        values = _evidence_like(rng, trial, dtype, finite=True)
+        before = values.copy()
+        assert median(values) == float(np.median(values))
+        np.testing.assert_array_equal(values, before)
+    with pytest.raises(ValueError):
+        median(np.zeros(0))
+
+
+def test_median_and_spread_of_nothing_finite_is_none():
+    assert median_and_spread(np.array([np.nan, np.inf, -np.inf], np.float32)) is None
+    assert median_and_spread(np.zeros(0)) is None
+
+
+def test_median_and_spread_by_hand():
+    # Sorted: 0, 1, 2, 4 -> median 1.5; distances 1.5, 0.5, 0.5, 2.5 -> median 1.0.
+    assert median_and_spread(np.array([4.0, np.nan, 0.0, 2.0, 1.0])) == (1.5, 1.0)
+
+
+def test_plane_homography_maps_is_the_numpy_formula_on_random_homographies():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        H, across = rng.normal(size=(3, 3)), rng.normal(size=3)
+        height, column0, row0 = float(rng.normal()), int(rng.integers(0, 50)), int(rng.integers(0, 50))
+        unit = rng.uniform(0.5, 4.0, size=2)
+        maps = np.empty((int(rng.integers(1, 30)), int(rng.integers(1, 30)), 2), np.float32)
+        valid = np.empty(maps.shape[:2], np.uint8)
+        plane_homography_maps(H, across, height, column0, row0, unit[0], unit[1], maps, valid)
+        i = np.arange(column0, column0 + maps.shape[1], dtype=np.float64)[None, :]
+        j = np.arange(row0, row0 + maps.shape[0], dtype=np.float64)[:, None]
+        x, y, z = (H[k, 0] * i + H[k, 1] * j + H[k, 2] for k in range(3))
+        meets = across[0] * i + across[1] * j + across[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -height / meets
+            expected_valid = np.isfinite(t) & (t > 0) & (z / meets > 0)
+            expected_u = ((x / z + 0.5) / unit[0] - 0.5).astype(np.float32)
+            expected_v = ((y / z + 0.5) / unit[1] - 0.5).astype(np.float32)
+        np.testing.assert_array_equal(valid.astype(bool), expected_valid)
+        np.testing.assert_array_equal(maps[..., 0], expected_u)
+        np.testing.assert_array_equal(maps[..., 1], expected_v)
+
+
+def test_plane_homography_maps_of_the_identity_by_hand():
+    # H the identity, the plane met everywhere (n . d = 1 > 0 with height -1): each pixel maps onto
+    # itself; in units of 2 px, pixel 3 (centre on 3) is at (3 + 0.5) / 2 - 0.5 = 1.25.
+    maps = np.empty((1, 2, 2), np.float32)
+    valid = np.empty((1, 2), np.uint8)
+    plane_homography_maps(np.eye(3), np.array([0.0, 0.0, 1.0]), -1.0, 3, 5, 2.0, 1.0, maps, valid)
+    assert maps.tolist() == [[[1.25, 5.0], [1.75, 5.0]]]
+    assert valid.tolist() == [[1, 1]]
+
+
+def test_project_into_mask_is_the_numpy_projection_and_lookup_on_random_points():
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        projection = rng.normal(size=(3, 4))
+        projection[2, 3] += 3.0  # most points in front of the camera, some behind
+        points = rng.normal(size=(int(rng.integers(1, 400)), 3))
+        mask = np.where(rng.random((int(rng.integers(1, 20)), int(rng.integers(1, 20)))) < 0.5, 255, 0).astype(np.uint8)
+        sx, sy = rng.uniform(0.05, 0.3, size=2)
+        n = len(points)
+        pixels, seen = np.empty((n, 2), np.int64), np.empty(n, np.uint8)
+        depth, hit = np.empty(n), np.empty(n, np.uint8)
+        project_into_mask(points, projection, sx, sy, mask, pixels, seen, depth, hit)
+        homogeneous = points @ projection[:, :3].T + projection[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = homogeneous[:, :2] / homogeneous[:, 2:]
+        coarse = np.rint(np.column_stack([(uv[:, 0] + 0.5) / sx - 0.5, (uv[:, 1] + 0.5) / sy - 0.5]))
+        height, width = mask.shape
+        expected_seen = ((homogeneous[:, 2] > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0)
+                         & (coarse[:, 0] < width) & (coarse[:, 1] < height))
+        expected_hit = np.ones(n, bool)
+        inside = coarse[expected_seen].astype(np.int64)
+        expected_hit[expected_seen] = mask[inside[:, 1], inside[:, 0]] > 0
+        np.testing.assert_allclose(depth, homogeneous[:, 2], rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(seen.astype(bool), expected_seen)
+        np.testing.assert_array_equal(hit.astype(bool), expected_hit)
+        np.testing.assert_array_equal(pixels[expected_seen], inside)
+
+
+def test_windowed_correlation_is_the_numpy_formula_on_random_window_means():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)))
+        mean_a, mean_b = (rng.uniform(0, 255, size=shape).astype(np.float32) for _ in range(2))
+        # Variances and sums of squares about the means' scale, some below the means' square (flat windows).
+        variance_a = np.maximum(rng.normal(20, 40, size=shape), 0).astype(np.float32)
+        flat_a = rng.uniform(0, 60, size=shape).astype(np.float32)
+        square_mean_b = (mean_b * mean_b + rng.normal(20, 40, size=shape)).astype(np.float32)
+        product_mean = (mean_a * mean_b + rng.normal(0, 30, size=shape)).astype(np.float32)
+        correlation, textured = np.empty(shape, np.float32), np.empty(shape, np.uint8)
+        windowed_correlation(mean_a, variance_a, flat_a, mean_b, square_mean_b, product_mean, 0.03, 9.0,
+                             correlation, textured)
+        variance_b = np.maximum(square_mean_b - mean_b * mean_b, 0.0)
+        expected = (product_mean - mean_a * mean_b) / np.sqrt(variance_a * variance_b + 1e-6)
+        expected_textured = (variance_a > flat_a) & (variance_b > np.maximum((0.03 * mean_b) ** 2, 9.0))
+        np.testing.assert_array_equal(correlation, expected)
+        np.testing.assert_array_equal(textured.astype(bool), expected_textured)
+
+
+def test_windowed_correlation_of_a_window_with_itself_is_one():
+    # b = a: the product's mean is the mean square, so the correlation is var / sqrt(var^2 + 1e-6).
+    mean, square_mean = np.array([[10.0]], np.float32), np.array([[116.0]], np.float32)  # variance 16
+    correlation, textured = np.empty((1, 1), np.float32), np.empty((1, 1), np.uint8)
+    windowed_correlation(mean, np.array([[16.0]], np.float32), np.array([[9.0]], np.float32), mean, square_mean,
+                         square_mean, 0.03, 9.0, correlation, textured)
+    assert abs(float(correlation[0, 0]) - 1.0) < 1e-6
+    assert textured[0, 0] == 1
+
+
+def _looking_at_origin(position) -> Camera:
+    z = -np.asarray(position, float) / np.linalg.norm(position)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = position
+    return Camera(K=[[520, 0, 318], [0, 515, 243], [0, 0, 1]], T_world_cam=T)
+
+
+def test_the_planes_closed_form_maps_are_those_of_each_table_point_projected():
+    # Two views of a table (z = 0) from either side: the homography's maps against finding each coarse
+    # pixel's table point and projecting it into the other view, the way a lens with distortion still goes.
+    image = np.zeros((480, 640, 3), np.uint8)
+    views = [auto_segment._View(i, image, _looking_at_origin(p), None)
+             for i, p in enumerate([[0.5, -0.1, 0.45], [-0.2, 0.5, 0.6]])]
+    plane = np.array([0.0, 0.0, 1.0, 0.0])
+    for view, other in [(views[0], views[1]), (views[1], views[0])]:
+        maps, inside = auto_segment._plane_homography_maps(view, other, plane)
+        points, valid = auto_segment._plane_points(view, plane)
+        expected_maps, expected_inside = auto_segment._plane_maps(other, points, valid, view.coarse_size)
+        assert inside.any() and not inside.all()
+        np.testing.assert_array_equal(inside, expected_inside)
+        np.testing.assert_allclose(maps[inside.reshape(maps.shape[:2])],
+                                   expected_maps[expected_inside.reshape(maps.shape[:2])], atol=1e-3)
