@@ -32,8 +32,9 @@ def best_verdict(grasps, parts, plane):
     return judge(grasps[0].T_world_grasp, parts, JUDGE_GRIPPER, plane, mu=DEFAULT_GRIPPER.friction)
 
 
-# Scenes where the superquadric alone fails (the fit in parts' better starts made 15 one that it holds).
-@pytest.mark.parametrize("index", [3, 9, 16])
+# Scenes where the superquadric alone fails (the fit in parts' better starts made 15 one that it holds, and
+# the restart from the start that agrees best with every view made 3 one: of the first 20, it fails on 11).
+@pytest.mark.parametrize("index", [0, 9, 16])
 def test_an_l_is_held_where_the_superquadric_alone_would_fail(tmp_path, index):
     # An L (a lying bar, an upright block on one end): no single superquadric describes it,
     # and the best grasp on the superquadric alone cuts the object or slips.
