@@ -322,7 +322,7 @@ def real_photographs() -> None:
     if (bunny / "scan.json").exists():
         result = run(load_bundle(bunny), Options())
         names = [view["mask"] for view in json.loads((bunny / "scan.json").read_text())["views"]]
-        print(f"  bunny         " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
+        print("  bunny         " + "  ".join(f"{n[:-4]} {iou:.3f}" for n, iou in zip(names, result.silhouette_iou))
               + f"   mean {np.mean(result.silhouette_iou):.3f}")
         union_line("bunny", result, load_bundle(bunny), names)
     else:

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from ._carve_cy import carve_view
-from .camera import Camera
+from .camera import Camera  # noqa: F401  (the examples in the docstrings use it)
 from .errors import GeometryError
 
 __all__ = ["occupancy", "carve", "clip_to_plane", "check_support_plane", "lift_above_plane"]

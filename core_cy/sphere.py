@@ -12,7 +12,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera  # noqa: F401  (the examples in the docstrings use it)
 from .errors import GeometryError
 
 __all__ = ["enclosing_sphere", "fibonacci_sphere"]

@@ -5,7 +5,6 @@ reconstructed by the real pipeline). The planner's best grasp is judged with
 workers/sim/judge.py, the DESIGN.md §3 "holds" test written apart from the planner.
 """
 
-import numpy as np
 import pytest
 
 from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps

@@ -118,7 +118,6 @@ def test_plain_tcp_to_a_tls_router_is_refused(pki):
 
 # --- no reconstruction worker trusted on its word (issue 23) -----------------------------------------
 
-from robocell.cell.pool import ReconstructorPool  # noqa: E402
 from tests.test_scale_pool import network, run, send, sees, until  # noqa: E402
 from robocell.wire import keys  # noqa: E402
 from robocell.wire.messages import WorkerLoad  # noqa: E402

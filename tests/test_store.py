@@ -14,7 +14,7 @@ import pytest
 
 from robocell.wire.errors import StoreError
 from robocell.wire.messages import JobEvent, JobState, Lifecycle, Progress, ScanRequest, ScanResult
-from robocell.cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, job_id_for, lifecycle_of, queued_event, queued_status
+from robocell.cell.store import _SCHEMA, SCHEMA_VERSION, JobStore, lifecycle_of, queued_event
 
 T0 = 1_795_000_000.0  # 2026-11-18T11:06:40Z
 IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]

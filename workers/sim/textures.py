@@ -20,7 +20,7 @@ Colours are BGR in [0, 1] (albedo), float32.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal, Sequence
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
