@@ -85,12 +85,16 @@ def _replay(args: argparse.Namespace) -> int:
                 raise ConfigError(f"port {port} on {args.bind} is in use by {holder}: give {option} another port")
         print(f"serving {path}: open {web_viewer_address(args.bind, args.web_port, args.grpc_port)} "
               f"(Ctrl-C stops)", flush=True)
-    viewer = subprocess.Popen(argv)
-    # A `kill` of this command stops the viewer too, as a Ctrl-C does (which reaches both).
+    # A `kill` of this command stops the viewer too, as a Ctrl-C does (which reaches both). Either may come
+    # while the viewer is being started: it is a stop then too, not an error.
     signal.signal(signal.SIGTERM, _terminated)
+    viewer: subprocess.Popen[bytes] | None = None
     try:
+        viewer = subprocess.Popen(argv)
         return viewer.wait()
     except (KeyboardInterrupt, _Terminated) as stop:
+        if viewer is None:  # a Ctrl-C reached the viewer's process group as well
+            return 0
         if isinstance(stop, _Terminated):
             viewer.terminate()
         try:
