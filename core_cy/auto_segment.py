@@ -126,12 +126,12 @@ class _View:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
         (h, w, 2) float32 maps for cv2.remap, and (h * w,) which of them ``other`` sees (a fresh copy).
         Geometry alone: worked out once per pair of views."""
-        plane_key = np.asarray(plane, np.float64).tobytes()
-        key = (other.index, plane_key)
+        key = _pair(other, plane)
         if key not in self._mappings:
             if self.camera.dist is None and other.camera.dist is None:
                 self._mappings[key] = _plane_homography_maps(self, other, plane)
             else:
+                plane_key = key[1]
                 if plane_key not in self._points:
                     self._points[plane_key] = _plane_points(self, plane)
                 points, valid = self._points[plane_key]
@@ -142,7 +142,7 @@ class _View:
     def warped(self, other: _View, plane: np.ndarray) -> np.ndarray:
         """``other``'s coarse image mapped through ``plane`` onto this view's (float32 BGR): each colour
         comparison of the two starts from it, so it is made once per pair of views."""
-        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        key = _pair(other, plane)
         if key not in self._warped:
             maps, _ = self.mapping(other, plane)
             self._warped[key] = _remapped(other.coarse, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -191,6 +191,11 @@ class _View:
         return self.camera.pixel_rays(uv)
 
 
+def _pair(other: _View, plane: np.ndarray) -> tuple[int, bytes]:
+    """The key of what a view caches per other view and plane (its mapping, the warped image, comparisons)."""
+    return other.index, np.asarray(plane, np.float64).tobytes()
+
+
 def _remapped(image: np.ndarray, maps: np.ndarray, interpolation: int, **border) -> np.ndarray:
     """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives), by cv2.remap. The
     two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV copies first."""
@@ -233,7 +238,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         maps, inside, behind = view.sees(other, plane, None if standing is None else standing[number])
         occluded |= behind
         # The images do not change from one look to the next, only what is taken to stand in front.
-        key = (other.index, np.asarray(plane, np.float64).tobytes(), difference_of)
+        key = (*_pair(other, plane), difference_of)
         if key not in view.differences:
             view.differences[key] = difference_of(view.coarse, view.warped(other, plane))
         difference = view.differences[key]
@@ -347,7 +352,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
         # behind its edge in the other view are taken for hidden too.
         maps, inside, _ = view.sees(other, plane, None if hidden is None else
                                     cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
-        key = (other.index, np.asarray(plane, np.float64).tobytes())
+        key = _pair(other, plane)
         if key not in view.correlations:
             fine_maps = _fine_window_maps(view, other, maps, fine_window)
             warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
@@ -1219,7 +1224,7 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
     for other in others:
         maps, inside, behind = view.sees(other, plane, None if occluders is None else occluders[other.index])
         occluded |= behind
-        key = (other.index, np.asarray(plane, np.float64).tobytes(), _ratio_parallax)
+        key = (*_pair(other, plane), _ratio_parallax)
         if key not in view.differences:
             # A pixel's worth of misregistration: the other view's range of values around the point.
             low, high = cv2.erode(ratios[other.index], _SMALL), cv2.dilate(ratios[other.index], _SMALL)

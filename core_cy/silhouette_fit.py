@@ -277,7 +277,6 @@ class _Fitter:
                 descent.run(max_iterations)
                 if descent.cost < best.cost:
                     best = descent
-        self.descents = alive
         return best
 
     def rms(self, cost: float) -> float:
