@@ -687,11 +687,19 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                                  f"image is {image.shape[1]}x{image.shape[0]}", view=index)
         views.append(_View(index, image, camera, background))
     aim = aim_point(cameras if aim_cameras is None else aim_cameras)
-    plane = None if support_plane is None else check_support_plane(support_plane, aim)
+    plane = None
+    if support_plane is not None:
+        # The cameras look down on the table, so they say which side of it the object is on. The views
+        # may converge at a flat object's foot or a little under the table (an arm aims at where the
+        # object touches it as well as at its middle): the aim is then taken on the table.
+        plane = check_support_plane(support_plane, np.mean([camera.center for camera in cameras], axis=0))
+        aim = aim + max(0.0, -float(plane[:3] @ aim + plane[3])) * plane[:3]
+        if parallax_capable(len(views)):
+            _even_the_light(views, plane)
     standing: list[np.ndarray | None] = [None] * len(views)
     # With two views the parallax cannot tell the object in one from the other's object mapped through
     # the plane onto the table beside it (each view's first look holds both): the aim seeds the cut.
-    parallax = plane if len(views) > 2 else None
+    parallax = plane if parallax_capable(len(views)) else None
     # With every view's empty workspace, the change against it is compared through the plane.
     every_background = parallax is not None and all(view.background is not None for view in views)
     if parallax is not None and not every_background:
@@ -720,6 +728,120 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
+
+
+def parallax_capable(view_count: int) -> bool:
+    """Whether the plane's parallax can find the object in ``view_count`` views (see auto_silhouettes)."""
+    return view_count > 2
+
+
+def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
+    """Divide each view's coarse pictures (image and background) by its own smooth light field, where
+    the views' light differs by more than a lens's fall-off (:data:`_LIGHT_FIELD_BEYOND`).
+
+    A table point is not equally bright in every picture: each camera sets its own exposure and white
+    balance, a lens darkens its corners, a renderer may shade the ground in the picture rather than on
+    the table. All of it is a smooth field over each view's own image, which no parallax makes; the
+    plane's parallax compares one view's table with another's through the plane and takes any
+    difference for something standing there. So each view's field, a plane per channel in its log over
+    its own image's coordinates, is fitted to the log ratios of every pair of views at the table points
+    they share, robustly (what differs much from the fit, the object, its parallax, their edges, is left
+    out of the next fit). A view's field is known where it shares table points with another; beyond
+    them it is held at the values found there, not extrapolated. Within exp(+-_LIGHT_FIELD_BEYOND) the
+    cues' noise floors take the difference in their stride, and the pictures are left as they are."""
+    rows_of_pairs = []
+    for view in views:
+        for other in views:
+            if other.index <= view.index:
+                continue
+            maps, inside = view.mapping(other, plane)
+            cw, ch = view.coarse_size
+            sample = np.zeros((ch, cw), bool)
+            sample[::_LIGHT_FIELD_STEP, ::_LIGHT_FIELD_STEP] = True
+            sample &= inside.reshape(ch, cw)
+            ys, xs = np.nonzero(sample)
+            there = maps[ys, xs]
+            seen = _remapped(other.coarse, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[ys, xs]
+            here = view.coarse[ys, xs]
+            lit = (here.min(axis=1) > _LIGHT_FIELD_DARKEST) & (seen.min(axis=1) > _LIGHT_FIELD_DARKEST)
+            if lit.sum() < _LIGHT_FIELD_MIN_SAMPLES:
+                continue
+            rows_of_pairs.append((view.index, _light_basis(view, xs[lit], ys[lit]),
+                                  other.index, _light_basis(other, there[lit, 0], there[lit, 1]),
+                                  np.log(here[lit]) - np.log(seen[lit])))
+    if not rows_of_pairs:
+        return
+    terms = 3
+    columns = terms * len(views)
+    design = np.zeros((sum(len(r[4]) for r in rows_of_pairs) + 1, columns))
+    log_ratio = np.zeros((design.shape[0], 3))
+    start = 0
+    for i, basis_i, j, basis_j, ratio in rows_of_pairs:
+        stop = start + len(ratio)
+        design[start:stop, terms * i:terms * (i + 1)] = basis_i
+        design[start:stop, terms * j:terms * (j + 1)] = -basis_j
+        log_ratio[start:stop] = ratio
+        start = stop
+    # Only ratios are seen: the fields' overall level is free, and is held at no change on average.
+    design[-1, ::terms] = 1.0
+    # Started from each pair's median ratio (one gain per pair), which the object and its parallax, less
+    # than half of the table the two share, cannot pull far; each fit is made of the samples close to
+    # the one before.
+    fitted = np.concatenate([np.broadcast_to(np.median(ratio, axis=0), ratio.shape)
+                             for *_, ratio in rows_of_pairs] + [np.zeros((1, 3))])
+    coefficients = np.zeros((columns, 3))
+    for _ in range(4):
+        residual = np.abs(log_ratio - fitted).sum(axis=1)
+        centre = float(np.median(residual[:-1]))
+        spread = 1.4826 * float(np.median(np.abs(residual[:-1] - centre)))
+        keep = residual < centre + max(3.0 * spread, _LIGHT_FIELD_TOLERANCE)
+        keep[-1] = True
+        coefficients, *_ = np.linalg.lstsq(design[keep], log_ratio[keep], rcond=None)
+        fitted = design @ coefficients
+    relative = np.abs(fitted[:-1])
+    if np.percentile(relative, 98) <= _LIGHT_FIELD_BEYOND or relative.max() > _LIGHT_FIELD_AT_MOST:
+        return
+    sampled: dict[int, list[np.ndarray]] = {view.index: [] for view in views}
+    for i, basis_i, j, basis_j, _ in rows_of_pairs:
+        sampled[i].append(basis_i @ coefficients[terms * i:terms * (i + 1)])
+        sampled[j].append(basis_j @ coefficients[terms * j:terms * (j + 1)])
+    for view in views:
+        if not sampled[view.index]:
+            continue
+        found = np.concatenate(sampled[view.index])
+        cw, ch = view.coarse_size
+        ys, xs = np.mgrid[0:ch, 0:cw]
+        log_field = _light_basis(view, xs.ravel(), ys.ravel()) @ coefficients[terms * view.index:terms * (view.index + 1)]
+        field = np.exp(np.clip(log_field, found.min(axis=0), found.max(axis=0)))
+        field = field.reshape(ch, cw, 3).astype(np.float32)
+        view.coarse = view.coarse / field
+        if view.background is not None:
+            view.background = view.background / field
+
+
+def _light_basis(view: _View, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """(N, 3) the terms of a view's light field (its log, per channel) at its coarse pixels (xs, ys)."""
+    cw, ch = view.coarse_size
+    x = np.asarray(xs, np.float64) / max(cw - 1, 1) * 2.0 - 1.0
+    y = np.asarray(ys, np.float64) / max(ch - 1, 1) * 2.0 - 1.0
+    return np.column_stack([np.ones_like(x), x, y])
+
+
+#: Every this many coarse pixels (each way) a shared table point samples the light fields.
+_LIGHT_FIELD_STEP = 2
+#: Channels this dark (grey levels) say little of a ratio: the noise is most of them.
+_LIGHT_FIELD_DARKEST = 8.0
+#: A pair of views sharing fewer table samples than this says nothing of the light.
+_LIGHT_FIELD_MIN_SAMPLES = 200
+#: Residuals (log ratio summed over channels) this small are always the table's.
+_LIGHT_FIELD_TOLERANCE = 0.06
+#: Two views' light within exp(+-0.2) of each other at the table points they share (a lens darkens its
+#: corners by up to about a fifth against its centre) is left to the cues' noise floors; beyond it
+#: (another exposure or white balance, a ground shaded in the picture) each view's is evened out.
+_LIGHT_FIELD_BEYOND = 0.2
+#: A field that would change a view's light by more than a factor of e (log 1) against another's is no
+#: camera's or lamp's but the fit's failure (too little table shared): the pictures are left as they are.
+_LIGHT_FIELD_AT_MOST = 1.0
 
 
 def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
