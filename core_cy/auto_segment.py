@@ -733,9 +733,11 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     """The views checked against each other, one correction at a time, each view corrected once.
 
     A silhouette that reaches out of the other views' hull takes in too much (a shadow, a stretch of
-    table); one that holds too little (the aim alone seeded it, and it found part of the object)
-    carves every other view's hull, so that they reach out of it. Which is which: a view without
-    which none of the others reaches out holds too little, and is cut again within their hull;
+    table); one that holds too little (the aim alone seeded it, and it found part of the object; or
+    its evidence missed a face the others found) carves every other view's hull, so that they reach
+    out of it. Which is which: a view without which none of the others reaches out holds too little,
+    and is cut again within their hull (seeded by its evidence: within their hull and its own
+    silhouette, by the colour models of its own seeds);
     failing that, the view that reaches out most is cut again with what lies outside marked table;
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
     others' hull is cut again within it.
@@ -748,15 +750,25 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         culprit, relief = -1, 0.0
         for k in everyone - done:
             others = everyone - {k}
-            if scores[k] is None and len(views) > 2 and max(excess[j] for j in others) > 1.0:
+            if len(views) > 2 and max(excess[j] for j in others) > 1.0:
                 without = [_excess(masks[j], hulls.into(others - {j}, j)) for j in others]
                 gain = sum(excess[j] for j in others) - sum(without)
                 if max(without) <= 1.0 and gain > relief:
                     culprit, relief = k, gain
         if culprit >= 0:
             done.add(culprit)
-            view = views[culprit]
-            masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {culprit}))
+            view, score = views[culprit], scores[culprit]
+            hull = hulls.of(everyone - {culprit})
+            if score is None:
+                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull)
+            else:
+                # The view's own evidence missed part of the object (a top of the table's colour and light,
+                # a dark face taken for the shadow beside it) that the others agree on: what the others'
+                # hull adds is looked for there too, by the colour models its own seeds trained, and
+                # nothing beyond the two is.
+                region = cv2.bitwise_or(masks[culprit], hull)
+                masks[culprit] = _graph_cut(view, region, score,
+                                            cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
             continue
         # Only a view seeded by the aim alone is cut again within the others' hull: a view whose evidence
         # seeded it (the plane's parallax, the empty workspace) knows better than a hull that the other
