@@ -802,7 +802,38 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             if cv2.countNonZero(kept) < 12:
                 raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
             masks[index] = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+    if len(views) > 2:
+        masks = _bays_looked_into(views, masks, scores, plane, aim, done)
     return masks
+
+
+def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+                      plane: np.ndarray | None, aim: np.ndarray, done: set[int]) -> list[np.ndarray]:
+    """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
+    is what lies within the silhouette's convex outline and within the other views' hull but outside the
+    silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
+    evidence missed (a box's or a can's top) leaves such a bay between the faces found around it; the two
+    other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
+    own evidence, looks for the object there too; what the view had found is kept."""
+    everyone = set(range(len(views)))
+    hulls = _Hulls(views, masks, plane, aim)
+    looked = list(masks)
+    for i in everyone - done:
+        score = scores[i]
+        if score is None:
+            continue
+        outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
+        bay = cv2.bitwise_and(cv2.bitwise_and(outline, hulls.of(everyone - {i})), cv2.bitwise_not(masks[i]))
+        bay = cv2.morphologyEx(bay, cv2.MORPH_OPEN, _SMALL)
+        if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
+            region = cv2.bitwise_or(masks[i], bay)
+            found = _graph_cut(views[i], region, score, cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
+            looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
+    return looked
+
+
+#: A bay of a silhouette (:func:`_bays_looked_into`) is looked into when it holds over this share of its area.
+_BAY = 0.05
 
 
 #: A view whose silhouette reaches this share of its area out of the other views' hull is cut again.
