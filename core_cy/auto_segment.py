@@ -750,6 +750,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     """
     done: set[int] = set()
     everyone = set(range(len(views)))
+    hulls: _Hulls | None = None
     for _ in range(len(views)):
         hulls = _Hulls(views, masks, plane, aim)
         excess = {i: _excess(masks[i], hulls.of(everyone - {i})) for i in everyone}
@@ -802,13 +803,15 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             if cv2.countNonZero(kept) < 12:
                 raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
             masks[index] = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+    else:
+        hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
-        masks = _bays_looked_into(views, masks, scores, plane, aim, done)
+        masks = _bays_looked_into(views, masks, scores, hulls or _Hulls(views, masks, plane, aim), done)
     return masks
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      plane: np.ndarray | None, aim: np.ndarray, done: set[int]) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int]) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -816,7 +819,6 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
     other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
     own evidence, looks for the object there too; what the view had found is kept."""
     everyone = set(range(len(views)))
-    hulls = _Hulls(views, masks, plane, aim)
     looked = list(masks)
     for i in everyone - done:
         score = scores[i]
