@@ -368,12 +368,13 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
 
 
-def _texture_change(view: _View, centre: np.ndarray) -> np.ndarray:
+def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
     1: none; 0 where the grain does not stand clear of the noise; NaN out of the window around the aim,
     coarse pixel ``centre``): a shadow darkens the grain by the same factor as its brightness, and its
     soft edge, a slope unrelated to the grain, does not weaken it; a face that hides the grain, even one
-    of the table's colour, loses it."""
+    of the table's colour, loses it. And the share of each coarse pixel's fine pixels whose grain stands
+    clear of the noise and is mostly kept (:data:`_GRAIN_KEPT`): there the table is seen, lit or not."""
     window, fine_window = _aim_window(view, centre)
     image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
     image_grain, empty_grain = _grain(image), _grain(empty)
@@ -390,7 +391,8 @@ def _texture_change(view: _View, centre: np.ndarray) -> np.ndarray:
     faint = (_GRAIN_FLOOR * cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)) ** 2
     expected = strength * np.minimum(dimmed, 1.0) ** 2
     grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
-    return _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
+    lost = _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
+    return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32))
 
 
 def _grain(image: np.ndarray) -> np.ndarray:
@@ -406,6 +408,10 @@ _GRAIN_FLOOR = 0.02
 _GRAIN_CLEAR = 2.0
 #: Grey levels: the faintest grain that JPEG keeps.
 _GRAIN_VISIBLE = 3.0
+#: A grain is kept where the image holds more than this share of the empty workspace's, dimmed as the light.
+_GRAIN_KEPT = 0.5
+#: A pixel whose fine pixels keep the grain in more than this share is the table, in a shadow or not.
+_GRAIN_SEEN = 0.6
 #: The grain lost on the table is taken to be at least this: JPEG and the sensor's noise leave that much.
 _GRAIN_NOISE_FLOOR = 0.2
 
@@ -855,30 +861,43 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     """The views checked against each other, one correction at a time, each view corrected once.
 
     A silhouette that reaches out of the other views' hull takes in too much (a shadow, a stretch of
-    table); one that holds too little (the aim alone seeded it, and it found part of the object)
-    carves every other view's hull, so that they reach out of it. Which is which: a view without
-    which none of the others reaches out holds too little, and is cut again within their hull;
+    table); one that holds too little (the aim alone seeded it, and it found part of the object; or
+    its evidence missed a face the others found) carves every other view's hull, so that they reach
+    out of it. Which is which: a view without which none of the others reaches out holds too little,
+    and is cut again within their hull (seeded by its evidence: within their hull and its own
+    silhouette, by the colour models of its own seeds);
     failing that, the view that reaches out most is cut again with what lies outside marked table;
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
     others' hull is cut again within it.
     """
     done: set[int] = set()
     everyone = set(range(len(views)))
+    hulls: _Hulls | None = None
     for _ in range(len(views)):
         hulls = _Hulls(views, masks, plane, aim)
         excess = {i: _excess(masks[i], hulls.of(everyone - {i})) for i in everyone}
         culprit, relief = -1, 0.0
         for k in everyone - done:
             others = everyone - {k}
-            if scores[k] is None and len(views) > 2 and max(excess[j] for j in others) > 1.0:
+            if len(views) > 2 and max(excess[j] for j in others) > 1.0:
                 without = [_excess(masks[j], hulls.into(others - {j}, j)) for j in others]
                 gain = sum(excess[j] for j in others) - sum(without)
                 if max(without) <= 1.0 and gain > relief:
                     culprit, relief = k, gain
         if culprit >= 0:
             done.add(culprit)
-            view = views[culprit]
-            masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {culprit}))
+            view, score = views[culprit], scores[culprit]
+            hull = hulls.of(everyone - {culprit})
+            if score is None:
+                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull)
+            else:
+                # The view's own evidence missed part of the object (a top of the table's colour and light,
+                # a dark face taken for the shadow beside it) that the others agree on: what the others'
+                # hull adds is looked for there too, by the colour models its own seeds trained, and
+                # nothing beyond the two is.
+                region = cv2.bitwise_or(masks[culprit], hull)
+                masks[culprit] = _graph_cut(view, region, score,
+                                            cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
             continue
         # Only a view seeded by the aim alone is cut again within the others' hull: a view whose evidence
         # seeded it (the plane's parallax, the empty workspace) knows better than a hull that the other
@@ -906,7 +925,39 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             if cv2.countNonZero(kept) < 12:
                 raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
             masks[index] = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+    else:
+        hulls = None  # the last round corrected a view: the hulls are to be carved again
+    if len(views) > 2:
+        masks = _bays_looked_into(views, masks, scores, hulls or _Hulls(views, masks, plane, aim), done)
     return masks
+
+
+def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+                      hulls: _Hulls, done: set[int]) -> list[np.ndarray]:
+    """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
+    is what lies within the silhouette's convex outline and within the other views' hull but outside the
+    silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
+    evidence missed (a box's or a can's top) leaves such a bay between the faces found around it; the two
+    other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
+    own evidence, looks for the object there too; what the view had found is kept."""
+    everyone = set(range(len(views)))
+    looked = list(masks)
+    for i in everyone - done:
+        score = scores[i]
+        if score is None:
+            continue
+        outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
+        bay = cv2.bitwise_and(cv2.bitwise_and(outline, hulls.of(everyone - {i})), cv2.bitwise_not(masks[i]))
+        bay = cv2.morphologyEx(bay, cv2.MORPH_OPEN, _SMALL)
+        if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
+            region = cv2.bitwise_or(masks[i], bay)
+            found = _graph_cut(views[i], region, score, cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
+            looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
+    return looked
+
+
+#: A bay of a silhouette (:func:`_bays_looked_into`) is looked into when it holds over this share of its area.
+_BAY = 0.05
 
 
 #: A view whose silhouette reaches this share of its area out of the other views' hull is cut again.
@@ -1370,10 +1421,12 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures = {}, {}
+    changed, textures, tables = {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        texture = _texture_change(view, _coarse_aim(view, aim))
+        texture, grain_kept = _texture_change(view, _coarse_aim(view, aim))
+        # Darker than the empty workspace, of its chromaticity, its grain kept: a shadow on the table.
+        tables[view.index] = _shadow_of_table(view) & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
         score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
@@ -1384,15 +1437,15 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, textures, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -1404,11 +1457,12 @@ _OCCLUDER_ITERATIONS = 1
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
-                textures: dict[int, np.ndarray], changed: dict[int, np.ndarray],
+                textures: dict[int, np.ndarray], tables: dict[int, np.ndarray], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
     where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
-    grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too."""
+    grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too;
+    ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept)."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -1417,7 +1471,9 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         score = evidence / max(_noise_level(np.where(evidence < 0, np.nan, evidence)), _BACKGROUND_NOISE_FLOOR)
         # Where every other view has the table point behind the object, the pixel changed and nothing
         # says it is a shadow (the object's foot, or a face whose table points it covers).
-        score = np.where(np.isnan(score), _HIDDEN, score)
+        # But a shadow that keeps the empty workspace's grain is the table: the strip under a lying can,
+        # which the can hides from every other view.
+        score = np.where(np.isnan(score), np.where(tables[view.index], 0.0, _HIDDEN), score)
         score = np.maximum(score, textures[view.index])
         if occluders is not None:
             # The tint against the other views' through the plane, as without a background (_first_cut):
