@@ -874,7 +874,8 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     or two of its outline, each a sharper step than the one from the table, and only the outermost
     step leaves nothing but table beyond. The table's colour is that at the band's outer end, the
     median over a few neighbouring normals (its print and grain vary; a normal that ends on the object
-    is outvoted). The edge runs smoothly from one normal to the next (a cheapest path round the
+    is outvoted); the table darkened, its colour kept, is the table too (the object's shadow beside
+    its foot, which the coarse cut often gives the object). The edge runs smoothly from one normal to the next (a cheapest path round the
     outline), which carries it across stretches where object and table look alike. Each pixel whose
     centre lies inside the edge so found is object, the truth's rule for a pixel the edge crosses
     (half of it or more is object).
@@ -919,14 +920,20 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
 _OUTLINE_SMOOTHING = 1.25
 #: Candidate offsets of the edge along a normal are this far apart (px); each is refined by a parabola.
 _EDGE_STEP = 0.5
-#: The table's colour is taken over the band's outermost this-many px, and over this many normals.
+#: The table's colour is taken over the outermost this-many px of profiles that run on this far beyond
+#: the band, and over this many normals.
 _TABLE_DEPTH_PX = 1.5
+_TABLE_BEYOND_PX = 1.0
 _TABLE_NORMALS = 7
 #: A colour within this many grey levels (beyond the table's own spread) of the table's is the table:
 #: sensor noise and JPEG.
 _TABLE_TOLERANCE = 6.0
 #: Colour unlike the table's left outside the edge costs this much per grey level and px.
 _OUTSIDE_WEIGHT = 1.0
+#: A shadow darkens the table's colour to no less than this share of it (under the object's foot, where
+#: the lamp and most of the sky are hidden) and changes it by under this share of its brightness there.
+_DEEPEST_SHADOW = 0.15
+_SHADOW_COLOUR_CHANGE = 0.15
 #: The edge's offset changing from one normal (a pixel along the outline) to the next costs this much
 #: per candidate step (in grey levels of the colour step it must beat).
 _EDGE_BEND_COST = 2.0
@@ -960,8 +967,10 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     """(M,) how far along each outward normal (px, within ``band``) the object's edge lies: the sharpest
     colour step that leaves only the table's colour beyond it, on a path smooth round the loop (see
     :func:`_refined`). ``image`` is float32 BGR, ``loop`` and ``normals`` as :func:`_outline_loop`."""
-    offsets = np.arange(-band, band + 1e-9, _EDGE_STEP)
-    count, candidates = len(loop), len(offsets)
+    # The profiles run on a little beyond the band, so that the table's colour is taken where the blur of
+    # an edge at the band's end does not reach.
+    offsets = np.arange(-band, band + _TABLE_BEYOND_PX + 1e-9, _EDGE_STEP)
+    count, candidates = len(loop), int(np.sum(offsets <= band + 1e-9))
 
     def profiles(shift: float) -> np.ndarray:
         at = loop[:, None, :] + (offsets[None, :, None] + shift) * normals[:, None, :]
@@ -976,24 +985,35 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     ends = colours[:, -depth:, :]
     table = _wrapped_median(np.median(ends, axis=1), _TABLE_NORMALS)
     spread = _wrapped_median(np.median(np.linalg.norm(ends - table[:, None, :], axis=2), axis=1), _TABLE_NORMALS)
-    unlike = np.maximum(np.linalg.norm(colours - table[:, None, :], axis=2) - (2 * spread + _TABLE_TOLERANCE)[:, None],
-                        0.0) * _EDGE_STEP
+    unlike = np.maximum(_unlike_table(colours, table) - (2 * spread + _TABLE_TOLERANCE)[:, None], 0.0) * _EDGE_STEP
     # What lies beyond a candidate (from a pixel outside it, past the edge's blur) and is not table.
     gap = int(round(1.0 / _EDGE_STEP))
     beyond = np.zeros_like(unlike)
-    beyond[:, :candidates - gap - 1] = np.cumsum(unlike[:, ::-1], axis=1)[:, ::-1][:, gap + 1:]
-    cost = np.ascontiguousarray(_OUTSIDE_WEIGHT * beyond - step, dtype=np.float64)
+    beyond[:, :len(offsets) - gap - 1] = np.cumsum(unlike[:, ::-1], axis=1)[:, ::-1][:, gap + 1:]
+    cost = np.ascontiguousarray((_OUTSIDE_WEIGHT * beyond - step)[:, :candidates], dtype=np.float64)
     path = np.empty(count, np.intp)
     smoothest_path(cost, _EDGE_BEND_COST, 1, path)
     # To a fraction of a step: the vertex of the parabola through the step's strength either side.
     rows = np.arange(count)
     before = step[rows, np.maximum(path - 1, 0)]
     at = step[rows, path]
-    after = step[rows, np.minimum(path + 1, candidates - 1)]
+    after = step[rows, path + 1]  # the profiles run on beyond the last candidate
     curvature = before - 2 * at + after
-    interior = (path > 0) & (path < candidates - 1) & (curvature < 0)
+    interior = (path > 0) & (curvature < 0)
     fraction = np.where(interior, 0.5 * (before - after) / np.where(interior, curvature, -1.0), 0.0)
     return offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP
+
+
+def _unlike_table(colours: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(M, D) how far each colour of ``colours`` (M, D, 3) lies from its row's ``table`` colour (M, 3), in
+    grey levels, the table in shade included: a colour close to the table's darkened (a shadow dims
+    the table's light, not its colour) is as far as it is from that darkened colour."""
+    power = np.maximum(np.einsum("mk,mk->m", table, table), 1.0)[:, None]
+    darkening = np.clip(np.einsum("mdk,mk->md", colours, table) / power, _DEEPEST_SHADOW, 1.0)
+    from_shade = np.linalg.norm(colours - darkening[..., None] * table[:, None, :], axis=2)
+    from_table = np.linalg.norm(colours - table[:, None, :], axis=2)
+    in_shade = from_shade < _SHADOW_COLOUR_CHANGE * darkening * np.sqrt(power)
+    return np.where(in_shade, np.minimum(from_table, from_shade), from_table)
 
 
 def _wrapped_median(values: np.ndarray, window: int) -> np.ndarray:
