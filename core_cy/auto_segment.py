@@ -872,13 +872,14 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     where a pixel is half object), but not with colour unlike the table's left outside it: an object's
     edge is often a dark rim (its surface turns away from the light there) or a print within a pixel
     or two of its outline, each a sharper step than the one from the table, and only the outermost
-    step leaves nothing but table beyond. The table's colour is that at the band's outer end, the
-    median over a few neighbouring normals (its print and grain vary; a normal that ends on the object
-    is outvoted); the table darkened, its colour kept, is the table too (the object's shadow beside
-    its foot, which the coarse cut often gives the object). The edge runs smoothly from one normal to the next (a cheapest path round the
-    outline), which carries it across stretches where object and table look alike. Each pixel whose
-    centre lies inside the edge so found is object, the truth's rule for a pixel the edge crosses
-    (half of it or more is object).
+    step leaves nothing but table beyond. The table's colour is that just beyond the band, the median
+    over a few neighbouring normals (its print and grain vary; a normal that ends on the object is
+    outvoted); the table darkened, its colour kept, is the table too (the object's shadow beside its
+    foot, which the coarse cut often gives the object). The edge runs smoothly from one normal to the
+    next (a cheapest path round the outline), which carries it across stretches where object and
+    table look alike, and its offsets, each found on one noisy profile, are averaged over a few
+    neighbours. Each pixel whose centre lies inside the edge so found is object: the truth's rule for
+    a pixel the edge crosses (half of it or more is object).
 
     Earlier, each pixel of the band went to the side whose nearest sure pixel's colour it was closer
     to; a sure pixel lies a band's width inside, and there the object's colour is not its rim's nor
@@ -934,6 +935,8 @@ _OUTSIDE_WEIGHT = 1.0
 #: the lamp and most of the sky are hidden) and changes it by under this share of its brightness there.
 _DEEPEST_SHADOW = 0.15
 _SHADOW_COLOUR_CHANGE = 0.15
+#: The offsets found are smoothed along the outline over this many normals (a Gaussian's standard deviation).
+_EDGE_SMOOTHING = 2.0
 #: The edge's offset changing from one normal (a pixel along the outline) to the next costs this much
 #: per candidate step (in grey levels of the colour step it must beat).
 _EDGE_BEND_COST = 2.0
@@ -943,13 +946,7 @@ def _outline_loop(contour: np.ndarray, smoothing: float) -> tuple[np.ndarray, np
     """A closed outline ((N, 2) pixel coordinates, in order, as cv2.findContours gives) smoothed along
     its length by a Gaussian of ``smoothing`` px, resampled one point a pixel of length, and the
     outward unit normal at each point: ((M, 2), (M, 2)) float64."""
-    points = contour.astype(np.float64)
-    if smoothing > 0 and len(points) > 2:
-        radius = min(int(np.ceil(3 * smoothing)), (len(points) - 1) // 2)
-        taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / smoothing) ** 2)
-        taps /= taps.sum()
-        wrapped = np.concatenate([points[-radius:], points, points[:radius]]) if radius else points
-        points = np.column_stack([np.convolve(wrapped[:, k], taps, mode="valid") for k in range(2)])
+    points = _smoothed_round(contour.astype(np.float64), smoothing)
     closed = np.vstack([points, points[:1]])
     length = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
     count = max(8, int(round(length[-1])))
@@ -1001,7 +998,21 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     curvature = before - 2 * at + after
     interior = (path > 0) & (curvature < 0)
     fraction = np.where(interior, 0.5 * (before - after) / np.where(interior, curvature, -1.0), 0.0)
-    return offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP
+    # Each offset is found on one noisy profile, while the edge runs on smoothly from one to the next.
+    return _smoothed_round(offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP, _EDGE_SMOOTHING)
+
+
+def _smoothed_round(values: np.ndarray, sigma: float) -> np.ndarray:
+    """``values`` (N, ...) round a closed loop, smoothed along it by a Gaussian of ``sigma`` entries."""
+    radius = min(int(np.ceil(3 * sigma)), (len(values) - 1) // 2) if sigma > 0 else 0
+    if radius < 1:
+        return values
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    wrapped = np.concatenate([values[-radius:], values, values[:radius]])
+    columns = wrapped.reshape(len(wrapped), -1)
+    smoothed = np.column_stack([np.convolve(columns[:, k], taps, mode="valid") for k in range(columns.shape[1])])
+    return smoothed.reshape(values.shape)
 
 
 def _unlike_table(colours: np.ndarray, table: np.ndarray) -> np.ndarray:

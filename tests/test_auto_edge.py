@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import pytest
 
 from robocell.core_cy import auto_segment
 from robocell.core_cy._edges_cy import smoothest_path
