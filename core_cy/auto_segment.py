@@ -20,9 +20,9 @@ with colour models of object and table learned from the seeds. The views
 then check each other: the hull carved from all other views, projected into
 a view, must contain that view's silhouette; what lies outside it (a
 shadow, a stretch of table) is table, and that view is cut again with it
-marked so. Last, the silhouette's edge is placed at full resolution: each
-pixel of a thin band along the coarse edge goes to the side, object or
-table, whose colour just beside the band it is closer to.
+marked so. Last, the silhouette's edge is placed at full resolution: along
+each normal of the coarse outline, on the sharpest colour step that leaves
+only the table's colour (or its shadow) beyond it, to a fraction of a pixel.
 
 Without a support plane the aim alone seeds the cut (the region around it
 is taken for the object, the image's border for the background), and the
