@@ -131,3 +131,57 @@ def edge_crossings(const unsigned char[:, :, ::1] image not None, const double[:
                 found[i] = 1
                 if moved < 0.05 and moved > -0.05:
                     break
+
+
+def smoothest_path(const double[:, ::1] cost not None, double step_cost, Py_ssize_t max_step,
+                   Py_ssize_t[::1] path not None):
+    """The path around a closed loop that is cheapest in ``cost`` plus ``step_cost`` per unit of change.
+
+    ``cost`` is (S, D): S positions around a closed loop and D choices at each (the candidate offsets
+    of an edge along the loop's normal); ``path[s]`` receives the choice at position s. Between
+    neighbouring positions the choice changes by at most ``max_step``, at ``step_cost`` per unit.
+    The loop is closed by going round it twice and keeping the second round, by when the path no
+    longer depends on where the first round began (dynamic programming, O(S D max_step)).
+    """
+    cdef Py_ssize_t S = cost.shape[0], D = cost.shape[1], rounds = 2 * S, s, d, j, src, best_d
+    cdef double best, candidate
+    if path.shape[0] != S:
+        raise ValueError("path needs one entry per position of the loop")
+    if S == 0 or D == 0:
+        return
+    if max_step < 0:
+        raise ValueError("max_step must be >= 0")
+    import numpy as np
+    accumulated_np = np.empty(D, np.float64)
+    following_np = np.empty(D, np.float64)
+    back_np = np.empty((rounds, D), np.intp)
+    cdef double[::1] accumulated = accumulated_np
+    cdef double[::1] following = following_np
+    cdef Py_ssize_t[:, ::1] back = back_np
+    with nogil:
+        for d in range(D):
+            accumulated[d] = cost[0, d]
+            back[0, d] = d
+        for s in range(1, rounds):
+            for d in range(D):
+                best = 1e300
+                best_d = d
+                for j in range(-max_step, max_step + 1):
+                    src = d - j
+                    if src < 0 or src >= D:
+                        continue
+                    candidate = accumulated[src] + step_cost * (j if j >= 0 else -j)
+                    if candidate < best:
+                        best = candidate
+                        best_d = src
+                following[d] = best + cost[s % S, d]
+                back[s, d] = best_d
+            for d in range(D):
+                accumulated[d] = following[d]
+        best_d = 0
+        for d in range(1, D):
+            if accumulated[d] < accumulated[best_d]:
+                best_d = d
+        for s in range(rounds - 1, S - 1, -1):
+            path[s - S] = best_d
+            best_d = back[s, best_d]

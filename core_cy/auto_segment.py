@@ -20,9 +20,9 @@ with colour models of object and table learned from the seeds. The views
 then check each other: the hull carved from all other views, projected into
 a view, must contain that view's silhouette; what lies outside it (a
 shadow, a stretch of table) is table, and that view is cut again with it
-marked so. Last, the silhouette's edge is placed at full resolution: each
-pixel of a thin band along the coarse edge goes to the side, object or
-table, whose colour just beside the band it is closer to.
+marked so. Last, the silhouette's edge is placed at full resolution: along
+each normal of the coarse outline, on the sharpest colour step that leaves
+only the table's colour (or its shadow) beyond it, to a fraction of a pixel.
 
 Without a support plane the aim alone seeds the cut (the region around it
 is taken for the object, the image's border for the background), and the
@@ -39,6 +39,7 @@ import numpy as np
 
 from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
                                windowed_correlation)
+from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
@@ -1035,13 +1036,28 @@ class _Hulls:
 
 
 def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The full-resolution silhouette and its outline: each pixel of a band along the coarse edge goes
-    to the side (object or table) whose colour just beside the band it is closer to.
+    """The full-resolution silhouette and its outline: the coarse edge, moved along its normal onto the
+    image's own edge, to a fraction of a pixel.
 
-    A pixel on the edge mixes the two sides' colours there; the nearest pixel sure to be object and the
-    nearest sure to be table give them (a print's local colour, not its mean over a window, which sent a
-    print's pixels to the table; and beside a shadow the table's colour is the shadow's, which the empty
-    workspace's picture is not: it sent a shadow's pixels to a dark object)."""
+    The coarse silhouette's edge lies within about a coarse pixel of the object's. Along each normal of
+    its outline (smoothed, one sample a pixel), within a band of that width either side, the edge is
+    where the colour steps most sharply (a blurred step is steepest half-way between its two sides:
+    where a pixel is half object), but not with colour unlike the table's left outside it: an object's
+    edge is often a dark rim (its surface turns away from the light there) or a print within a pixel
+    or two of its outline, each a sharper step than the one from the table, and only the outermost
+    step leaves nothing but table beyond. The table's colour is that just beyond the band, the median
+    over a few neighbouring normals (its print and grain vary; a normal that ends on the object is
+    outvoted); the table darkened, its colour kept, is the table too (the object's shadow beside its
+    foot, which the coarse cut often gives the object). The edge runs smoothly from one normal to the
+    next (a cheapest path round the outline), which carries it across stretches where object and
+    table look alike, and its offsets, each found on one noisy profile, are averaged over a few
+    neighbours. Each pixel whose centre lies inside the edge so found is object: the truth's rule for
+    a pixel the edge crosses (half of it or more is object).
+
+    Earlier, each pixel of the band went to the side whose nearest sure pixel's colour it was closer
+    to; a sure pixel lies a band's width inside, and there the object's colour is not its rim's nor
+    its print's at the edge, which sent edge pixels to the table (about half a pixel all round).
+    """
     height, width = view.image.shape[:2]
     band = int(np.ceil(max(view.sx, view.sy))) + 1
     x, y, w, h = cv2.boundingRect(coarse_mask)
@@ -1051,14 +1067,21 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     # The coarse mask, resampled smoothly and cut at its half-way line, within the box.
     up = cv2.resize(coarse_mask, (width, height), interpolation=cv2.INTER_LINEAR)[y0:y1, x0:x1]
     mask = (up >= 128).astype(np.uint8)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
-    sure = cv2.erode(mask, kernel)
-    table = 1 - cv2.dilate(mask, kernel)
     image = view.image[y0:y1, x0:x1].astype(np.float32)
-    object_distance = _relative_difference(image, _nearest_colour(image, sure))
-    table_distance = _relative_difference(image, _nearest_colour(image, table))
-    uncertain = (sure == 0) & (table == 0)
-    chosen = cv2.medianBlur(np.where(uncertain, object_distance < table_distance, sure > 0).astype(np.uint8) * 255, 3)
+    inside_edge = np.zeros_like(mask)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    for contour in contours:
+        if cv2.contourArea(contour) < (2 * band) ** 2:
+            # Too small for a band either side of its edge: kept as the coarse mask has it.
+            cv2.drawContours(inside_edge, [contour], -1, 1, thickness=cv2.FILLED)
+            continue
+        loop, normals = _outline_loop(contour.reshape(-1, 2), _OUTLINE_SMOOTHING * max(view.sx, view.sy))
+        offsets = _edge_offsets(image, loop, normals, band)
+        _fill_centres_inside(inside_edge, loop + offsets[:, None] * normals)
+    # The edge moves at most the band's width: beyond it the coarse mask stands.
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+    sure, table = cv2.erode(mask, kernel), cv2.dilate(mask, kernel) == 0
+    chosen = np.where((sure > 0) | ((inside_edge > 0) & ~table), 255, 0).astype(np.uint8)
     if not cv2.countNonZero(chosen):
         raise SilhouetteError(_NOTHING, view=view.index)
     silhouette = np.zeros((height, width), np.uint8)
@@ -1066,16 +1089,144 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return mask_with_outline(silhouette, view=view.index)
 
 
-def _nearest_colour(image: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-    """(h, w, 3) float32: at every pixel of ``image``, the colour of the nearest pixel where ``seeds`` (h, w)
-    is nonzero (``image`` itself where there is none)."""
-    if not seeds.any():
-        return image
-    # With DIST_LABEL_PIXEL every seed pixel is its own label, numbered in raster order from 1.
-    _, labels = cv2.distanceTransformWithLabels(np.where(seeds > 0, 0, 1).astype(np.uint8), cv2.DIST_L2, 3,
-                                                labelType=cv2.DIST_LABEL_PIXEL)
-    ys, xs = np.nonzero(seeds)
-    return image[ys, xs][labels - 1]
+#: The coarse outline is smoothed along its length over this many coarse pixels (a Gaussian's
+#: standard deviation) before its normals are taken: the coarse mask's staircase is no edge.
+_OUTLINE_SMOOTHING = 1.25
+#: Candidate offsets of the edge along a normal are this far apart (px); each is refined by a parabola.
+_EDGE_STEP = 0.5
+#: The table's colour is taken over the outermost this-many px of profiles that run on this far beyond
+#: the band, and over this many normals.
+_TABLE_DEPTH_PX = 1.5
+_TABLE_BEYOND_PX = 1.0
+_TABLE_NORMALS = 7
+#: A colour within this many grey levels (beyond the table's own spread) of the table's is the table:
+#: sensor noise and JPEG.
+_TABLE_TOLERANCE = 6.0
+#: Colour unlike the table's left outside the edge costs this much per grey level and px.
+_OUTSIDE_WEIGHT = 1.0
+#: A shadow darkens the table's colour to no less than this share of it (under the object's foot, where
+#: the lamp and most of the sky are hidden) and changes it by under this share of its brightness there.
+_DEEPEST_SHADOW = 0.15
+_SHADOW_COLOUR_CHANGE = 0.15
+#: The offsets found are smoothed along the outline over this many normals (a Gaussian's standard deviation).
+_EDGE_SMOOTHING = 2.0
+#: The edge's offset changing from one normal (a pixel along the outline) to the next costs this much
+#: per candidate step (in grey levels of the colour step it must beat).
+_EDGE_BEND_COST = 2.0
+
+
+def _outline_loop(contour: np.ndarray, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed outline ((N, 2) pixel coordinates, in order, as cv2.findContours gives) smoothed along
+    its length by a Gaussian of ``smoothing`` px, resampled one point a pixel of length, and the
+    outward unit normal at each point: ((M, 2), (M, 2)) float64."""
+    points = _smoothed_round(contour.astype(np.float64), smoothing)
+    closed = np.vstack([points, points[:1]])
+    length = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
+    count = max(8, int(round(length[-1])))
+    along = np.linspace(0.0, length[-1], count, endpoint=False)
+    loop = np.column_stack([np.interp(along, length, closed[:, 0]), np.interp(along, length, closed[:, 1])])
+    tangents = np.roll(loop, -1, axis=0) - np.roll(loop, 1, axis=0)
+    tangents /= np.maximum(np.hypot(tangents[:, 0], tangents[:, 1]), 1e-9)[:, None]
+    normals = np.column_stack([tangents[:, 1], -tangents[:, 0]])
+    # (ty, -tx) points out of a loop of positive signed area (the shoelace formula), in of a negative one.
+    signed_area = 0.5 * float(np.sum(loop[:, 0] * np.roll(loop[:, 1], -1) - np.roll(loop[:, 0], -1) * loop[:, 1]))
+    return loop, (normals if signed_area >= 0 else -normals)
+
+
+def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band: int) -> np.ndarray:
+    """(M,) how far along each outward normal (px, within ``band``) the object's edge lies: the sharpest
+    colour step that leaves only the table's colour beyond it, on a path smooth round the loop (see
+    :func:`_refined`). ``image`` is float32 BGR, ``loop`` and ``normals`` as :func:`_outline_loop`."""
+    # The profiles run on a little beyond the band, so that the table's colour is taken where the blur of
+    # an edge at the band's end does not reach.
+    offsets = np.arange(-band, band + _TABLE_BEYOND_PX + 1e-9, _EDGE_STEP)
+    count, candidates = len(loop), int(np.sum(offsets <= band + 1e-9))
+
+    def profiles(shift: float) -> np.ndarray:
+        at = loop[:, None, :] + (offsets[None, :, None] + shift) * normals[:, None, :]
+        return cv2.remap(image, at[..., 0].astype(np.float32), at[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE)
+
+    # The colour step across each candidate, over one pixel: blur makes an edge's step steepest where
+    # it is half-way.
+    step = np.linalg.norm(profiles(0.5) - profiles(-0.5), axis=2)
+    colours = profiles(0.0)
+    depth = max(1, int(round(_TABLE_DEPTH_PX / _EDGE_STEP)))
+    ends = colours[:, -depth:, :]
+    table = _wrapped_median(np.median(ends, axis=1), _TABLE_NORMALS)
+    spread = _wrapped_median(np.median(np.linalg.norm(ends - table[:, None, :], axis=2), axis=1), _TABLE_NORMALS)
+    unlike = np.maximum(_unlike_table(colours, table) - (2 * spread + _TABLE_TOLERANCE)[:, None], 0.0) * _EDGE_STEP
+    # What lies beyond a candidate (from a pixel outside it, past the edge's blur) and is not table.
+    gap = int(round(1.0 / _EDGE_STEP))
+    beyond = np.zeros_like(unlike)
+    beyond[:, :len(offsets) - gap - 1] = np.cumsum(unlike[:, ::-1], axis=1)[:, ::-1][:, gap + 1:]
+    cost = np.ascontiguousarray((_OUTSIDE_WEIGHT * beyond - step)[:, :candidates], dtype=np.float64)
+    path = np.empty(count, np.intp)
+    smoothest_path(cost, _EDGE_BEND_COST, 1, path)
+    # To a fraction of a step: the vertex of the parabola through the step's strength either side.
+    rows = np.arange(count)
+    before = step[rows, np.maximum(path - 1, 0)]
+    at = step[rows, path]
+    after = step[rows, path + 1]  # the profiles run on beyond the last candidate
+    curvature = before - 2 * at + after
+    interior = (path > 0) & (curvature < 0)
+    fraction = np.where(interior, 0.5 * (before - after) / np.where(interior, curvature, -1.0), 0.0)
+    # Each offset is found on one noisy profile, while the edge runs on smoothly from one to the next.
+    return _smoothed_round(offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP, _EDGE_SMOOTHING)
+
+
+def _smoothed_round(values: np.ndarray, sigma: float) -> np.ndarray:
+    """``values`` (N, ...) round a closed loop, smoothed along it by a Gaussian of ``sigma`` entries."""
+    radius = min(int(np.ceil(3 * sigma)), (len(values) - 1) // 2) if sigma > 0 else 0
+    if radius < 1:
+        return values
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    wrapped = np.concatenate([values[-radius:], values, values[:radius]])
+    columns = wrapped.reshape(len(wrapped), -1)
+    smoothed = np.column_stack([np.convolve(columns[:, k], taps, mode="valid") for k in range(columns.shape[1])])
+    return smoothed.reshape(values.shape)
+
+
+def _unlike_table(colours: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(M, D) how far each colour of ``colours`` (M, D, 3) lies from its row's ``table`` colour (M, 3), in
+    grey levels, the table in shade included: a colour close to the table's darkened (a shadow dims
+    the table's light, not its colour) is as far as it is from that darkened colour."""
+    power = np.maximum(np.einsum("mk,mk->m", table, table), 1.0)[:, None]
+    darkening = np.clip(np.einsum("mdk,mk->md", colours, table) / power, _DEEPEST_SHADOW, 1.0)
+    from_shade = np.linalg.norm(colours - darkening[..., None] * table[:, None, :], axis=2)
+    from_table = np.linalg.norm(colours - table[:, None, :], axis=2)
+    in_shade = from_shade < _SHADOW_COLOUR_CHANGE * darkening * np.sqrt(power)
+    return np.where(in_shade, np.minimum(from_table, from_shade), from_table)
+
+
+def _wrapped_median(values: np.ndarray, window: int) -> np.ndarray:
+    """The running median of ``values`` (N, ...) round a closed loop, over ``window`` (odd) neighbours."""
+    half = min(window // 2, (len(values) - 1) // 2)
+    return np.median(np.stack([np.roll(values, k, axis=0) for k in range(-half, half + 1)]), axis=0)
+
+
+def _fill_centres_inside(binary: np.ndarray, polygon: np.ndarray) -> None:
+    """Set to 1 each pixel of ``binary`` (h, w) whose centre lies inside ``polygon`` ((N, 2) pixel
+    coordinates, closed, even-odd rule). cv2.fillPoly rounds the vertices and fills every pixel the
+    edge touches, which grows a polygon by about half a pixel all round."""
+    height, width = binary.shape
+    start, end = polygon, np.roll(polygon, -1, axis=0)
+    low, high = np.minimum(start[:, 1], end[:, 1]), np.maximum(start[:, 1], end[:, 1])
+    rows = np.arange(max(0, int(np.ceil(low.min()))), min(height - 1, int(np.floor(high.max()))) + 1)
+    if not len(rows):
+        return
+    # Each edge crosses the rows in [low, high): a vertex on a row is counted once.
+    row_index, edge = np.nonzero((low[None, :] <= rows[:, None]) & (rows[:, None] < high[None, :]))
+    across = (rows[row_index] - start[edge, 1]) / (end[edge, 1] - start[edge, 1])
+    x = start[edge, 0] + across * (end[edge, 0] - start[edge, 0])
+    order = np.lexsort((x, row_index))
+    row_index, x = row_index[order], x[order]
+    first = np.clip(np.ceil(x[0::2]), 0, width).astype(np.int64)
+    last = np.clip(np.floor(x[1::2]), -1, width - 1).astype(np.int64)
+    for row, a, b in zip(rows[row_index[0::2]], first, last):
+        if b >= a:
+            binary[row, a:b + 1] = 1
 
 
 def _coarse_aim(view: _View, aim: np.ndarray) -> np.ndarray:
