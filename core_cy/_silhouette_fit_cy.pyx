@@ -206,6 +206,7 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     """
     cdef Py_ssize_t n = samples.shape[0]
     cdef double[:, ::1] edges = np.empty((hull.shape[0], 8))
+    cdef double[:, ::1] rays = np.empty((n, 3))
     if hull.shape[1] != 2 or hull.shape[0] < 3:
         raise ValueError("hull must be (H, 2) with H >= 3")
     if samples.shape[1] != 2 or planes.shape[0] != n or planes.shape[1] != 9:
@@ -213,14 +214,54 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     if K.shape[0] != 3 or K.shape[1] != 3 or R.shape[0] != 3 or R.shape[1] != 3 or centre.shape[0] != 3:
         raise ValueError("K and R must be (3, 3) and centre (3,)")
     with nogil:
-        _tangent_planes(&hull[0, 0], hull.shape[0], samples, 0, n, K, R, centre, pixels_per_unit, planes, edges)
+        _rays(samples, 0, n, K, R, rays)
+        _tangent_planes(&hull[0, 0], hull.shape[0], samples, 0, n, K, R, centre, pixels_per_unit, rays, planes,
+                        edges)
+
+
+def sample_rays(const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
+                const double[:, :, ::1] K not None, const double[:, :, ::1] R not None):
+    """(N, 3) each edge sample's ray, a unit direction in the world: view v's samples are
+    ``samples[starts[v]:starts[v + 1]]``, its camera ``K[v]`` and ``R[v]`` (camera to world). The
+    rays do not change while a fit runs, so they are worked out once, not at every evaluation."""
+    cdef Py_ssize_t n_views = K.shape[0], v
+    cdef double[:, ::1] rays = np.empty((samples.shape[0], 3))
+    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or R.shape[0] != n_views or K.shape[1] != 3
+            or K.shape[2] != 3 or R.shape[1] != 3 or R.shape[2] != 3):
+        raise ValueError("need (N, 2) samples, (V + 1,) starts and (V, 3, 3) K and R")
+    for v in range(n_views):
+        if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
+            raise ValueError("starts must rise from 0 to at most N")
+        _rays(samples, starts[v], starts[v + 1], K[v], R[v], rays)
+    return np.asarray(rays)
+
+
+cdef void _rays(const double[:, ::1] samples, Py_ssize_t first, Py_ssize_t last, const double[:, ::1] K,
+                const double[:, ::1] R, double[:, ::1] rays) noexcept nogil:
+    """Rows ``first:last`` of :func:`sample_rays` for one camera: K^-1 (p, 1) (upper-triangular K),
+    turned into the world and made unit."""
+    cdef Py_ssize_t i
+    cdef double r0, r1, r2, w0, w1, w2, norm
+    for i in range(first, last):
+        r1 = (samples[i, 1] - K[1, 2]) / K[1, 1]
+        r0 = (samples[i, 0] - K[0, 2] - K[0, 1] * r1) / K[0, 0]
+        r2 = 1.0
+        w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+        w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+        w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+        norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        rays[i, 0] = w0 / norm
+        rays[i, 1] = w1 / norm
+        rays[i, 2] = w2 / norm
 
 
 cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] samples, Py_ssize_t first,
                           Py_ssize_t last, const double[:, ::1] K, const double[:, ::1] R, const double[::1] centre,
-                          double pixels_per_unit, double[:, ::1] planes, double[:, ::1] edges) noexcept nogil:
+                          double pixels_per_unit, const double[:, ::1] rays, double[:, ::1] planes,
+                          double[:, ::1] edges) noexcept nogil:
     """As :func:`tangent_planes`, for samples ``first:last`` into the same rows of ``planes``; ``hull``
-    points to H (x, y) pairs, ``edges`` (>= H, 8) is scratch.
+    points to H (x, y) pairs, ``rays`` are the samples' :func:`sample_rays`, ``edges`` (>= H, 8) is
+    scratch.
 
     Each sample's nearest edge is the first of the least distance, as a search of every edge finds
     it; but the edges are searched in runs of ``_RUN`` along the outline, and a run whose circle
@@ -228,7 +269,7 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
     """
     cdef Py_ssize_t i, j, b, runs = (h + _RUN - 1) // _RUN, last_j, seed = 0
     cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area, reach
-    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
+    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, w0, w1, w2
     area = 0.0
     for j in range(h):
         area += (hull[2 * j] * hull[2 * ((j + 1) % h) + 1] - hull[2 * ((j + 1) % h)] * hull[2 * j + 1])
@@ -313,67 +354,70 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
             planes[i, j] = R[j, 0] * mc0 + R[j, 1] * mc1 + R[j, 2] * mc2
         planes[i, 3] = planes[i, 0] * centre[0] + planes[i, 1] * centre[1] + planes[i, 2] * centre[2]
         planes[i, 4] = norm * pixels_per_unit
-        # The ray's direction: K^-1 (p, 1) (upper-triangular K), turned into the world.
-        r1 = (py - K[1, 2]) / K[1, 1]
-        r0 = (px - K[0, 2] - K[0, 1] * r1) / K[0, 0]
-        r2 = 1.0
-        w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-        w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-        w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
-        norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        w0 /= norm
-        w1 /= norm
-        w2 /= norm
+        w0 = rays[i, 0]
+        w1 = rays[i, 1]
+        w2 = rays[i, 2]
         planes[i, 5] = w1 * planes[i, 2] - w2 * planes[i, 1]
         planes[i, 6] = w2 * planes[i, 0] - w0 * planes[i, 2]
         planes[i, 7] = w0 * planes[i, 1] - w1 * planes[i, 0]
         planes[i, 8] = planes[i, 5] * centre[0] + planes[i, 6] * centre[1] + planes[i, 7] * centre[2]
 
 
-def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
-                double scale, Py_ssize_t n_eta, const double[:, ::1] angles not None,
+def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not None, const double[:, ::1] t0 not None,
+                const double[::1] scale not None, Py_ssize_t n_eta, const double[:, ::1] angles not None,
                 const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
                 const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
                 const double[:, :, ::1] K not None, const double[:, :, ::1] R not None,
-                const double[::1] pixels_per_unit not None, double[:, ::1] grid not None,
-                float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None, double[:, ::1] planes not None):
-    """One part's :func:`tangent_planes` in every view, its outline drawn by :func:`outline_points`:
-    the silhouette fit's work per part and evaluation in one call. False (``planes`` then
-    unfinished) if the part reaches behind a camera or its outline in a view is no polygon.
+                const double[::1] pixels_per_unit not None, const double[:, ::1] rays not None,
+                double[:, ::1] grid not None, float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None,
+                double[:, :, ::1] planes not None):
+    """Each of P parts' :func:`tangent_planes` in every view, its outline drawn by
+    :func:`outline_points`: the silhouette fit's work per evaluation in one call. False (``planes``
+    then unfinished) if a part reaches behind a camera or its outline in a view is no polygon.
 
-    View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2 in all) and its camera
-    ``K[v]``, ``R[v]`` (camera to world), ``centres[v]``, ``pixels_per_unit[v]``; ``planes``
-    (N, 9) gets their rows. The outline is the convex hull of ``uv[v, :counts[v]]`` (which
-    this reorders): the polygon ``cv2.convexHull`` draws. ``angles`` are :func:`outline_angles` of
-    ``n_eta`` eta's and the omega's; other arguments as in :func:`outline_points`.
+    Part p has parameters ``x[11 p: 11 p + 11]`` about its frame ``R0[p]``, ``t0[p]``, ``scale[p]``
+    (as in :func:`normal_equations`). View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2
+    in all), their :func:`sample_rays` ``rays``, and its camera ``K[v]``, ``R[v]`` (camera to world),
+    ``centres[v]``, ``pixels_per_unit[v]``; ``planes[p]`` (N, 9) gets part p's rows. The outline is the
+    convex hull of ``uv[v, :counts[v]]`` (which this reorders): the polygon ``cv2.convexHull`` draws.
+    ``angles`` are :func:`outline_angles` of ``n_eta`` eta's and the omega's; ``grid``, ``uv`` and
+    ``counts`` are scratch as in :func:`outline_points`.
     """
-    cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], v, h
+    cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], n_parts = R0.shape[0], v, h, p
     cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
     cdef double[::1] facing = np.empty(n_rows)
     cdef double[:, ::1] edges = np.empty((n_rows, 8))
     cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
-    cdef bint ok
+    cdef bint ok = True
     _check_outline(n_eta, angles, projections, centres, grid, uv, counts)
-    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or planes.shape[0] != samples.shape[0]
-            or planes.shape[1] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
+    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or rays.shape[0] != samples.shape[0]
+            or rays.shape[1] != 3 or planes.shape[0] != n_parts or planes.shape[1] != samples.shape[0]
+            or planes.shape[2] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
             or pixels_per_unit.shape[0] != n_views or K.shape[1] != 3 or K.shape[2] != 3 or R.shape[1] != 3
             or R.shape[2] != 3):
-        raise ValueError("need (N, 2) samples, (V + 1,) starts, (N, 9) planes, (V, 3, 3) K and R, (V,) scales")
+        raise ValueError("need (N, 2) samples, (V + 1,) starts, (N, 3) rays, (P, N, 9) planes, (V, 3, 3) K and R, "
+                         "(V,) scales")
+    if (x.shape[0] != 11 * n_parts or R0.shape[1] != 3 or R0.shape[2] != 3 or t0.shape[0] != n_parts
+            or t0.shape[1] != 3 or scale.shape[0] != n_parts):
+        raise ValueError("need x of 11 per part, (P, 3, 3) R0, (P, 3) t0 and (P,) scale")
     for v in range(n_views):
         if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
             raise ValueError("starts must rise from 0 to at most N")
     with nogil:
-        ok = _outline_points(x, R0, t0, scale, n_eta, angles, projections, centres, grid, uv, counts, trig,
-                             facing)
-        for v in range(n_views):
+        for p in range(n_parts):
+            ok = _outline_points(x[11 * p: 11 * p + 11], R0[p], t0[p], scale[p], n_eta, angles, projections,
+                                 centres, grid, uv, counts, trig, facing)
+            for v in range(n_views):
+                if not ok:
+                    break
+                h = _convex_hull(<_Point*>&uv[v, 0, 0], counts[v], <_Point*>&hull[0, 0])
+                if h < 3:
+                    ok = False
+                    break
+                _tangent_planes(&hull[0, 0], h, samples, starts[v], starts[v + 1], K[v], R[v], centres[v],
+                                pixels_per_unit[v], rays, planes[p], edges)
             if not ok:
                 break
-            h = _convex_hull(<_Point*>&uv[v, 0, 0], counts[v], <_Point*>&hull[0, 0])
-            if h < 3:
-                ok = False
-                break
-            _tangent_planes(&hull[0, 0], h, samples, starts[v], starts[v + 1], K[v], R[v], centres[v],
-                            pixels_per_unit[v], planes, edges)
     return ok
 
 
