@@ -13,7 +13,7 @@ import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
 
-from ._superquadric_cy cimport _rotation, _support, _support_value
+from ._superquadric_cy cimport _log_sum, _rotation, _support
 
 cdef double _TINY = 1e-300
 # Edges of an outline searched together for a sample's nearest (see _tangent_planes).
@@ -530,16 +530,62 @@ cdef enum:
     MAX_PARTS = 6
 
 
+ctypedef struct _Support:
+    double v[3]  # the object-frame direction
+    double lT[3]  # log |a_k v_k|
+    double lS, lG, w1, w2, g1, g3, h  # as in _superquadric_cy._support
+
+
+cdef inline double _support_kept(const double* a, const double* e, const double* v, _Support* s) noexcept nogil:
+    """The support along v (as ``_support_value``, the same arithmetic), keeping in ``s`` what its
+    derivatives need: the sample's tangent plane is found among several tried, and only the chosen
+    one's derivatives are wanted, from the terms already worked out (:func:`_support_derivatives`)."""
+    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1]), T
+    cdef int k
+    for k in range(3):
+        s.v[k] = v[k]
+        T = fabs(a[k] * v[k])
+        s.lT[k] = log(T if T > _TINY else _TINY)
+    s.lS = _log_sum(q2 * s.lT[0], q2 * s.lT[1], &s.w1, &s.w2)
+    s.lG = _log_sum(q1 / q2 * s.lS, q1 * s.lT[2], &s.g1, &s.g3)
+    s.h = exp(s.lG / q1)
+    return s.h
+
+
+cdef inline void _support_derivatives(const double* a, const double* e, const _Support* s, double* dh_da,
+                                      double* dh_de, double* dh_dv) noexcept nogil:
+    """dh/da, dh/de and dh/dv of :func:`_support_kept`'s support (as ``_superquadric_cy._support``
+    gives them, the same arithmetic)."""
+    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1]), h = s.h, lS = s.lS, lG = s.lG, dq1, dq2
+    cdef double dT[3]
+    cdef int k
+    dT[0] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * s.lT[0] - lS)
+    dT[1] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * s.lT[1] - lS)
+    dT[2] = h * exp((q1 - 1.0) * s.lT[2] - lG)
+    dq1 = h * (-lG / (q1 * q1) + (s.g1 * lS / q2 + s.g3 * s.lT[2]) / q1)
+    dq2 = h * s.g1 / q2 * (s.w1 * s.lT[0] + s.w2 * s.lT[1] - lS / q2)
+    dh_de[0] = dq1 * 2.0 / ((2.0 - e[0]) * (2.0 - e[0]))
+    dh_de[1] = dq2 * 2.0 / ((2.0 - e[1]) * (2.0 - e[1]))
+    for k in range(3):
+        dh_da[k] = dT[k] * fabs(s.v[k])
+        dh_dv[k] = dT[k] * a[k] * (1.0 if s.v[k] > 0 else (-1.0 if s.v[k] < 0 else 0.0))
+
+
+
+
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
                                 const double* e, const double* t, double R[3][3], const double* cosines,
-                                const double* sines, double tilt, double bound, double* best_m) noexcept nogil:
+                                const double* sines, double tilt, double bound, double* best_m,
+                                _Support* best_support) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
     ray by -tilt, 0, tilt and the parabola's vertex; best_m gets that plane's normal (its offset is
-    returned through best_m[3]). The plane through the ray untilted comes first: turning it only
-    lowers the least reach, so where that reach is already below ``bound`` it is returned at once."""
+    returned through best_m[3]) and best_support its support's terms. The plane through the ray
+    untilted comes first: turning it only lowers the least reach, so where that reach is already
+    below ``bound`` it is returned at once."""
     cdef double m[3]
     cdef double v[3]
     cdef double reaches[3]
+    cdef _Support support
     cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
     cdef int j, k, step
     for step in range(4):
@@ -561,7 +607,7 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
         offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
         for k in range(3):
             v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
-        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, e, v) - offset
+        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
         if j < 3:
             reaches[j] = reach
         if reach < best:
@@ -569,6 +615,7 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
             for k in range(3):
                 best_m[k] = m[k]
             best_m[3] = offset
+            best_support[0] = support
         if tilt <= 0 or best < bound:
             break
     return best
@@ -629,6 +676,8 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     cdef double dh_de[2]
     cdef double dh_dv[3]
     cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, reach, best, deepest
+    cdef _Support found, kept
+    cdef bint answered
     cdef double cosines[3]
     cdef double sines[3]
     if P < 1 or P > MAX_PARTS or x.shape[0] != 11 * P or JtJ.shape[0] != 11 * P or JtJ.shape[1] != 11 * P \
@@ -670,6 +719,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
             if i < n:
                 best = -1e300
                 chosen = 0
+                answered = False
                 # The part that answered last time first: it most likely does again, and then the others
                 # are mostly dismissed by their box alone. Which part answers does not depend on the order.
                 first = owner[i] if owner is not None and 0 <= owner[i] < P else 0
@@ -683,11 +733,13 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                             continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
                     reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
-                                                          cosines, sines, tilt, best / planes[p, i, 4], m)
+                                                          cosines, sines, tilt, best / planes[p, i, 4], m, &found)
                     # Of parts that reach alike, the first answers.
                     if reach > best or (reach == best and p < chosen):
                         best = reach
                         chosen = p
+                        answered = True
+                        kept = found
                         for k in range(4):
                             best_m[k] = m[k]
                 if owner is not None:
@@ -706,7 +758,14 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                 weight = plane_weight
             p = chosen
             base = 11 * p
-            r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
+            if i < n and answered:
+                # The chosen plane's residual is the reach already found (the same arithmetic), and its
+                # support's derivatives come from the terms kept with it.
+                r = best
+                if jacobian:
+                    _support_derivatives(a[p], &x[base + 3], &kept, dh_da, dh_de, dh_dv)
+            else:
+                r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
             root = sqrt(1.0 + r * r / c2)
             cost += c2 * (root - 1.0)
             if not jacobian:
