@@ -269,7 +269,8 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
     """
     cdef Py_ssize_t i, j, b, runs = (h + _RUN - 1) // _RUN, last_j, seed = 0
     cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area, reach
-    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, w0, w1, w2
+    cdef double best_nx, best_ny, best_dx = 0.0, best_dy = 0.0, px, py, mc0, mc1, mc2, norm, s, w0, w1, w2
+    cdef bint at_vertex = False
     area = 0.0
     for j in range(h):
         area += (hull[2 * j] * hull[2 * ((j + 1) % h) + 1] - hull[2 * ((j + 1) % h)] * hull[2 * j + 1])
@@ -337,10 +338,14 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
                     seed = j
                     best_nx = edges[j, 3]
                     best_ny = edges[j, 4]
-                    if (tau == 0.0 or tau == 1.0) and best_nx * dx + best_ny * dy > 0 and d2 > 1e-12:
-                        norm = sqrt(d2)
-                        best_nx = dx / norm
-                        best_ny = dy / norm
+                    best_dx = dx
+                    best_dy = dy
+                    at_vertex = tau == 0.0 or tau == 1.0
+        # Outside a vertex, the normal points from it to the sample (worked out for the nearest edge alone).
+        if best < 1e300 and at_vertex and best_nx * best_dx + best_ny * best_dy > 0 and best > 1e-12:
+            norm = sqrt(best)
+            best_nx = best_dx / norm
+            best_ny = best_dy / norm
         # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
         s = best_nx * px + best_ny * py
         mc0 = K[0, 0] * best_nx
