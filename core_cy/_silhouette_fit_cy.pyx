@@ -13,7 +13,7 @@ import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
 
-from ._superquadric_cy cimport _log_sum, _rotation, _support
+from ._superquadric_cy cimport _rotation, _support
 
 cdef double _TINY = 1e-300
 # Edges of an outline searched together for a sample's nearest (see _tangent_planes).
@@ -538,37 +538,73 @@ cdef enum:
 ctypedef struct _Support:
     double v[3]  # the object-frame direction
     double lT[3]  # log |a_k v_k|
-    double lS, lG, w1, w2, g1, g3, h  # as in _superquadric_cy._support
+    double lS, lG, h  # as in _superquadric_cy._support
+    double rS, rG  # the ratios (the lesser term over the greater) of the two log-sums, for their shares
+    bint xS, xG  # whether the first term of each log-sum is the greater
 
 
-cdef inline double _support_kept(const double* a, const double* e, const double* v, _Support* s) noexcept nogil:
+ctypedef struct _Exponents:
+    double q1, q2, q12  # 2 / (2 - e1), 2 / (2 - e2) and q1 / q2: a part's, the same for all its samples
+
+
+cdef inline void _exponents(const double* e, _Exponents* q) noexcept nogil:
+    q.q1 = 2.0 / (2.0 - e[0])
+    q.q2 = 2.0 / (2.0 - e[1])
+    q.q12 = q.q1 / q.q2
+
+
+cdef inline double _log_sum_ratio(double la, double lb, double* ratio, bint* first) noexcept nogil:
+    """log(e^la + e^lb) as ``_log_sum`` works it out (the same arithmetic), the shares left for
+    :func:`_shares`: only the chosen plane's support needs them."""
+    if la >= lb:
+        ratio[0] = exp(lb - la)
+        first[0] = True
+        return la + log(1.0 + ratio[0])
+    ratio[0] = exp(la - lb)
+    first[0] = False
+    return lb + log(1.0 + ratio[0])
+
+
+cdef inline void _shares(double ratio, bint first, double* wa, double* wb) noexcept nogil:
+    """The shares ``_log_sum`` gives with its log-sum (the same arithmetic)."""
+    if first:
+        wa[0] = 1.0 / (1.0 + ratio)
+        wb[0] = ratio * wa[0]
+    else:
+        wb[0] = 1.0 / (1.0 + ratio)
+        wa[0] = ratio * wb[0]
+
+
+cdef inline double _support_kept(const double* a, const _Exponents* q, const double* v, _Support* s) noexcept nogil:
     """The support along v (as ``_support_value``, the same arithmetic), keeping in ``s`` what its
     derivatives need: the sample's tangent plane is found among several tried, and only the chosen
     one's derivatives are wanted, from the terms already worked out (:func:`_support_derivatives`)."""
-    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1]), T
+    cdef double T
     cdef int k
     for k in range(3):
         s.v[k] = v[k]
         T = fabs(a[k] * v[k])
         s.lT[k] = log(T if T > _TINY else _TINY)
-    s.lS = _log_sum(q2 * s.lT[0], q2 * s.lT[1], &s.w1, &s.w2)
-    s.lG = _log_sum(q1 / q2 * s.lS, q1 * s.lT[2], &s.g1, &s.g3)
-    s.h = exp(s.lG / q1)
+    s.lS = _log_sum_ratio(q.q2 * s.lT[0], q.q2 * s.lT[1], &s.rS, &s.xS)
+    s.lG = _log_sum_ratio(q.q12 * s.lS, q.q1 * s.lT[2], &s.rG, &s.xG)
+    s.h = exp(s.lG / q.q1)
     return s.h
 
 
-cdef inline void _support_derivatives(const double* a, const double* e, const _Support* s, double* dh_da,
-                                      double* dh_de, double* dh_dv) noexcept nogil:
+cdef inline void _support_derivatives(const double* a, const double* e, const _Exponents* q, const _Support* s,
+                                      double* dh_da, double* dh_de, double* dh_dv) noexcept nogil:
     """dh/da, dh/de and dh/dv of :func:`_support_kept`'s support (as ``_superquadric_cy._support``
     gives them, the same arithmetic)."""
-    cdef double q1 = 2.0 / (2.0 - e[0]), q2 = 2.0 / (2.0 - e[1]), h = s.h, lS = s.lS, lG = s.lG, dq1, dq2
+    cdef double q1 = q.q1, q2 = q.q2, h = s.h, lS = s.lS, lG = s.lG, dq1, dq2, w1, w2, g1, g3
     cdef double dT[3]
     cdef int k
-    dT[0] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * s.lT[0] - lS)
-    dT[1] = h * exp(q1 / q2 * lS - lG + (q2 - 1.0) * s.lT[1] - lS)
+    _shares(s.rS, s.xS, &w1, &w2)
+    _shares(s.rG, s.xG, &g1, &g3)
+    dT[0] = h * exp(q.q12 * lS - lG + (q2 - 1.0) * s.lT[0] - lS)
+    dT[1] = h * exp(q.q12 * lS - lG + (q2 - 1.0) * s.lT[1] - lS)
     dT[2] = h * exp((q1 - 1.0) * s.lT[2] - lG)
-    dq1 = h * (-lG / (q1 * q1) + (s.g1 * lS / q2 + s.g3 * s.lT[2]) / q1)
-    dq2 = h * s.g1 / q2 * (s.w1 * s.lT[0] + s.w2 * s.lT[1] - lS / q2)
+    dq1 = h * (-lG / (q1 * q1) + (g1 * lS / q2 + g3 * s.lT[2]) / q1)
+    dq2 = h * g1 / q2 * (w1 * s.lT[0] + w2 * s.lT[1] - lS / q2)
     dh_de[0] = dq1 * 2.0 / ((2.0 - e[0]) * (2.0 - e[0]))
     dh_de[1] = dq2 * 2.0 / ((2.0 - e[1]) * (2.0 - e[1]))
     for k in range(3):
@@ -576,17 +612,15 @@ cdef inline void _support_derivatives(const double* a, const double* e, const _S
         dh_dv[k] = dT[k] * a[k] * (1.0 if s.v[k] > 0 else (-1.0 if s.v[k] < 0 else 0.0))
 
 
-
-
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
-                                const double* e, const double* t, double R[3][3], const double* cosines,
+                                const _Exponents* e, const double* t, double R[3][3], const double* cosines,
                                 const double* sines, double tilt, double bound, double* best_m,
                                 _Support* best_support) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
-    ray by -tilt, 0, tilt and the parabola's vertex; best_m gets that plane's normal (its offset is
-    returned through best_m[3]) and best_support its support's terms. The plane through the ray
-    untilted comes first: turning it only lowers the least reach, so where that reach is already
-    below ``bound`` it is returned at once."""
+    ray by -tilt, 0, tilt and the parabola's vertex (``e``: the part's :func:`_exponents`); best_m
+    gets that plane's normal (its offset is returned through best_m[3]) and best_support its
+    support's terms. The plane through the ray untilted comes first: turning it only lowers the
+    least reach, so where that reach is already below ``bound`` it is returned at once."""
     cdef double m[3]
     cdef double v[3]
     cdef double reaches[3]
@@ -682,6 +716,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     cdef double dh_dv[3]
     cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, reach, best, deepest
     cdef _Support found, kept
+    cdef _Exponents exponents[MAX_PARTS]
     cdef bint answered
     cdef double cosines[3]
     cdef double sines[3]
@@ -698,6 +733,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
         for k in range(3):
             a[p][k] = exp(x[11 * p + k])
             t[p][k] = t0[p, k] + scale[p] * x[11 * p + 5 + k]
+        _exponents(&x[11 * p + 3], &exponents[p])
     with nogil:
         cosines[0] = cos(tilt)
         cosines[1] = 1.0
@@ -737,7 +773,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                         if planes[p, i, 4] * reach + 1e-9 * (fabs(planes[p, i, 4] * reach) + 1.0) < best:
                             continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
-                    reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
+                    reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &exponents[p], t[p], R[p],
                                                           cosines, sines, tilt, best / planes[p, i, 4], m, &found)
                     # Of parts that reach alike, the first answers.
                     if reach > best or (reach == best and p < chosen):
@@ -768,7 +804,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                 # support's derivatives come from the terms kept with it.
                 r = best
                 if jacobian:
-                    _support_derivatives(a[p], &x[base + 3], &kept, dh_da, dh_de, dh_dv)
+                    _support_derivatives(a[p], &x[base + 3], &exponents[p], &kept, dh_da, dh_de, dh_dv)
             else:
                 r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
             root = sqrt(1.0 + r * r / c2)
