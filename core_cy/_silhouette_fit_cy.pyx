@@ -13,7 +13,7 @@ import numpy as np
 
 from libc.math cimport exp, log, fabs, sqrt, cos, sin
 
-from ._superquadric_cy cimport _rotation, _support, _support_value
+from ._superquadric_cy cimport _rotation, _support
 
 cdef double _TINY = 1e-300
 # Edges of an outline searched together for a sample's nearest (see _tangent_planes).
@@ -206,6 +206,7 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     """
     cdef Py_ssize_t n = samples.shape[0]
     cdef double[:, ::1] edges = np.empty((hull.shape[0], 8))
+    cdef double[:, ::1] rays = np.empty((n, 3))
     if hull.shape[1] != 2 or hull.shape[0] < 3:
         raise ValueError("hull must be (H, 2) with H >= 3")
     if samples.shape[1] != 2 or planes.shape[0] != n or planes.shape[1] != 9:
@@ -213,14 +214,54 @@ def tangent_planes(const float[:, ::1] hull not None, const double[:, ::1] sampl
     if K.shape[0] != 3 or K.shape[1] != 3 or R.shape[0] != 3 or R.shape[1] != 3 or centre.shape[0] != 3:
         raise ValueError("K and R must be (3, 3) and centre (3,)")
     with nogil:
-        _tangent_planes(&hull[0, 0], hull.shape[0], samples, 0, n, K, R, centre, pixels_per_unit, planes, edges)
+        _rays(samples, 0, n, K, R, rays)
+        _tangent_planes(&hull[0, 0], hull.shape[0], samples, 0, n, K, R, centre, pixels_per_unit, rays, planes,
+                        edges)
+
+
+def sample_rays(const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
+                const double[:, :, ::1] K not None, const double[:, :, ::1] R not None):
+    """(N, 3) each edge sample's ray, a unit direction in the world: view v's samples are
+    ``samples[starts[v]:starts[v + 1]]``, its camera ``K[v]`` and ``R[v]`` (camera to world). The
+    rays do not change while a fit runs, so they are worked out once, not at every evaluation."""
+    cdef Py_ssize_t n_views = K.shape[0], v
+    cdef double[:, ::1] rays = np.empty((samples.shape[0], 3))
+    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or R.shape[0] != n_views or K.shape[1] != 3
+            or K.shape[2] != 3 or R.shape[1] != 3 or R.shape[2] != 3):
+        raise ValueError("need (N, 2) samples, (V + 1,) starts and (V, 3, 3) K and R")
+    for v in range(n_views):
+        if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
+            raise ValueError("starts must rise from 0 to at most N")
+        _rays(samples, starts[v], starts[v + 1], K[v], R[v], rays)
+    return np.asarray(rays)
+
+
+cdef void _rays(const double[:, ::1] samples, Py_ssize_t first, Py_ssize_t last, const double[:, ::1] K,
+                const double[:, ::1] R, double[:, ::1] rays) noexcept nogil:
+    """Rows ``first:last`` of :func:`sample_rays` for one camera: K^-1 (p, 1) (upper-triangular K),
+    turned into the world and made unit."""
+    cdef Py_ssize_t i
+    cdef double r0, r1, r2, w0, w1, w2, norm
+    for i in range(first, last):
+        r1 = (samples[i, 1] - K[1, 2]) / K[1, 1]
+        r0 = (samples[i, 0] - K[0, 2] - K[0, 1] * r1) / K[0, 0]
+        r2 = 1.0
+        w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+        w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+        w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+        norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        rays[i, 0] = w0 / norm
+        rays[i, 1] = w1 / norm
+        rays[i, 2] = w2 / norm
 
 
 cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] samples, Py_ssize_t first,
                           Py_ssize_t last, const double[:, ::1] K, const double[:, ::1] R, const double[::1] centre,
-                          double pixels_per_unit, double[:, ::1] planes, double[:, ::1] edges) noexcept nogil:
+                          double pixels_per_unit, const double[:, ::1] rays, double[:, ::1] planes,
+                          double[:, ::1] edges) noexcept nogil:
     """As :func:`tangent_planes`, for samples ``first:last`` into the same rows of ``planes``; ``hull``
-    points to H (x, y) pairs, ``edges`` (>= H, 8) is scratch.
+    points to H (x, y) pairs, ``rays`` are the samples' :func:`sample_rays`, ``edges`` (>= H, 8) is
+    scratch.
 
     Each sample's nearest edge is the first of the least distance, as a search of every edge finds
     it; but the edges are searched in runs of ``_RUN`` along the outline, and a run whose circle
@@ -228,7 +269,8 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
     """
     cdef Py_ssize_t i, j, b, runs = (h + _RUN - 1) // _RUN, last_j, seed = 0
     cdef double ax, ay, ex, ey, tau, dx, dy, d2, best, sign, area, reach
-    cdef double best_nx, best_ny, px, py, mc0, mc1, mc2, norm, s, r0, r1, r2, w0, w1, w2
+    cdef double best_nx, best_ny, best_dx = 0.0, best_dy = 0.0, px, py, mc0, mc1, mc2, norm, s, w0, w1, w2
+    cdef bint at_vertex = False
     area = 0.0
     for j in range(h):
         area += (hull[2 * j] * hull[2 * ((j + 1) % h) + 1] - hull[2 * ((j + 1) % h)] * hull[2 * j + 1])
@@ -296,10 +338,14 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
                     seed = j
                     best_nx = edges[j, 3]
                     best_ny = edges[j, 4]
-                    if (tau == 0.0 or tau == 1.0) and best_nx * dx + best_ny * dy > 0 and d2 > 1e-12:
-                        norm = sqrt(d2)
-                        best_nx = dx / norm
-                        best_ny = dy / norm
+                    best_dx = dx
+                    best_dy = dy
+                    at_vertex = tau == 0.0 or tau == 1.0
+        # Outside a vertex, the normal points from it to the sample (worked out for the nearest edge alone).
+        if best < 1e300 and at_vertex and best_nx * best_dx + best_ny * best_dy > 0 and best > 1e-12:
+            norm = sqrt(best)
+            best_nx = best_dx / norm
+            best_ny = best_dy / norm
         # The plane through the camera centre and the image line n . u = n . p: K^T (n, -n . p).
         s = best_nx * px + best_ny * py
         mc0 = K[0, 0] * best_nx
@@ -313,67 +359,70 @@ cdef void _tangent_planes(const float* hull, Py_ssize_t h, const double[:, ::1] 
             planes[i, j] = R[j, 0] * mc0 + R[j, 1] * mc1 + R[j, 2] * mc2
         planes[i, 3] = planes[i, 0] * centre[0] + planes[i, 1] * centre[1] + planes[i, 2] * centre[2]
         planes[i, 4] = norm * pixels_per_unit
-        # The ray's direction: K^-1 (p, 1) (upper-triangular K), turned into the world.
-        r1 = (py - K[1, 2]) / K[1, 1]
-        r0 = (px - K[0, 2] - K[0, 1] * r1) / K[0, 0]
-        r2 = 1.0
-        w0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-        w1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-        w2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
-        norm = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        w0 /= norm
-        w1 /= norm
-        w2 /= norm
+        w0 = rays[i, 0]
+        w1 = rays[i, 1]
+        w2 = rays[i, 2]
         planes[i, 5] = w1 * planes[i, 2] - w2 * planes[i, 1]
         planes[i, 6] = w2 * planes[i, 0] - w0 * planes[i, 2]
         planes[i, 7] = w0 * planes[i, 1] - w1 * planes[i, 0]
         planes[i, 8] = planes[i, 5] * centre[0] + planes[i, 6] * centre[1] + planes[i, 7] * centre[2]
 
 
-def part_planes(const double[::1] x not None, const double[:, ::1] R0 not None, const double[::1] t0 not None,
-                double scale, Py_ssize_t n_eta, const double[:, ::1] angles not None,
+def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not None, const double[:, ::1] t0 not None,
+                const double[::1] scale not None, Py_ssize_t n_eta, const double[:, ::1] angles not None,
                 const double[:, :, ::1] projections not None, const double[:, ::1] centres not None,
                 const double[:, ::1] samples not None, const Py_ssize_t[::1] starts not None,
                 const double[:, :, ::1] K not None, const double[:, :, ::1] R not None,
-                const double[::1] pixels_per_unit not None, double[:, ::1] grid not None,
-                float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None, double[:, ::1] planes not None):
-    """One part's :func:`tangent_planes` in every view, its outline drawn by :func:`outline_points`:
-    the silhouette fit's work per part and evaluation in one call. False (``planes`` then
-    unfinished) if the part reaches behind a camera or its outline in a view is no polygon.
+                const double[::1] pixels_per_unit not None, const double[:, ::1] rays not None,
+                double[:, ::1] grid not None, float[:, :, ::1] uv not None, Py_ssize_t[::1] counts not None,
+                double[:, :, ::1] planes not None):
+    """Each of P parts' :func:`tangent_planes` in every view, its outline drawn by
+    :func:`outline_points`: the silhouette fit's work per evaluation in one call. False (``planes``
+    then unfinished) if a part reaches behind a camera or its outline in a view is no polygon.
 
-    View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2 in all) and its camera
-    ``K[v]``, ``R[v]`` (camera to world), ``centres[v]``, ``pixels_per_unit[v]``; ``planes``
-    (N, 9) gets their rows. The outline is the convex hull of ``uv[v, :counts[v]]`` (which
-    this reorders): the polygon ``cv2.convexHull`` draws. ``angles`` are :func:`outline_angles` of
-    ``n_eta`` eta's and the omega's; other arguments as in :func:`outline_points`.
+    Part p has parameters ``x[11 p: 11 p + 11]`` about its frame ``R0[p]``, ``t0[p]``, ``scale[p]``
+    (as in :func:`normal_equations`). View v's samples are ``samples[starts[v]:starts[v + 1]]`` (N, 2
+    in all), their :func:`sample_rays` ``rays``, and its camera ``K[v]``, ``R[v]`` (camera to world),
+    ``centres[v]``, ``pixels_per_unit[v]``; ``planes[p]`` (N, 9) gets part p's rows. The outline is the
+    convex hull of ``uv[v, :counts[v]]`` (which this reorders): the polygon ``cv2.convexHull`` draws.
+    ``angles`` are :func:`outline_angles` of ``n_eta`` eta's and the omega's; ``grid``, ``uv`` and
+    ``counts`` are scratch as in :func:`outline_points`.
     """
-    cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], v, h
+    cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], n_parts = R0.shape[0], v, h, p
     cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
     cdef double[::1] facing = np.empty(n_rows)
     cdef double[:, ::1] edges = np.empty((n_rows, 8))
     cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
-    cdef bint ok
+    cdef bint ok = True
     _check_outline(n_eta, angles, projections, centres, grid, uv, counts)
-    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or planes.shape[0] != samples.shape[0]
-            or planes.shape[1] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
+    if (samples.shape[1] != 2 or starts.shape[0] != n_views + 1 or rays.shape[0] != samples.shape[0]
+            or rays.shape[1] != 3 or planes.shape[0] != n_parts or planes.shape[1] != samples.shape[0]
+            or planes.shape[2] != 9 or K.shape[0] != n_views or R.shape[0] != n_views
             or pixels_per_unit.shape[0] != n_views or K.shape[1] != 3 or K.shape[2] != 3 or R.shape[1] != 3
             or R.shape[2] != 3):
-        raise ValueError("need (N, 2) samples, (V + 1,) starts, (N, 9) planes, (V, 3, 3) K and R, (V,) scales")
+        raise ValueError("need (N, 2) samples, (V + 1,) starts, (N, 3) rays, (P, N, 9) planes, (V, 3, 3) K and R, "
+                         "(V,) scales")
+    if (x.shape[0] != 11 * n_parts or R0.shape[1] != 3 or R0.shape[2] != 3 or t0.shape[0] != n_parts
+            or t0.shape[1] != 3 or scale.shape[0] != n_parts):
+        raise ValueError("need x of 11 per part, (P, 3, 3) R0, (P, 3) t0 and (P,) scale")
     for v in range(n_views):
         if starts[v] < 0 or starts[v] > starts[v + 1] or starts[v + 1] > samples.shape[0]:
             raise ValueError("starts must rise from 0 to at most N")
     with nogil:
-        ok = _outline_points(x, R0, t0, scale, n_eta, angles, projections, centres, grid, uv, counts, trig,
-                             facing)
-        for v in range(n_views):
+        for p in range(n_parts):
+            ok = _outline_points(x[11 * p: 11 * p + 11], R0[p], t0[p], scale[p], n_eta, angles, projections,
+                                 centres, grid, uv, counts, trig, facing)
+            for v in range(n_views):
+                if not ok:
+                    break
+                h = _convex_hull(<_Point*>&uv[v, 0, 0], counts[v], <_Point*>&hull[0, 0])
+                if h < 3:
+                    ok = False
+                    break
+                _tangent_planes(&hull[0, 0], h, samples, starts[v], starts[v + 1], K[v], R[v], centres[v],
+                                pixels_per_unit[v], rays, planes[p], edges)
             if not ok:
                 break
-            h = _convex_hull(<_Point*>&uv[v, 0, 0], counts[v], <_Point*>&hull[0, 0])
-            if h < 3:
-                ok = False
-                break
-            _tangent_planes(&hull[0, 0], h, samples, starts[v], starts[v + 1], K[v], R[v], centres[v],
-                            pixels_per_unit[v], planes, edges)
     return ok
 
 
@@ -486,16 +535,96 @@ cdef enum:
     MAX_PARTS = 6
 
 
+ctypedef struct _Support:
+    double v[3]  # the object-frame direction
+    double lT[3]  # log |a_k v_k|
+    double lS, lG, h  # as in _superquadric_cy._support
+    double rS, rG  # the ratios (the lesser term over the greater) of the two log-sums, for their shares
+    bint xS, xG  # whether the first term of each log-sum is the greater
+
+
+ctypedef struct _Exponents:
+    double q1, q2, q12  # 2 / (2 - e1), 2 / (2 - e2) and q1 / q2: a part's, the same for all its samples
+
+
+cdef inline void _exponents(const double* e, _Exponents* q) noexcept nogil:
+    q.q1 = 2.0 / (2.0 - e[0])
+    q.q2 = 2.0 / (2.0 - e[1])
+    q.q12 = q.q1 / q.q2
+
+
+cdef inline double _log_sum_ratio(double la, double lb, double* ratio, bint* first) noexcept nogil:
+    """log(e^la + e^lb) as ``_log_sum`` works it out (the same arithmetic), the shares left for
+    :func:`_shares`: only the chosen plane's support needs them."""
+    if la >= lb:
+        ratio[0] = exp(lb - la)
+        first[0] = True
+        return la + log(1.0 + ratio[0])
+    ratio[0] = exp(la - lb)
+    first[0] = False
+    return lb + log(1.0 + ratio[0])
+
+
+cdef inline void _shares(double ratio, bint first, double* wa, double* wb) noexcept nogil:
+    """The shares ``_log_sum`` gives with its log-sum (the same arithmetic)."""
+    if first:
+        wa[0] = 1.0 / (1.0 + ratio)
+        wb[0] = ratio * wa[0]
+    else:
+        wb[0] = 1.0 / (1.0 + ratio)
+        wa[0] = ratio * wb[0]
+
+
+cdef inline double _support_kept(const double* a, const _Exponents* q, const double* v, _Support* s) noexcept nogil:
+    """The support along v (as ``_support_value``, the same arithmetic), keeping in ``s`` what its
+    derivatives need: the sample's tangent plane is found among several tried, and only the chosen
+    one's derivatives are wanted, from the terms already worked out (:func:`_support_derivatives`)."""
+    cdef double T
+    cdef int k
+    for k in range(3):
+        s.v[k] = v[k]
+        T = fabs(a[k] * v[k])
+        s.lT[k] = log(T if T > _TINY else _TINY)
+    s.lS = _log_sum_ratio(q.q2 * s.lT[0], q.q2 * s.lT[1], &s.rS, &s.xS)
+    s.lG = _log_sum_ratio(q.q12 * s.lS, q.q1 * s.lT[2], &s.rG, &s.xG)
+    s.h = exp(s.lG / q.q1)
+    return s.h
+
+
+cdef inline void _support_derivatives(const double* a, const double* e, const _Exponents* q, const _Support* s,
+                                      double* dh_da, double* dh_de, double* dh_dv) noexcept nogil:
+    """dh/da, dh/de and dh/dv of :func:`_support_kept`'s support (as ``_superquadric_cy._support``
+    gives them, the same arithmetic)."""
+    cdef double q1 = q.q1, q2 = q.q2, h = s.h, lS = s.lS, lG = s.lG, dq1, dq2, w1, w2, g1, g3
+    cdef double dT[3]
+    cdef int k
+    _shares(s.rS, s.xS, &w1, &w2)
+    _shares(s.rG, s.xG, &g1, &g3)
+    dT[0] = h * exp(q.q12 * lS - lG + (q2 - 1.0) * s.lT[0] - lS)
+    dT[1] = h * exp(q.q12 * lS - lG + (q2 - 1.0) * s.lT[1] - lS)
+    dT[2] = h * exp((q1 - 1.0) * s.lT[2] - lG)
+    dq1 = h * (-lG / (q1 * q1) + (g1 * lS / q2 + g3 * s.lT[2]) / q1)
+    dq2 = h * g1 / q2 * (w1 * s.lT[0] + w2 * s.lT[1] - lS / q2)
+    dh_de[0] = dq1 * 2.0 / ((2.0 - e[0]) * (2.0 - e[0]))
+    dh_de[1] = dq2 * 2.0 / ((2.0 - e[1]) * (2.0 - e[1]))
+    for k in range(3):
+        dh_da[k] = dT[k] * fabs(s.v[k])
+        dh_dv[k] = dT[k] * a[k] * (1.0 if s.v[k] > 0 else (-1.0 if s.v[k] < 0 else 0.0))
+
+
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
-                                const double* e, const double* t, double R[3][3], const double* cosines,
-                                const double* sines, double tilt, double bound, double* best_m) noexcept nogil:
+                                const _Exponents* e, const double* t, double R[3][3], const double* cosines,
+                                const double* sines, double tilt, double bound, double* best_m,
+                                _Support* best_support) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
-    ray by -tilt, 0, tilt and the parabola's vertex; best_m gets that plane's normal (its offset is
-    returned through best_m[3]). The plane through the ray untilted comes first: turning it only
-    lowers the least reach, so where that reach is already below ``bound`` it is returned at once."""
+    ray by -tilt, 0, tilt and the parabola's vertex (``e``: the part's :func:`_exponents`); best_m
+    gets that plane's normal (its offset is returned through best_m[3]) and best_support its
+    support's terms. The plane through the ray untilted comes first: turning it only lowers the
+    least reach, so where that reach is already below ``bound`` it is returned at once."""
     cdef double m[3]
     cdef double v[3]
     cdef double reaches[3]
+    cdef _Support support
     cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
     cdef int j, k, step
     for step in range(4):
@@ -517,7 +646,7 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
         offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
         for k in range(3):
             v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
-        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_value(a, e, v) - offset
+        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
         if j < 3:
             reaches[j] = reach
         if reach < best:
@@ -525,6 +654,7 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
             for k in range(3):
                 best_m[k] = m[k]
             best_m[3] = offset
+            best_support[0] = support
         if tilt <= 0 or best < bound:
             break
     return best
@@ -585,6 +715,9 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     cdef double dh_de[2]
     cdef double dh_dv[3]
     cdef double c2 = loss_scale * loss_scale, cost = 0.0, r, root, w, weight, offset, reach, best, deepest
+    cdef _Support found, kept
+    cdef _Exponents exponents[MAX_PARTS]
+    cdef bint answered
     cdef double cosines[3]
     cdef double sines[3]
     if P < 1 or P > MAX_PARTS or x.shape[0] != 11 * P or JtJ.shape[0] != 11 * P or JtJ.shape[1] != 11 * P \
@@ -600,6 +733,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
         for k in range(3):
             a[p][k] = exp(x[11 * p + k])
             t[p][k] = t0[p, k] + scale[p] * x[11 * p + 5 + k]
+        _exponents(&x[11 * p + 3], &exponents[p])
     with nogil:
         cosines[0] = cos(tilt)
         cosines[1] = 1.0
@@ -626,6 +760,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
             if i < n:
                 best = -1e300
                 chosen = 0
+                answered = False
                 # The part that answered last time first: it most likely does again, and then the others
                 # are mostly dismissed by their box alone. Which part answers does not depend on the order.
                 first = owner[i] if owner is not None and 0 <= owner[i] < P else 0
@@ -638,12 +773,14 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                         if planes[p, i, 4] * reach + 1e-9 * (fabs(planes[p, i, 4] * reach) + 1.0) < best:
                             continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
-                    reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &x[11 * p + 3], t[p], R[p],
-                                                          cosines, sines, tilt, best / planes[p, i, 4], m)
+                    reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &exponents[p], t[p], R[p],
+                                                          cosines, sines, tilt, best / planes[p, i, 4], m, &found)
                     # Of parts that reach alike, the first answers.
                     if reach > best or (reach == best and p < chosen):
                         best = reach
                         chosen = p
+                        answered = True
+                        kept = found
                         for k in range(4):
                             best_m[k] = m[k]
                 if owner is not None:
@@ -662,7 +799,14 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                 weight = plane_weight
             p = chosen
             base = 11 * p
-            r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
+            if i < n and answered:
+                # The chosen plane's residual is the reach already found (the same arithmetic), and its
+                # support's derivatives come from the terms kept with it.
+                r = best
+                if jacobian:
+                    _support_derivatives(a[p], &x[base + 3], &exponents[p], &kept, dh_da, dh_de, dh_dv)
+            else:
+                r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
             root = sqrt(1.0 + r * r / c2)
             cost += c2 * (root - 1.0)
             if not jacobian:

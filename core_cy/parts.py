@@ -508,10 +508,14 @@ def _grouped(parts, unexplained: np.ndarray, plane) -> list[tuple[Superquadric, 
         # On a table a part rests on a face: its frame upright (a strong start, not a rule), and,
         # since what lies below it may hide behind the parts in front, also reaching down to the table.
         R = _upright(R, plane[:3])
-        proposals.append(tuple(parts) + (_box_start(members, R, floor),))
+        start = _box_start(members, R, floor)
+        proposals.append(tuple(parts) + (start,))
         height = members @ plane[:3] + plane[3]
-        proposals.append(tuple(parts) + (_box_start(np.vstack([members, members - height[:, None] * plane[:3]]),
-                                                    R, floor),))
+        down = _box_start(np.vstack([members, members - height[:, None] * plane[:3]]), R, floor)
+        # A group that reaches the table already gives that same start again: its descent would be the
+        # first one's, step for step.
+        if not (np.array_equal(down.size, start.size) and np.array_equal(down.T_world_object, start.T_world_object)):
+            proposals.append(tuple(parts) + (down,))
     return proposals
 
 

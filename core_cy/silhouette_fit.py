@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._silhouette_fit_cy import normal_equations, outline_angles, part_planes
+from ._silhouette_fit_cy import normal_equations, outline_angles, part_planes, sample_rays
 from .errors import FitError
 from .least_squares import Descent
 from .superquadric import Superquadric, _rotation
@@ -109,6 +109,7 @@ class _Views:
     Ks: np.ndarray  # (V, 3, 3)
     Rs: np.ndarray  # (V, 3, 3) camera to world
     pixels_per_unit: np.ndarray  # (V,) 1 / the object's depth
+    rays: np.ndarray  # (N, 3) each sample's ray, a unit direction in the world
 
     @classmethod
     def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
@@ -128,13 +129,14 @@ class _Views:
             samples.append(view_samples)
             rows.append(slice(row, row + len(view_samples)))
             row += len(view_samples)
+        all_samples = np.ascontiguousarray(np.concatenate(samples) if samples else np.empty((0, 2)))
+        starts = np.array([0] + [r.stop for r in rows], np.intp)
+        Ks = np.ascontiguousarray([K for K, _, _, _ in packed], dtype=np.float64).reshape(-1, 3, 3)
+        Rs = np.ascontiguousarray([R for _, R, _, _ in packed], dtype=np.float64).reshape(-1, 3, 3)
         return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
-                   packed, samples, rows, row, float(np.mean(scales)),
-                   np.ascontiguousarray(np.concatenate(samples) if samples else np.empty((0, 2))),
-                   np.array([0] + [r.stop for r in rows], np.intp),
-                   np.ascontiguousarray([K for K, _, _, _ in packed], dtype=np.float64).reshape(-1, 3, 3),
-                   np.ascontiguousarray([R for _, R, _, _ in packed]).reshape(-1, 3, 3),
-                   np.array([scale for _, _, _, scale in packed], dtype=np.float64))
+                   packed, samples, rows, row, float(np.mean(scales)), all_samples, starts, Ks, Rs,
+                   np.array([scale for _, _, _, scale in packed], dtype=np.float64),
+                   sample_rays(all_samples, starts, Ks, Rs))
 
 
 class _Problem:
@@ -183,11 +185,10 @@ class _Problem:
     def evaluate(self, x: np.ndarray, JtJ: np.ndarray, Jtr: np.ndarray) -> float:
         views, planes = self.views, self.trial_planes
         self.tally[0] += self.count
-        for p in range(self.count):
-            if not part_planes(x[11 * p: 11 * p + 11], self.R0[p], self.t0[p], self.scale[p], len(_ETA), _ANGLES,
-                               views.projections, views.centres, views.all_samples, views.starts, views.Ks,
-                               views.Rs, views.pixels_per_unit, self.grid, self.uv, self.counts, planes[p]):
-                return np.inf  # the part reaches behind a camera, or its outline in a view is no polygon
+        if not part_planes(x, self.R0, self.t0, self.scale, len(_ETA), _ANGLES, views.projections, views.centres,
+                           views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit, views.rays,
+                           self.grid, self.uv, self.counts, planes):
+            return np.inf  # a part reaches behind a camera, or its outline in a view is no polygon
         return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
                                 self.plane_weight, _TILT, JtJ, Jtr, True, self.owner)
 

@@ -10,7 +10,8 @@ import pytest
 from robocell.workers.sim.objects import SuperquadricObject
 from robocell.workers.sim.render import render
 from robocell.workers.sim.scans import default_K, plan_views
-from robocell.core_cy._silhouette_fit_cy import normal_equations, outline_points, part_planes, tangent_planes
+from robocell.core_cy._silhouette_fit_cy import (normal_equations, outline_points, part_planes, sample_rays,
+                                                 tangent_planes)
 from robocell.core_cy.camera import Camera
 from robocell.core_cy.edges import edge_samples
 from robocell.core_cy.errors import FitError
@@ -187,10 +188,10 @@ def test_part_planes_draw_the_outline_cv2_draws(name):
     views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
     problem = _Problem(truth, views, np.zeros(4), 0.0, 1.0)
     x = problem.x0 + np.array([0.1, -0.05, 0.0, -0.2, 0.1, 0.02, -0.01, 0.0, 0.1, -0.05, 0.3])  # a general pose
-    planes = np.empty((views.count, 9))
-    assert part_planes(x, problem.R0[0], problem.t0[0], problem.scale[0], len(_ETA), _ANGLES, views.projections,
+    planes = np.empty((1, views.count, 9))
+    assert part_planes(x, problem.R0, problem.t0, problem.scale, len(_ETA), _ANGLES, views.projections,
                        views.centres, views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit,
-                       problem.grid, problem.uv, problem.counts, planes)
+                       views.rays, problem.grid, problem.uv, problem.counts, planes)
     assert outline_points(x, problem.R0[0], problem.t0[0], problem.scale[0], _ETA, _OMEGA, views.projections,
                           views.centres, problem.grid, problem.uv, problem.counts)
     for view, (samples, rows, (K, R, centre, pixels_per_unit)) in enumerate(
@@ -198,7 +199,43 @@ def test_part_planes_draw_the_outline_cv2_draws(name):
         hull = cv2.convexHull(problem.uv[view, :problem.counts[view]]).reshape(-1, 2)
         expected = np.empty((len(samples), 9))
         tangent_planes(hull, samples, K, R, centre, pixels_per_unit, expected)
-        np.testing.assert_allclose(planes[rows], expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(planes[0, rows], expected, rtol=1e-9, atol=1e-12)
+
+
+def test_sample_rays_are_the_unit_directions_through_the_samples():
+    """Each sample's ray: K^-1 (u, v, 1) turned into the world by its view's camera and made unit."""
+    truth, cameras, edges = _ideal_scan("cylinder", 3)
+    views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
+    rays = sample_rays(views.all_samples, views.starts, views.Ks, views.Rs)
+    for v, camera in enumerate(cameras):
+        samples = views.all_samples[views.starts[v]:views.starts[v + 1]]
+        directions = np.column_stack([samples, np.ones(len(samples))]) @ np.linalg.inv(camera.K).T @ views.Rs[v].T
+        expected = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+        np.testing.assert_allclose(rays[views.starts[v]:views.starts[v + 1]], expected, rtol=0, atol=1e-12)
+        # A point along the ray projects back onto the sample.
+        uv, _ = camera.project(camera.center + 0.7 * expected)
+        np.testing.assert_allclose(uv, samples, atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["rounded-box", "ellipsoid"])
+def test_part_planes_of_a_union_are_each_parts_own(name):
+    """One call for several parts gives each part the planes a call for that part alone gives it."""
+    truth, cameras, edges = _ideal_scan(name, 3)
+    views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
+    parts = (truth, _perturbed(truth, seed=3))
+    problem = _Problem(parts, views, np.zeros(4), 0.0, 1.0)
+    x = problem.x0 + np.random.default_rng(4).normal(size=22) * 0.02
+    together = np.empty((2, views.count, 9))
+    assert part_planes(x, problem.R0, problem.t0, problem.scale, len(_ETA), _ANGLES, views.projections,
+                       views.centres, views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit,
+                       views.rays, problem.grid, problem.uv, problem.counts, together)
+    for p in range(2):
+        alone = np.empty((1, views.count, 9))
+        assert part_planes(x[11 * p: 11 * p + 11].copy(), problem.R0[p:p + 1].copy(), problem.t0[p:p + 1].copy(),
+                           problem.scale[p:p + 1].copy(), len(_ETA), _ANGLES, views.projections, views.centres,
+                           views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit, views.rays,
+                           problem.grid, problem.uv, problem.counts, alone)
+        np.testing.assert_array_equal(together[p], alone[0])
 
 
 def test_residuals_are_distances_to_the_outline_in_pixels():
