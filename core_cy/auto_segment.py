@@ -727,14 +727,34 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
             # view sees the object in front of the table point, it neither confirms nor denies it. The
             # second look adds what the first one's false agreements hid; what it drops (a part seen only
             # as hidden, which the graph cut gave the table this time) the first look keeps.
-            standing = [cv2.bitwise_or(first, cut) for first, (cut, _) in zip(standing, cuts) if first is not None]
-            again = [_first_cut(view, views, parallax, aim, standing, earlier)
-                     for view, (_, earlier) in zip(views, cuts)]
-            cuts = [(_filled_region(cv2.bitwise_or(first, second), view), score)
-                    for view, (first, _), (second, score) in zip(views, cuts, again)]
+            hiding = [cv2.bitwise_or(first, cut) for first, (cut, _) in zip(standing, cuts) if first is not None]
+            looking = set(range(len(views)))
+            # A look may find in a view what the looks before missed: a low face (a flat box's top) stands
+            # out through the plane only along its outline, a line that may hold only a corner, until the
+            # other views' silhouettes hide the table points under it; each view found whole hides them
+            # from the rest. So the other views are looked at again while some view's silhouette grows by
+            # a part (:data:`_GROWN`); as many looks as views at most, each finding a view's part or ending.
+            for _ in range(len(views)):
+                again = {i: _first_cut(views[i], views, parallax, aim, hiding, cuts[i][1]) for i in looking}
+                for i, (second, score) in again.items():
+                    cuts[i] = (_filled_region(cv2.bitwise_or(cuts[i][0], second), views[i]), score)
+                grown = set()
+                for i, (cut, _) in enumerate(cuts):
+                    gained = cv2.countNonZero(cv2.bitwise_and(cut, cv2.bitwise_not(hiding[i])))
+                    if gained > _GROWN * cv2.countNonZero(cut):
+                        grown.add(i)
+                    hiding[i] = cv2.bitwise_or(hiding[i], cut)
+                looking = {i for i in range(len(views)) if grown - {i}}
+                if not looking:
+                    break
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
+
+
+#: A look that adds over this share of a view's silhouette found a part the looks before missed (a face);
+#: less only redraws its edge, which hides hardly more of the table from the other views.
+_GROWN = 0.25
 
 
 def parallax_capable(view_count: int) -> bool:
