@@ -28,7 +28,10 @@ Every proposal is refined against the silhouettes of the union (all parts
 together, the support plane kept: :func:`core_cy.silhouette_fit.fit_to_silhouettes`)
 a few steps; the best goes on to convergence (and, while it leaves the silhouettes
 unexplained, the proposals left behind go on in turn); the parts that do not pay are
-dropped (the least useful first, the rest refined again). The union is kept
+dropped (the least useful first, the rest refined again). Where that leaves a union no
+better than the model before it, the few steps were a wrong guess (a start already at its
+minimum beats those still on their way down): the proposals left behind go on to their
+end, and of those that pay, the one that ends lowest is taken. The union is kept
 if it gains ``PART_GAIN`` of IoU over the model before it in two views (or carves),
 with more parts, or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
@@ -288,31 +291,63 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
                 proposals += _waists(box, points, box_owner)
         if not proposals:
             break
-        candidate = fitter.result(fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX,
-                                                 within=within)).parts
-        candidate, candidate_ious = _paying(candidate, fitter, rasters)
-        # More parts must explain more: as much as one part must pay, in as many views. A union of no
-        # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
-        # (not the one superquadric: that is the single fit's, from its own starts).
-        gains = np.asarray(candidate_ious) - np.asarray(ious)
-        gained = int(_views_paid(gains))
-        # A union that explains more in one view only, with no more volume, carves away what that
-        # view shows empty (a dumbbell's weights without the gap between them, which the other
-        # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
-        # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
-        explains_more = (gained >= _views_to_pay(len(cameras))
-                         or (float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
-        if explains_more and len(candidate) <= len(current):
-            explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
-        if explains_more:
+        winner = fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX, within=within)
+        candidate, candidate_ious = _paying(fitter.result(winner).parts, fitter, rasters)
+        verdict = _verdict(candidate, candidate_ious, current, ious, base, trial is None, fitter)
+        if verdict is None:
+            # The screening ranks the proposals by their cost after a few steps, a guess at where they
+            # end: the winner may be a start already at its minimum, its extra part paying for nothing,
+            # while others still on their way down end lower, and pay. So, the winner given up, the
+            # proposals left behind go on to their end in the order of their cost (while within the
+            # budget), and of those whose parts pay, the one that ends lowest is kept (the first to
+            # pay may only explain a view's wrong silhouette the better).
+            chosen = None
+            for descent in sorted((descent for descent in fitter.descents
+                                   if descent is not winner and np.isfinite(descent.cost)),
+                                  key=lambda descent: descent.cost):
+                if not within():
+                    break
+                other, other_ious = _paying(fitter.result(descent.run(_ITERATIONS)).parts, fitter, rasters)
+                other_verdict = _verdict(other, other_ious, current, ious, base, trial is None, fitter)
+                if other_verdict is None:
+                    continue
+                rank = (other_verdict != "kept", fitter.descent(other).cost)
+                if chosen is None or rank < chosen[0]:
+                    chosen = (rank, other, other_ious, other_verdict)
+            if chosen is not None:
+                _, candidate, candidate_ious, verdict = chosen
+        if verdict == "kept":
             current, ious, trial = candidate, candidate_ious, None
-        elif trial is None and len(candidate) > len(base) and gained >= 1:
-            trial = candidate  # it explains more in one view at least: not just a part cut in two
+        elif verdict == "trial":
+            trial = candidate
         else:
             break
     if len(current) > 1 and plane is not None:
         current, ious = _rested(current, fitter, plane, ious, rasters)
     return PartsFit(current, ious, fitter.evaluations)
+
+
+def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fitter: _Fitter) -> str | None:
+    """Whether a round's union, its parts all paying, is kept ("kept"), goes one round on ("trial")
+    or is given up (None), against the model before it, ``current`` with its IoUs ``ious``."""
+    # More parts must explain more: as much as one part must pay, in as many views. A union of no
+    # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
+    # (not the one superquadric: that is the single fit's, from its own starts).
+    gains = np.asarray(candidate_ious) - np.asarray(ious)
+    gained = int(_views_paid(gains))
+    # A union that explains more in one view only, with no more volume, carves away what that
+    # view shows empty (a dumbbell's weights without the gap between them, which the other
+    # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
+    # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
+    explains_more = (gained >= _views_to_pay(len(candidate_ious))
+                     or (float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
+    if explains_more and len(candidate) <= len(current):
+        explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
+    if explains_more:
+        return "kept"
+    if may_trial and len(candidate) > len(base) and gained >= 1:
+        return "trial"  # it explains more in one view at least: not just a part cut in two
+    return None
 
 
 def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, rasters: _Rasters):

@@ -13,7 +13,7 @@ from robocell.core_cy.camera import Camera
 from robocell.core_cy.edges import edge_samples, silhouette_outline
 from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps
 from robocell.core_cy.reconstruct import Options, View, reconstruct
-from robocell.core_cy.silhouette_fit import _Problem, _Views
+from robocell.core_cy.silhouette_fit import _Fitter, _Problem, _Views
 from robocell.core_cy.superquadric import Superquadric, inside_outside
 from robocell.wire.bundle import load_bundle
 from robocell.workers.sim.judge import JudgeGripper, Part, judge, parts_from_truth, union_iou
@@ -112,6 +112,30 @@ def test_a_union_of_two_superquadrics_is_recovered_as_two_parts(name):
     assert min(result.silhouette_iou) > 0.95
     line = result.to_dict()
     assert len(line["parts"]) == 2 and set(line["parts"][0]) == {"size", "shape", "T_world_object"}
+
+
+def test_a_union_is_found_where_the_screening_picks_a_part_that_does_not_pay(monkeypatch):
+    # The screening (each proposal a few steps) is a guess: here its winner is made the one
+    # superquadric with a speck inside it, a part that pays for nothing (as a start already at its
+    # minimum can win on the real photographs). The proposals it left behind still find the two parts.
+    obj = COMPOUNDS["can on a box"]()
+    cameras = _cameras(obj, 3)
+    single = _reconstruct(obj, cameras, max_parts=1).superquadric
+    screened = _Fitter.best_of
+    rounds = []
+
+    def speck_first(self, starts, *args, **kwargs):
+        best = screened(self, starts, *args, **kwargs)
+        if isinstance(starts[0], Superquadric) or rounds:
+            return best  # the one superquadric's own fit, or a later round of parts
+        rounds.append(len(starts))
+        speck = Superquadric(0.05 * single.size, single.shape, single.T_world_object)
+        return self.descent((single, speck))
+
+    monkeypatch.setattr(_Fitter, "best_of", speck_first)
+    result = _reconstruct(obj, cameras)
+    assert rounds and len(result.parts) == 2
+    assert _union_iou(result.parts, _truth_parts(obj)) > 0.95
 
 
 def _lying(yaw_deg: float, centre, size) -> SuperquadricObject:
