@@ -105,6 +105,28 @@ def test_views_aimed_under_the_table_find_the_object():
         auto_silhouettes(images, cameras, support_plane=[0.0, 0.0, -1.0, 0.0])
 
 
+def test_a_flat_box_seen_by_six_views_is_found_in_every_view():
+    # A flat box's top, 2.4 cm above the table and of one colour, stands out through the plane only along
+    # its outline, and with six views all round the other views' agreement leaves a corner of it in some
+    # views on the first look; a view is looked at again while the others' silhouettes grow (the classic
+    # red scene of workers/sim, a renderer apart from the one the other tests here use). Before: views
+    # of 0.05 to 0.13 here.
+    from robocell.workers.sim.objects import SuperquadricObject
+    from robocell.workers.sim.render import render
+    from robocell.workers.sim.scans import default_K, plan_views
+
+    rng = np.random.default_rng(2)
+    box = SuperquadricObject.on_table((0.2, 0.2), [0.06, 0.04, 0.012], (0.6, 0.0))
+    poses = plan_views([0.6, 0.0, 0.0], 6, distance=(0.45, 0.65), elevation_deg=(30, 65), rng=rng,
+                       azimuth_start_deg=rng.uniform(0, 360))
+    K = default_K()
+    rendered = [render(box, T, K, rng=np.random.default_rng(100 + i)) for i, T in enumerate(poses)]
+    found = auto_silhouettes([image for image, _ in rendered], [Camera(K, T) for T in poses],
+                             support_plane=TABLE)
+    ious = [_iou(silhouette, truth) for (silhouette, _), (_, truth) in zip(found, rendered)]
+    assert min(ious) > 0.95, ious
+
+
 @pytest.mark.xfail(reason="a flat object top of exactly the table's colour and light has no cue at the coarse "
                           "scale: its sides are found, its top is not (a known limit)", strict=False)
 def test_an_object_the_colour_of_the_table():
