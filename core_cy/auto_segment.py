@@ -788,7 +788,7 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
             sample &= inside.reshape(ch, cw)
             ys, xs = np.nonzero(sample)
             there = maps[ys, xs]
-            seen = _remapped(other.coarse, maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[ys, xs]
+            seen = _remapped(other.coarse, there[None], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
             here = view.coarse[ys, xs]
             lit = (here.min(axis=1) > _LIGHT_FIELD_DARKEST) & (seen.min(axis=1) > _LIGHT_FIELD_DARKEST)
             if lit.sum() < _LIGHT_FIELD_MIN_SAMPLES:
@@ -823,7 +823,10 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
         spread = 1.4826 * float(np.median(np.abs(residual[:-1] - centre)))
         keep = residual < centre + max(3.0 * spread, _LIGHT_FIELD_TOLERANCE)
         keep[-1] = True
-        coefficients, *_ = np.linalg.lstsq(design[keep], log_ratio[keep], rcond=None)
+        # The normal equations (a few columns a view against thousands of samples), held solvable where a
+        # view shares too little table with any other to have rows: its field stays 1.
+        kept = design[keep]
+        coefficients = np.linalg.solve(kept.T @ kept + 1e-9 * np.eye(columns), kept.T @ log_ratio[keep])
         fitted = design @ coefficients
     relative = np.abs(fitted[:-1])
     if np.percentile(relative, 98) <= _LIGHT_FIELD_BEYOND or relative.max() > _LIGHT_FIELD_AT_MOST:
@@ -855,7 +858,7 @@ def _light_basis(view: _View, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
 
 
 #: Every this many coarse pixels (each way) a shared table point samples the light fields.
-_LIGHT_FIELD_STEP = 2
+_LIGHT_FIELD_STEP = 4
 #: Channels this dark (grey levels) say little of a ratio: the noise is most of them.
 _LIGHT_FIELD_DARKEST = 8.0
 #: A pair of views sharing fewer table samples than this says nothing of the light.
