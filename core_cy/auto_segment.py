@@ -977,7 +977,54 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             region = cv2.bitwise_or(masks[i], bay)
             found = _graph_cut(views[i], region, score, cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
+        if len(views) == 3 and views[i].background is None:
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hulls.of(everyone - {i}))
     return looked
+
+
+def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
+    the view's own evidence there is not contrary.
+
+    A face of the table's colour and light (a white box's top on white laminate, seen from the side) may
+    lie beyond the convex outline of the faces found, where no bay shows it: three views' hull is loose
+    enough to hold a box with or without its top. Cut again within the hull, by the colour models its own
+    seeds trained, the view finds such a face by its edges and its shade. But the hull holds a band of
+    table around the object too, which the colour models may take (a print of the table's colour, a
+    shadow): what the view's evidence says there decides. The plane's parallax against a white top on a
+    white table is faint, yet above the table's noise over most of the face (the tint and the light of a
+    face above the plane are not quite those of the table point behind it); where another view confirms
+    the table point behind a piece within the table's own noise over most of it, the piece is table.
+
+    Only where the hull is of two views, and so cannot show a face missing: with three carving views or
+    more a view without its face leaves the others reaching out of its hull, and :func:`_agreed` finds
+    it; and only on the plane's parallax (an empty workspace shows a face of the table's colour anyway).
+    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette) and mostly seen: where
+    the object hides the table points behind it from the other views, the view has no evidence there,
+    and the first look's graph cut has already decided."""
+    try:
+        found = _graph_cut(view, cv2.bitwise_or(mask, hull), score,
+                           cv2.bitwise_not(cv2.dilate(cv2.bitwise_or(mask, hull), _SMALL, iterations=2)))
+    except SilhouetteError:
+        return mask
+    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(added, connectivity=8)
+    if count <= 1:
+        return mask
+    touching = cv2.dilate(mask, _SMALL) > 0
+    # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
+    seen = score != _HIDDEN
+    grown = mask.copy()
+    for label in range(1, count):
+        piece = labels == label
+        area = int(piece.sum())
+        evidence = score[piece & seen]
+        # A piece apart from the silhouette is not a face of it.
+        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask) or 2 * len(evidence) <= area:
+            continue
+        if median(np.ascontiguousarray(evidence, np.float32)) > 1.0:
+            grown[piece] = 255
+    return _filled_region(grown, view)
 
 
 #: A bay of a silhouette (:func:`_bays_looked_into`) is looked into when it holds over this share of its area.
