@@ -716,7 +716,8 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
         for view in views:
             evidence = np.nan_to_num(_parallax_evidence(view, [v for v in views if v is not view], parallax))
             first = np.where(evidence > 2.5 * max(_noise_level(evidence), _NOISE_FLOOR), 255, 0).astype(np.uint8)
-            standing[view.index] = cv2.dilate(cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL), _SMALL)
+            opened = cv2.morphologyEx(first, cv2.MORPH_OPEN, _SMALL)
+            standing[view.index] = cv2.dilate(_grown_by_colour(view, opened, _coarse_aim(view, aim)), _SMALL)
     if every_background:
         assert parallax is not None
         cuts = _background_cuts(views, parallax, aim)
@@ -755,6 +756,51 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
 #: A look that adds over this share of a view's silhouette found a part the looks before missed (a face);
 #: less only redraws its edge, which hides hardly more of the table from the other views.
 _GROWN = 0.25
+
+
+def _grown_by_colour(view: _View, standing: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``standing`` (0/255) with what joins its pieces near the aim in their own colours (issue 20).
+
+    A low face of one colour (a flat box's top) stands out through the plane only where another view sees
+    the table beside it, at its corners: elsewhere a view that sees the face in front of the table point
+    agrees with it, and the first look finds only corners, so hides too little for the next. The corners'
+    own colour joins the rest of the face: a pixel near the aim joins where it is within
+    :data:`_SEED_NEAR` of a piece's colour and over :data:`_TABLE_FAR` from every colour of the table
+    away from the aim, and from the table's colour darkened (a shadow is table)."""
+    cw, ch = view.coarse_size
+    reach = 0.25 * np.hypot(cw, ch)
+    near = _components_near(standing, centre, reach)
+    if not cv2.countNonZero(near):
+        return standing
+    yy, xx = np.mgrid[0:ch, 0:cw]
+    distance = np.hypot(xx - centre[0], yy - centre[1])
+    table = view.coarse[(distance > reach) & (standing == 0)]
+    seeds = view.coarse[near > 0]
+    if len(table) < 20:
+        return standing
+    table = table[:: max(1, len(table) // _COLOUR_SAMPLES)]
+    seeds = seeds[:: max(1, len(seeds) // _COLOUR_SAMPLES)]
+    inside = distance <= reach
+    colours = view.coarse[inside]
+    to_seed = np.min(np.linalg.norm(colours[:, None, :] - seeds[None, :, :], axis=2), axis=1)
+    to_table = np.min(np.linalg.norm(colours[:, None, :] - table[None, :, :], axis=2), axis=1)
+    like = np.zeros((ch, cw), np.uint8)
+    # A shadow is the table's colour darkened: table too.
+    from_shade = _unlike_table(colours[None], np.median(table, axis=0)[None])[0]
+    like[inside] = np.where((to_seed < _SEED_NEAR) & (np.minimum(to_table, from_shade) > _TABLE_FAR), 255, 0)
+    like = cv2.bitwise_or(like, near)
+    count, labels = cv2.connectedComponents(like, connectivity=8)
+    chosen = np.zeros(count, bool)
+    chosen[np.unique(labels[near > 0])] = True
+    chosen[0] = False
+    return cv2.bitwise_or(standing, np.where(chosen[labels], 255, 0).astype(np.uint8))
+
+
+#: Colours sampled of the pieces and of the table, at most.
+_COLOUR_SAMPLES = 300
+#: Grey levels (BGR distance) within a piece's colour, and beyond the table's, of a pixel that joins it.
+_SEED_NEAR = 8.0
+_TABLE_FAR = 40.0
 
 
 def parallax_capable(view_count: int) -> bool:
