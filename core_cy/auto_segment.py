@@ -36,6 +36,7 @@ from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
                                windowed_correlation)
@@ -782,8 +783,8 @@ def _grown_by_colour(view: _View, standing: np.ndarray, centre: np.ndarray) -> n
     seeds = seeds[:: max(1, len(seeds) // _COLOUR_SAMPLES)]
     inside = distance <= reach
     colours = view.coarse[inside]
-    to_seed = np.min(np.linalg.norm(colours[:, None, :] - seeds[None, :, :], axis=2), axis=1)
-    to_table = np.min(np.linalg.norm(colours[:, None, :] - table[None, :, :], axis=2), axis=1)
+    to_seed, _ = cKDTree(seeds).query(colours)
+    to_table, _ = cKDTree(table).query(colours)
     like = np.zeros((ch, cw), np.uint8)
     # A shadow is the table's colour darkened: table too.
     from_shade = _unlike_table(colours[None], np.median(table, axis=0)[None])[0]
