@@ -36,9 +36,8 @@ from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
-from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
+from ._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps, project_into_mask,
                                windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
@@ -839,18 +838,19 @@ def _grown_by_colour(view: _View, standing: np.ndarray, centre: np.ndarray) -> n
     seeds = seeds[:: max(1, len(seeds) // _COLOUR_SAMPLES)]
     inside = distance <= reach
     colours = view.coarse[inside]
-    # Only whether a colour lies within _SEED_NEAR of a piece's and beyond _TABLE_FAR of the table's counts:
-    # each k-d tree search stops at its threshold (a hair beyond it, so that the rounding of the tree's own
-    # bounds cannot drop a colour at the threshold; the distances found are compared as before), and the
-    # table is searched only for the colours that passed the pieces' test and the shade's.
-    to_seed, _ = cKDTree(seeds).query(colours, distance_upper_bound=_SEED_NEAR * _SEARCH_SLACK)
-    joins = to_seed < _SEED_NEAR
+    # Only whether a colour lies within _SEED_NEAR of a piece's and beyond _TABLE_FAR of the table's counts,
+    # not which is nearest (any_within: a grid of the samples, the distances cKDTree's), and the table is
+    # looked at only for the colours that passed the pieces' test and the shade's.
+    joins = np.empty(len(colours), np.uint8)
+    any_within(colours, np.ascontiguousarray(seeds), _SEED_NEAR, False, joins)
+    joins = joins.view(bool)
     # A shadow is the table's colour darkened: table too.
     from_shade = _unlike_table(colours[joins][None], np.median(table, axis=0)[None])[0]
     candidates = np.flatnonzero(joins)[from_shade > _TABLE_FAR]
-    to_table, _ = cKDTree(table).query(colours[candidates], distance_upper_bound=_TABLE_FAR * _SEARCH_SLACK)
+    near_table = np.empty(len(candidates), np.uint8)
+    any_within(np.ascontiguousarray(colours[candidates]), np.ascontiguousarray(table), _TABLE_FAR, True, near_table)
     joins[:] = False
-    joins[candidates[to_table > _TABLE_FAR]] = True
+    joins[candidates[near_table == 0]] = True
     like = np.zeros((ch, cw), np.uint8)
     like[inside] = np.where(joins, 255, 0)
     like = cv2.bitwise_or(like, near)
@@ -866,9 +866,6 @@ _COLOUR_SAMPLES = 300
 #: Grey levels (BGR distance) within a piece's colour, and beyond the table's, of a pixel that joins it.
 _SEED_NEAR = 8.0
 _TABLE_FAR = 40.0
-#: A k-d tree search bounded at a threshold reaches this factor beyond it: the tree's bounds are summed in
-#: floating point, and a colour exactly at the threshold must still be found to be compared with it.
-_SEARCH_SLACK = 1.0 + 1e-6
 
 
 def parallax_capable(view_count: int) -> bool:

@@ -8,8 +8,8 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
-                                               windowed_correlation)
+from robocell.core_cy._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps,
+                                               project_into_mask, windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -265,3 +265,38 @@ def test_a_resized_window_is_the_window_of_the_whole_resized(size, to):
         if trial % 10 == 0:
             window = (slice(0, th), slice(0, tw))
         assert np.array_equal(auto_segment._resized_window(image, to, window), whole[window])
+
+
+def test_any_within_is_the_nearest_samples_distance_against_the_radius():
+    """As scipy's cKDTree's nearest distance compared with the radius, ties at whole grey levels included."""
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        points = (rng.random((int(rng.integers(1, 2000)), 3)) * 255).astype(np.float32)
+        samples = (rng.random((int(rng.integers(0, 300)), 3)) * 120 + 60).astype(np.float32)
+        if trial % 3 == 0:
+            points, samples = np.round(points), np.round(samples)
+        if trial % 7 == 0:
+            samples *= 1000.0  # spread far: the grid's cells widen
+        radius = [8.0, 40.0, 1.0, 3.0][trial % 4]
+        for inclusive in (False, True):
+            found = np.empty(len(points), np.uint8)
+            any_within(points, np.ascontiguousarray(samples), radius, inclusive, found)
+            if len(samples):
+                nearest = cKDTree(samples).query(points)[0]
+                expected = nearest <= radius if inclusive else nearest < radius
+            else:
+                expected = np.zeros(len(points), bool)
+            assert np.array_equal(found.view(bool), expected)
+
+
+def test_any_within_by_hand():
+    samples = np.array([[0.0, 0.0, 0.0], [100.0, 100.0, 100.0]], np.float32)
+    points = np.array([[8.0, 0.0, 0.0], [7.9, 0.0, 0.0], [100.0, 100.0, 108.0], [50.0, 50.0, 50.0]], np.float32)
+    found = np.empty(4, np.uint8)
+    any_within(points, samples, 8.0, False, found)
+    assert found.tolist() == [0, 1, 0, 0]
+    any_within(points, samples, 8.0, True, found)
+    assert found.tolist() == [1, 1, 1, 0]
+    with pytest.raises(ValueError):
+        any_within(points, samples, 0.0, True, found)
