@@ -243,7 +243,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         if key not in view.differences:
             view.differences[key] = difference_of(view.coarse, view.warped(other, plane))
         difference = view.differences[key]
-        evidence = np.where(inside, np.minimum(evidence, difference), evidence)
+        np.minimum(evidence, difference, out=evidence, where=inside)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
     # in the other views that would see it: NaN.
@@ -367,7 +367,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
         correlation, textured = view.correlations[key]
         seeing = inside[window_rows][:, window_columns]
         known = textured & seeing
-        best = np.where(known, np.maximum(best, correlation), best)
+        np.maximum(best, correlation, out=best, where=known)
         seen |= known
     return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
 
@@ -1751,7 +1751,7 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
                                     borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
         disagreement = view.differences[key]
-        best = np.where(inside, np.minimum(best, disagreement), best)
+        np.minimum(best, disagreement, out=best, where=inside)
         seen |= inside
     # Hidden behind what stands there in the other views that would see it: NaN; out of every other view's
     # picture: -1 (nothing is known).
