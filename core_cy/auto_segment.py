@@ -594,47 +594,10 @@ def _fine_window_maps(view: _View, other: _View, maps: np.ndarray, fine_window: 
     place the fine pixels."""
     fh, fw = _fine_grey(view).shape
     ofh, ofw = _fine_grey(other).shape
-    fine_maps = _resized_window(maps, (fw, fh), fine_window)
+    fine_maps = cv2.resize(maps, (fw, fh), interpolation=cv2.INTER_LINEAR)[fine_window]
     fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
     fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
     return fine_maps
-
-
-def _resized_window(image: np.ndarray, size: tuple[int, int], window: tuple[slice, slice]) -> np.ndarray:
-    """``cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)[window]`` (a float image), made by resizing
-    only the part of ``image`` around the window where that gives the very same values, else by resizing it
-    whole.
-
-    OpenCV samples output pixel x at (x + 0.5) * scale - 0.5 of its input (scale = 1 / (size / input size)),
-    each output pixel from its two neighbours there alone. A crop of the input that starts at input pixel
-    D * scale, resized by the same ratio, samples output pixel x - D at the same place less D * scale: with
-    scale a binary fraction (3.2 times, 4 times) every such product is exact, and the values are the same,
-    so long as the crop holds both neighbours of every window pixel (or ends where the image does: its
-    edges are clamped alike)."""
-    height, width = image.shape[:2]
-    crop, offsets, resized_size = [], [], []
-    for part, length, resized in ((window[1], width, size[0]), (window[0], height, size[1])):
-        scale = 1.0 / (resized / length)
-        fine = scale * 2.0 ** 20
-        start, stop = part.indices(resized)[:2]
-        if fine != np.floor(fine) or resized >= 2 ** 20 or stop <= start:
-            return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)[window]
-        # Output offsets D with D * scale a whole input pixel come every ``period`` pixels; the crop's length
-        # must keep the ratio (resized / length) exactly: a multiple of length / gcd.
-        period = 2 ** 20 // np.gcd(int(fine), 2 ** 20)
-        unit = length // np.gcd(length, resized)
-        offset = max(0, (int(np.floor((start + 0.5) * scale - 0.5)) - 2) // round(period * scale)) * period
-        first = round(offset * scale)
-        last = min(length, int(np.floor((stop - 0.5) * scale - 0.5)) + 3)
-        span = min(-(-(last - first) // unit) * unit, length - first)
-        if (span * resized) % length:
-            return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)[window]
-        crop.append(slice(first, first + span))
-        offsets.append((start - offset, stop - offset))
-        resized_size.append(span * resized // length)
-    (columns, rows), ((c0, c1), (r0, r1)) = crop, offsets
-    return cv2.resize(image[rows, columns], (resized_size[0], resized_size[1]),
-                      interpolation=cv2.INTER_LINEAR)[r0:r1, c0:c1]
 
 
 _CHROMA_OFFSET = 12.0

@@ -249,24 +249,6 @@ def test_grown_by_colour_is_the_brute_force_distances():
         assert cv2.countNonZero(found) > cv2.countNonZero(standing)
 
 
-@pytest.mark.parametrize("size, to", [((200, 150), (640, 480)), ((200, 150), (800, 600)), ((200, 113), (800, 450)),
-                                      ((197, 133), (640, 431)), ((200, 150), (100, 75)), ((20, 15), (64, 48))])
-def test_a_resized_window_is_the_window_of_the_whole_resized(size, to):
-    """Resized from a crop where the scale allows it (3.2, 4, 0.5 times), from the whole image elsewhere:
-    the same values either way."""
-    import cv2
-    rng = np.random.default_rng(4)
-    (w, h), (tw, th) = size, to
-    for trial in range(100):
-        image = rng.normal(100, 50, (h, w, 2)).astype(np.float32)
-        whole = cv2.resize(image, to, interpolation=cv2.INTER_LINEAR)
-        y0, x0 = int(rng.integers(0, th)), int(rng.integers(0, tw))
-        window = (slice(y0, min(th, y0 + int(rng.integers(1, th)))), slice(x0, min(tw, x0 + int(rng.integers(1, tw)))))
-        if trial % 10 == 0:
-            window = (slice(0, th), slice(0, tw))
-        assert np.array_equal(auto_segment._resized_window(image, to, window), whole[window])
-
-
 def test_any_within_is_the_nearest_samples_distance_against_the_radius():
     """As scipy's cKDTree's nearest distance compared with the radius, ties at whole grey levels included."""
     from scipy.spatial import cKDTree
