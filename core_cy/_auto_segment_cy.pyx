@@ -3,7 +3,7 @@
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
-from libc.math cimport fabs, isfinite, rint, sqrtf
+from libc.math cimport fabs, floor, isfinite, rint, sqrt, sqrtf
 
 import numpy as np
 
@@ -207,3 +207,94 @@ def windowed_correlation(const float[:, ::1] mean_a not None, const float[:, ::1
                 correlation[r, c] = (product_mean[r, c] - mean_a[r, c] * mb) / sqrtf(
                     variance_a[r, c] * variance_b + tiny)
                 textured[r, c] = variance_a[r, c] > flat_a[r, c] and variance_b > floor_b
+
+
+def any_within(const float[:, ::1] points not None, const float[:, ::1] samples not None, double radius,
+               bint inclusive, unsigned char[::1] found not None):
+    """Fill ``found`` ((N,) uint8) with 1 where some of the ``samples`` (S, 3) lies within ``radius`` of
+    ``points[i]`` (N, 3): at a distance under it, or at most it if ``inclusive``. The distance is scipy's
+    cKDTree's, the square root of the squared differences summed channel by channel in double, so that
+    the answer is the nearest sample's distance compared with ``radius`` as before.
+
+    Only whether some sample is near counts, not which: the samples are put in cells a hair wider than the
+    radius, and each point looks in its own cell and the 26 around it (a sample within the radius differs
+    from the point by less than a cell in every channel, by a margin that the rounding of a division cannot
+    bridge), stopping at the first sample near enough."""
+    cdef Py_ssize_t n = points.shape[0], count = samples.shape[0], i, k, s, a, b, c
+    cdef double low[3]
+    cdef double high[3]
+    cdef Py_ssize_t dims[3]
+    cdef Py_ssize_t at[3]
+    cdef double cell, d, d2, distance, coordinate, extent = 0.0
+    cdef Py_ssize_t cells, index, start, stop
+    if points.shape[1] != 3 or samples.shape[1] != 3 or found.shape[0] != n:
+        raise ValueError("points must be (N, 3), samples (S, 3) and found (N,)")
+    if not (radius > 0 and isfinite(radius)):
+        raise ValueError("the radius must be positive and finite")
+    if count == 0:
+        found[:] = 0
+        return
+    for k in range(3):
+        low[k] = high[k] = samples[0, k]
+        for s in range(1, count):
+            low[k] = min(low[k], <double>samples[s, k])
+            high[k] = max(high[k], <double>samples[s, k])
+        if not (isfinite(low[k]) and isfinite(high[k])):
+            raise ValueError("the samples must be finite")
+        extent = max(extent, high[k] - low[k])
+    # Cells a hair wider than the radius, and no more than 64 a side however far the samples spread.
+    cell = max(radius * (1.0 + 1e-9), extent / 64.0)
+    for k in range(3):
+        dims[k] = <Py_ssize_t>floor((high[k] - low[k]) / cell) + 1
+    cells = dims[0] * dims[1] * dims[2]
+    # The samples sorted by cell (a counting sort): cell q holds order[starts[q]:starts[q + 1]].
+    starts_array = np.zeros(cells + 1, np.intp)
+    order_array = np.empty(count, np.intp)
+    cell_of_array = np.empty(count, np.intp)
+    cdef Py_ssize_t[::1] starts = starts_array, order = order_array, cell_of = cell_of_array
+    with nogil:
+        for s in range(count):
+            index = 0
+            for k in range(3):
+                index = index * dims[k] + <Py_ssize_t>floor((samples[s, k] - low[k]) / cell)
+            cell_of[s] = index
+            starts[index + 1] += 1
+        for index in range(cells):
+            starts[index + 1] += starts[index]
+        for s in range(count):
+            order[starts[cell_of[s]]] = s
+            starts[cell_of[s]] += 1
+        for index in range(cells, 0, -1):
+            starts[index] = starts[index - 1]
+        starts[0] = 0
+        for i in range(n):
+            found[i] = 0
+            for k in range(3):
+                coordinate = floor((points[i, k] - low[k]) / cell)
+                # Out of the cells and their neighbours (or not a number): no sample is near.
+                if not (coordinate >= -1 and coordinate <= dims[k]):
+                    break
+                at[k] = <Py_ssize_t>coordinate
+            else:
+                for a in range(max(at[0] - 1, 0), min(at[0] + 2, dims[0])):
+                    for b in range(max(at[1] - 1, 0), min(at[1] + 2, dims[1])):
+                        for c in range(max(at[2] - 1, 0), min(at[2] + 2, dims[2])):
+                            index = (a * dims[1] + b) * dims[2] + c
+                            start, stop = starts[index], starts[index + 1]
+                            for s in range(start, stop):
+                                d = <double>points[i, 0] - <double>samples[order[s], 0]
+                                d2 = d * d
+                                d = <double>points[i, 1] - <double>samples[order[s], 1]
+                                d2 = d2 + d * d
+                                d = <double>points[i, 2] - <double>samples[order[s], 2]
+                                d2 = d2 + d * d
+                                distance = sqrt(d2)
+                                if distance < radius or (inclusive and distance == radius):
+                                    found[i] = 1
+                                    break
+                            if found[i]:
+                                break
+                        if found[i]:
+                            break
+                    if found[i]:
+                        break

@@ -36,9 +36,8 @@ from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
-from ._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
+from ._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps, project_into_mask,
                                windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
@@ -244,7 +243,7 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
         if key not in view.differences:
             view.differences[key] = difference_of(view.coarse, view.warped(other, plane))
         difference = view.differences[key]
-        evidence = np.where(inside, np.minimum(evidence, difference), evidence)
+        np.minimum(evidence, difference, out=evidence, where=inside)
         seen |= inside
     # Out of every other view's picture: nothing is known, taken for table; hidden behind the object
     # in the other views that would see it: NaN.
@@ -349,6 +348,9 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     best = np.full(grey.shape, -1.0, np.float32)
     seen = np.zeros(grey.shape, bool)
     own = None  # the window's own statistics, shared by every other view's comparison
+    # The coarse pixel each fine pixel of the window lies in, as cv2.resize's nearest neighbour picks it.
+    rows, columns = _nearest_indices(view.coarse_size, (fw, fh))
+    window_rows, window_columns = rows[fine_window[0]], columns[fine_window[1]]
     for other, hidden in zip(others, standing):
         # The grain is compared at a finer scale than the object's outline is known: the table points just
         # behind its edge in the other view are taken for hidden too.
@@ -363,11 +365,28 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
                 own = _window_statistics(grey)
             view.correlations[key] = _local_correlation(own, warped)
         correlation, textured = view.correlations[key]
-        seeing = cv2.resize(inside.astype(np.uint8), (fw, fh), interpolation=cv2.INTER_NEAREST)[fine_window] > 0
+        seeing = inside[window_rows][:, window_columns]
         known = textured & seeing
-        best = np.where(known, np.maximum(best, correlation), best)
+        np.maximum(best, correlation, out=best, where=known)
         seen |= known
     return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
+
+
+def _nearest_indices(size: tuple[int, int], to: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Which row and which column of an image of ``size`` (w, h) each row and column of it resized to ``to``
+    (w, h) by cv2.resize's nearest neighbour is taken from: OpenCV's own choice, read off an image of
+    indices resized alike, so that an image's resized window is its rows and columns picked by them
+    (without resizing the whole image)."""
+    (w, h), (tw, th) = size, to
+    key = (w, h, tw, th)
+    if key not in _NEAREST_INDICES:
+        columns = cv2.resize(np.arange(w, dtype=np.float32)[None, :], (tw, 1), interpolation=cv2.INTER_NEAREST)
+        rows = cv2.resize(np.arange(h, dtype=np.float32)[:, None], (1, th), interpolation=cv2.INTER_NEAREST)
+        _NEAREST_INDICES[key] = (rows.ravel().astype(np.intp), columns.ravel().astype(np.intp))
+    return _NEAREST_INDICES[key]
+
+
+_NEAREST_INDICES: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -773,8 +792,7 @@ def _grown_by_colour(view: _View, standing: np.ndarray, centre: np.ndarray) -> n
     near = _components_near(standing, centre, reach)
     if not cv2.countNonZero(near):
         return standing
-    yy, xx = np.mgrid[0:ch, 0:cw]
-    distance = np.hypot(xx - centre[0], yy - centre[1])
+    distance = np.hypot((np.arange(cw) - centre[0])[None, :], (np.arange(ch) - centre[1])[:, None])
     table = view.coarse[(distance > reach) & (standing == 0)]
     seeds = view.coarse[near > 0]
     if len(table) < 20:
@@ -783,12 +801,21 @@ def _grown_by_colour(view: _View, standing: np.ndarray, centre: np.ndarray) -> n
     seeds = seeds[:: max(1, len(seeds) // _COLOUR_SAMPLES)]
     inside = distance <= reach
     colours = view.coarse[inside]
-    to_seed, _ = cKDTree(seeds).query(colours)
-    to_table, _ = cKDTree(table).query(colours)
-    like = np.zeros((ch, cw), np.uint8)
+    # Only whether a colour lies within _SEED_NEAR of a piece's and beyond _TABLE_FAR of the table's counts,
+    # not which is nearest (any_within: a grid of the samples, the distances cKDTree's), and the table is
+    # looked at only for the colours that passed the pieces' test and the shade's.
+    joins = np.empty(len(colours), np.uint8)
+    any_within(colours, np.ascontiguousarray(seeds), _SEED_NEAR, False, joins)
+    joins = joins.view(bool)
     # A shadow is the table's colour darkened: table too.
-    from_shade = _unlike_table(colours[None], np.median(table, axis=0)[None])[0]
-    like[inside] = np.where((to_seed < _SEED_NEAR) & (np.minimum(to_table, from_shade) > _TABLE_FAR), 255, 0)
+    from_shade = _unlike_table(colours[joins][None], np.median(table, axis=0)[None])[0]
+    candidates = np.flatnonzero(joins)[from_shade > _TABLE_FAR]
+    near_table = np.empty(len(candidates), np.uint8)
+    any_within(np.ascontiguousarray(colours[candidates]), np.ascontiguousarray(table), _TABLE_FAR, True, near_table)
+    joins[:] = False
+    joins[candidates[near_table == 0]] = True
+    like = np.zeros((ch, cw), np.uint8)
+    like[inside] = np.where(joins, 255, 0)
     like = cv2.bitwise_or(like, near)
     count, labels = cv2.connectedComponents(like, connectivity=8)
     chosen = np.zeros(count, bool)
@@ -1259,15 +1286,20 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     offsets = np.arange(-band, band + _TABLE_BEYOND_PX + 1e-9, _EDGE_STEP)
     count, candidates = len(loop), int(np.sum(offsets <= band + 1e-9))
 
-    def profiles(shift: float) -> np.ndarray:
-        at = loop[:, None, :] + (offsets[None, :, None] + shift) * normals[:, None, :]
-        return cv2.remap(image, at[..., 0].astype(np.float32), at[..., 1].astype(np.float32), cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REPLICATE)
-
+    # The profiles at the candidates and half a pixel either side, in one: half a pixel is one candidate step,
+    # so the profile shifted either way is the same samples one step along (the offsets are multiples of a
+    # half, exact in floating point), read from a profile one step longer at each end.
+    shift = int(round(0.5 / _EDGE_STEP))
+    assert shift * _EDGE_STEP == 0.5
+    extended = np.concatenate([offsets[0] - _EDGE_STEP * np.arange(shift, 0, -1), offsets,
+                               offsets[-1] + _EDGE_STEP * np.arange(1, shift + 1)])
+    at = loop[:, None, :] + extended[None, :, None] * normals[:, None, :]
+    sampled = cv2.remap(image, at[..., 0].astype(np.float32), at[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE)
+    colours = sampled[:, shift:shift + len(offsets)]
     # The colour step across each candidate, over one pixel: blur makes an edge's step steepest where
     # it is half-way.
-    step = np.linalg.norm(profiles(0.5) - profiles(-0.5), axis=2)
-    colours = profiles(0.0)
+    step = np.linalg.norm(sampled[:, 2 * shift:] - sampled[:, :len(offsets)], axis=2)
     depth = max(1, int(round(_TABLE_DEPTH_PX / _EDGE_STEP)))
     ends = colours[:, -depth:, :]
     table = _wrapped_median(np.median(ends, axis=1), _TABLE_NORMALS)
@@ -1581,14 +1613,19 @@ _CUT_MARGIN = 0.5
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
-    """Pixels of the same chromaticity as the ``table`` pixels' median and darker than it: a shadow."""
-    brightness = image.sum(axis=2) + 3.0
-    chroma = image / brightness[..., None]
-    if not table.any():
-        return np.zeros(brightness.shape, bool)
-    table_chroma = np.array([median(np.ascontiguousarray(chroma[..., k][table])) for k in range(3)], chroma.dtype)
-    table_brightness = median(brightness[table])
-    return (np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
+    """The ``table`` pixels of the same chromaticity as their median and darker than it: a shadow. Only
+    they are asked about (the graph cut marks a shadow among the pixels the other views confirm), so the
+    rest of the image is not looked at."""
+    found = np.zeros(table.shape, bool)
+    pixels = image[table]
+    if not len(pixels):
+        return found
+    brightness = pixels.sum(axis=1) + 3.0
+    chroma = pixels / brightness[:, None]
+    table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
+    table_brightness = median(brightness)
+    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
+    return found
 
 
 def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
@@ -1596,8 +1633,10 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
     cw, ch = view.coarse_size
     x0, y0, x1, y1 = box
     result = np.zeros((ch, cw), np.uint8)
-    has_object = np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)).any()
-    has_table = np.isin(mask, (cv2.GC_BGD, cv2.GC_PR_BGD)).any()
+    # GrabCut's labels are 0 to 3, the object's the odd ones (GC_FGD 1, GC_PR_FGD 3), the table's the even.
+    odd = mask & 1
+    has_object = cv2.countNonZero(odd) > 0
+    has_table = cv2.countNonZero(odd) < odd.size
     if not has_object:
         raise SilhouetteError(_NOTHING, view=view.index)
     if has_table:
@@ -1607,7 +1646,7 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
         cv2.grabCut(image, mask, (0, 0, 0, 0), background_model, object_model,
                     _GC_ITERATIONS if iterations is None else iterations,
                     cv2.GC_INIT_WITH_MASK)  # the box is unused: the mask seeds it
-    result[y0:y1, x0:x1] = np.where(np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
+    result[y0:y1, x0:x1] = (mask & 1) * np.uint8(255)
     return _filled_region(result, view)
 
 
@@ -1675,7 +1714,7 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
                                     borderMode=cv2.BORDER_REPLICATE)
             view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
         disagreement = view.differences[key]
-        best = np.where(inside, np.minimum(best, disagreement), best)
+        np.minimum(best, disagreement, out=best, where=inside)
         seen |= inside
     # Hidden behind what stands there in the other views that would see it: NaN; out of every other view's
     # picture: -1 (nothing is known).

@@ -8,8 +8,8 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (median, median_and_spread, plane_homography_maps, project_into_mask,
-                                               windowed_correlation)
+from robocell.core_cy._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps,
+                                               project_into_mask, windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -177,3 +177,108 @@ def test_the_planes_closed_form_maps_are_those_of_each_table_point_projected():
         np.testing.assert_array_equal(inside, expected_inside)
         np.testing.assert_allclose(maps[inside.reshape(maps.shape[:2])],
                                    expected_maps[expected_inside.reshape(maps.shape[:2])], atol=1e-3)
+
+
+@pytest.mark.parametrize("size, to", [((200, 150), (640, 480)), ((200, 150), (800, 600)), ((197, 133), (777, 523)),
+                                      ((150, 200), (480, 640)), ((8, 8), (30, 30))])
+def test_nearest_indices_pick_what_cv2_resize_picks(size, to):
+    import cv2
+    image = np.random.default_rng(1).integers(0, 256, (size[1], size[0]), dtype=np.uint8)
+    rows, columns = auto_segment._nearest_indices(size, to)
+    resized = cv2.resize(image, to, interpolation=cv2.INTER_NEAREST)
+    assert np.array_equal(image[rows][:, columns], resized)
+    assert np.array_equal(image[rows[5:40]][:, columns[3:17]], resized[5:40, 3:17])
+
+
+def test_shadow_like_asks_only_the_table_pixels_what_the_whole_image_formula_says():
+    rng = np.random.default_rng(2)
+    for trial in range(50):
+        image = (rng.random((30, 40, 3)) * 255).astype(np.float32)
+        image[rng.random((30, 40)) < 0.4] *= 0.5  # some of it darkened alike: a shadow's look
+        table = rng.random((30, 40)) < 0.6 * (trial % 5 > 0)
+        brightness = image.sum(axis=2) + 3.0
+        chroma = image / brightness[..., None]
+        expected = np.zeros((30, 40), bool)
+        if table.any():
+            table_chroma = np.array([np.median(chroma[..., k][table]) for k in range(3)], np.float32)
+            expected = ((np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12)
+                        & (brightness < 0.92 * np.float32(np.median(brightness[table]))))
+        assert np.array_equal(auto_segment._shadow_like(image, table), expected & table)
+
+
+def test_grown_by_colour_is_the_brute_force_distances():
+    """The k-d tree searches stopped at their thresholds decide as every colour's distance to every sample."""
+    from types import SimpleNamespace
+
+    import cv2
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        ch, cw = 60, 80
+        coarse = np.full((ch, cw, 3), 120.0, np.float32) + rng.normal(0, 20, (ch, cw, 3)).astype(np.float32)
+        # A piece near the aim of one colour, some of the same colour beside it, and colours at the thresholds.
+        coarse[25:35, 35:45] = [30.0, 60.0, 200.0]
+        coarse[20:40, 45:55] = np.float32([30.0, 60.0, 200.0]) + rng.integers(-9, 10, (20, 10, 3)).astype(np.float32)
+        standing = np.zeros((ch, cw), np.uint8)
+        standing[27:33, 37:43] = 255
+        view = SimpleNamespace(coarse_size=(cw, ch), coarse=coarse)
+        centre = np.array([40.0, 30.0])
+        found = auto_segment._grown_by_colour(view, standing, centre)
+        # The same by every distance.
+        reach = 0.25 * np.hypot(cw, ch)
+        near = auto_segment._components_near(standing, centre, reach)
+        yy, xx = np.mgrid[0:ch, 0:cw]
+        distance = np.hypot(xx - centre[0], yy - centre[1])
+        table = coarse[(distance > reach) & (standing == 0)]
+        seeds = coarse[near > 0]
+        table = table[:: max(1, len(table) // auto_segment._COLOUR_SAMPLES)]
+        seeds = seeds[:: max(1, len(seeds) // auto_segment._COLOUR_SAMPLES)]
+        inside = distance <= reach
+        colours = coarse[inside].astype(np.float64)
+        to_seed = np.sqrt(((colours[:, None] - seeds[None]) ** 2).sum(axis=2)).min(axis=1)
+        to_table = np.sqrt(((colours[:, None] - table[None]) ** 2).sum(axis=2)).min(axis=1)
+        from_shade = auto_segment._unlike_table(coarse[inside][None], np.median(table, axis=0)[None])[0]
+        like = np.zeros((ch, cw), np.uint8)
+        like[inside] = np.where((to_seed < auto_segment._SEED_NEAR)
+                                & (np.minimum(to_table, from_shade) > auto_segment._TABLE_FAR), 255, 0)
+        count, labels = cv2.connectedComponents(cv2.bitwise_or(like, near), connectivity=8)
+        chosen = np.zeros(count, bool)
+        chosen[np.unique(labels[near > 0])] = True
+        chosen[0] = False
+        expected = cv2.bitwise_or(standing, np.where(chosen[labels], 255, 0).astype(np.uint8))
+        assert np.array_equal(found, expected)
+        assert cv2.countNonZero(found) > cv2.countNonZero(standing)
+
+
+def test_any_within_is_the_nearest_samples_distance_against_the_radius():
+    """As scipy's cKDTree's nearest distance compared with the radius, ties at whole grey levels included."""
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        points = (rng.random((int(rng.integers(1, 2000)), 3)) * 255).astype(np.float32)
+        samples = (rng.random((int(rng.integers(0, 300)), 3)) * 120 + 60).astype(np.float32)
+        if trial % 3 == 0:
+            points, samples = np.round(points), np.round(samples)
+        if trial % 7 == 0:
+            samples *= 1000.0  # spread far: the grid's cells widen
+        radius = [8.0, 40.0, 1.0, 3.0][trial % 4]
+        for inclusive in (False, True):
+            found = np.empty(len(points), np.uint8)
+            any_within(points, np.ascontiguousarray(samples), radius, inclusive, found)
+            if len(samples):
+                nearest = cKDTree(samples).query(points)[0]
+                expected = nearest <= radius if inclusive else nearest < radius
+            else:
+                expected = np.zeros(len(points), bool)
+            assert np.array_equal(found.view(bool), expected)
+
+
+def test_any_within_by_hand():
+    samples = np.array([[0.0, 0.0, 0.0], [100.0, 100.0, 100.0]], np.float32)
+    points = np.array([[8.0, 0.0, 0.0], [7.9, 0.0, 0.0], [100.0, 100.0, 108.0], [50.0, 50.0, 50.0]], np.float32)
+    found = np.empty(4, np.uint8)
+    any_within(points, samples, 8.0, False, found)
+    assert found.tolist() == [0, 1, 0, 0]
+    any_within(points, samples, 8.0, True, found)
+    assert found.tolist() == [1, 1, 1, 0]
+    with pytest.raises(ValueError):
+        any_within(points, samples, 0.0, True, found)
