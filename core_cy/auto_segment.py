@@ -993,9 +993,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 # a dark face taken for the shadow beside it) that the others agree on: what the others'
                 # hull adds is looked for there too, by the colour models its own seeds trained, and
                 # nothing beyond the two is.
-                region = cv2.bitwise_or(masks[culprit], hull)
-                masks[culprit] = _graph_cut(view, region, score,
-                                            cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
+                masks[culprit] = _cut_within(view, cv2.bitwise_or(masks[culprit], hull), score)
             continue
         # Only a view seeded by the aim alone is cut again within the others' hull: a view whose evidence
         # seeded it (the plane's parallax, the empty workspace) knows better than a hull that the other
@@ -1044,15 +1042,15 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
         score = scores[i]
         if score is None:
             continue
+        hull = hulls.of(everyone - {i})
         outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
-        bay = cv2.bitwise_and(cv2.bitwise_and(outline, hulls.of(everyone - {i})), cv2.bitwise_not(masks[i]))
+        bay = cv2.bitwise_and(cv2.bitwise_and(outline, hull), cv2.bitwise_not(masks[i]))
         bay = cv2.morphologyEx(bay, cv2.MORPH_OPEN, _SMALL)
         if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
-            region = cv2.bitwise_or(masks[i], bay)
-            found = _graph_cut(views[i], region, score, cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
+            found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hulls.of(everyone - {i}))
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull)
     return looked
 
 
@@ -1077,8 +1075,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     the object hides the table points behind it from the other views, the view has no evidence there,
     and the first look's graph cut has already decided."""
     try:
-        found = _graph_cut(view, cv2.bitwise_or(mask, hull), score,
-                           cv2.bitwise_not(cv2.dilate(cv2.bitwise_or(mask, hull), _SMALL, iterations=2)))
+        found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
         return mask
     added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _SMALL)
@@ -1099,6 +1096,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if median(np.ascontiguousarray(evidence, np.float32)) > 1.0:
             grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _cut_within(view: _View, region: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """The graph cut of ``region`` (0/255) seeded by the view's evidence ``score``, with nothing beyond it
+    but the edge's blur (two small dilations) allowed: what else the view holds is looked for there, by the
+    colour models its own seeds train."""
+    return _graph_cut(view, region, score, cv2.bitwise_not(cv2.dilate(region, _SMALL, iterations=2)))
 
 
 #: A bay of a silhouette (:func:`_bays_looked_into`) is looked into when it holds over this share of its area.
