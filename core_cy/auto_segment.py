@@ -987,7 +987,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             view, score = views[culprit], scores[culprit]
             hull = hulls.of(everyone - {culprit})
             if score is None:
-                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull)
+                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull, _object_colours(views, masks, culprit))
             else:
                 # The view's own evidence missed part of the object (a top of the table's colour and light,
                 # a dark face taken for the shadow beside it) that the others agree on: what the others'
@@ -1008,14 +1008,15 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             index = min(small, key=small.__getitem__)
             done.add(index)
             view = views[index]
-            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {index}))
+            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {index}),
+                                           _object_colours(views, masks, index))
             continue
         index = max(candidates, key=excess.__getitem__)
         done.add(index)
         view, score = views[index], scores[index]
         hull = hulls.of(everyone - {index})
         if score is None:
-            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hull)
+            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hull, _object_colours(views, masks, index))
         else:
             kept = cv2.bitwise_and(masks[index], hull)
             if cv2.countNonZero(kept) < 12:
@@ -1664,7 +1665,33 @@ def _filled_region(binary: np.ndarray, view: _View) -> np.ndarray:
     return filled
 
 
-def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = None) -> np.ndarray:
+def _object_colours(views: Sequence[_View], masks: Sequence[np.ndarray], index: int) -> np.ndarray:
+    """(h, w) bool: the pixels of view ``index`` whose colour the other views' silhouettes hold more often
+    than the rest of their pictures. An object looks much alike from every view; a stretch of table that
+    the hull holds (a hull of views all from one side reaches far down to the table) does not look like
+    what the other views found."""
+    counts = np.ones((2, _COLOUR_BINS ** 3))
+    for j, (other, mask) in enumerate(zip(views, masks)):
+        if j != index:
+            bins = _colour_bins(other.coarse)
+            inside = mask > 0
+            counts[0] += np.bincount(bins[inside], minlength=_COLOUR_BINS ** 3)
+            counts[1] += np.bincount(bins[~inside], minlength=_COLOUR_BINS ** 3)
+    likelihood = counts / counts.sum(axis=1, keepdims=True)
+    return (likelihood[0] > likelihood[1])[_colour_bins(views[index].coarse)]
+
+
+#: Bins per channel of the colour histograms that compare views (:func:`_object_colours`).
+_COLOUR_BINS = 16
+
+
+def _colour_bins(image: np.ndarray) -> np.ndarray:
+    q = np.clip(image, 0, 255).astype(np.int64) * _COLOUR_BINS // 256
+    return (q[..., 0] * _COLOUR_BINS + q[..., 1]) * _COLOUR_BINS + q[..., 2]
+
+
+def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = None,
+                    object_colours: np.ndarray | None = None) -> np.ndarray:
     """Without a plane or a background: the region around the aim is taken for the object, the rest
     of the image for the background, and the graph cut draws the line between them by colour. With
     the other views' ``hull`` (0/255), the object is looked for within it, and outside it is sure
@@ -1677,6 +1704,8 @@ def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = N
         cv2.ellipse(mask, (cx, cy), axes, 0, 0, 360, cv2.GC_PR_FGD, thickness=-1)
     else:
         mask[hull > 0] = cv2.GC_PR_FGD
+        if object_colours is not None:
+            mask[(hull > 0) & ~object_colours] = cv2.GC_PR_BGD
         mask[cv2.dilate(hull, _SMALL, iterations=2) == 0] = cv2.GC_BGD
     cv2.circle(mask, (cx, cy), max(2, cw // 40), cv2.GC_FGD, thickness=-1)
     return _run_grabcut(view, mask, (0, 0, cw, ch))

@@ -3,6 +3,7 @@ ray-traced apart from it (tests/seg_scenes.py): textures, a cast shadow, area-tr
 noise, JPEG."""
 
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -310,3 +311,26 @@ def test_a_white_top_that_two_of_three_views_miss_is_found_within_the_others_hul
     there, faint but over the table's noise across most of the face, keeps it."""
     ious = _printed_scene_ious(tmp_path, 3, "laminate-white-box", backgrounds=False)
     assert min(ious) > 0.9, ious
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def test_a_view_cut_again_without_a_plane_keeps_what_looks_like_the_object_elsewhere():
+    """Real photographs, no support plane: ../shared/data/dtu65/six, a skull on a brown board, every camera
+    on one side. Seeded by the aim alone, two views find only an eye socket; cut again within the other
+    views' hull, which from one side reaches far down onto the board, they took the board too, and the
+    views that had been right were cut again to agree (0.39 worst, 0.73 mean against the masks supplied
+    with the set). Within the hull, only what the other views' silhouettes hold more often than the rest
+    of their pictures seeds the object."""
+    path = DATA / "dtu65" / "six"
+    if not (path / "scan.json").exists():
+        pytest.skip(f"no test data at {path}")
+    bundle = load_bundle(path)
+    names = json.loads((path / "scan.json").read_text())["views"]
+    images = [cv2.imread(str(path / view["image"])) for view in names]
+    masks = [cv2.imread(str(path / view["mask"]), cv2.IMREAD_GRAYSCALE) for view in names]
+    found = auto_silhouettes(images, [view.camera for view in bundle.views])
+    ious = [_iou(silhouette, mask) for (silhouette, _), mask in zip(found, masks)]
+    assert min(ious) > 0.85 and np.mean(ious) > 0.93, ious
+
