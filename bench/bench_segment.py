@@ -13,9 +13,10 @@ segmentation, so the reconstruction uses its default), three ways:
 
 (a) silhouette IoU of each view's silhouette (the one the reconstruction carved from) against the true
     silhouette (the renderer's area-true coverage at one half), per table kind, mean and worst;
-(b) volumetric IoU against the true object (bench_core.py's Monte Carlo judge, the simulator's own inside
-    test) per table kind and per object kind, mean and worst, beside the ceiling, and whether the best
-    grasp holds the true object (workers/sim/judge.py, written apart from the planner);
+(b) volumetric IoU of the model (its union of parts, as `robocell reconstruct` gives it) against the true
+    object (workers/sim/judge.py's Monte Carlo union_iou, written apart from the fit) per table kind and
+    per object kind, mean and worst, beside the ceiling, and whether the best grasp, planned on the union
+    as the cell and `robocell reconstruct --grasps` plan it, holds the true object (the same judge);
 (c) speed: `robocell reconstruct` on the 3-view 640x480 JPEG bundles, from outside, one core
     (taskset -c 0), as a ratio to OpenCV's decode of the same three JPEGs on the same core, measured
     in the same run, over the bundles that reconstruct; the classic red HSV bundles of the standard set
@@ -48,12 +49,12 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_core import object_iou  # noqa: E402
+from bench_core import model_parts  # noqa: E402
 
 from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
 from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
 from robocell.wire.bundle import load_bundle  # noqa: E402
-from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth  # noqa: E402
+from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth, union_iou  # noqa: E402
 from robocell.workers.sim.scans import printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
@@ -82,7 +83,7 @@ def write_bundles(specs, out: Path) -> list[tuple]:
 
 
 def best_grasp_holds(result, obj, plane) -> bool:
-    grasps = plan_grasps(result.superquadric, plane, residual=result.residual,
+    grasps = plan_grasps(result.parts, plane, residual=result.residual,
                          silhouette_iou=result.silhouette_iou, points=result.points)
     if not grasps:
         return False
@@ -109,7 +110,7 @@ def score(spec, plain: Path, with_bg: Path) -> dict:
         except Exception as exc:  # a failed reconstruction scores 0; its message is shown
             entry["error"] = f"{type(exc).__name__}: {exc}"
         else:
-            entry["iou"] = object_iou(result.superquadric, obj)
+            entry["iou"] = union_iou(model_parts(result), parts_from_truth(obj.truth()))
             entry["views"] = [float((s > 0)[t].sum() / max(1, ((s > 0) | t).sum()))
                               for s, t in zip(result.silhouettes, truths)]
             entry["holds"] = best_grasp_holds(result, obj, bundle.support_plane)

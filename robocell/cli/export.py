@@ -142,19 +142,15 @@ def model_from_bundle(directory: str | Path, gripper_path: str | None = None) ->
     BundleError, CoreError
         A bad bundle or gripper file (the message names what is wrong).
     """
-    from robocell.core_cy.grasp import plan_grasps
-    from robocell.core_cy.gripper import grasps_to_json
     from robocell.core_cy.reconstruct import reconstruct
     from robocell.wire.bundle import load_bundle
 
-    from .reconstruct import _gripper
+    from .reconstruct import _gripper, _with_grasps
 
     bundle = load_bundle(directory)
     gripper = _gripper(gripper_path)
     result = reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
-    grasps = plan_grasps(result.superquadric, bundle.support_plane, gripper, residual=result.residual,
-                         silhouette_iou=result.silhouette_iou, points=result.points)
-    line = {**result.to_dict(), "grasps": grasps_to_json(grasps)}
+    line = _with_grasps(result.to_dict(), result, bundle, gripper)
     model = model_from_result(Path(directory).resolve().name, line)
     views = []
     for index, view in enumerate(bundle.views):

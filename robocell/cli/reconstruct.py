@@ -65,14 +65,16 @@ def _gripper(path: str | None):
         raise CoreError(f"cannot read the gripper file: {exc.strerror}") from exc
 
 
-def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int) -> dict:
-    """Add DESIGN.md §3's ``grasps`` to a result line, and their time to ``timings_ms``."""
+def _with_grasps(line: dict, result, bundle, gripper, max_grasps: int | None = None) -> dict:
+    """Add DESIGN.md §3's ``grasps`` to a result line, and their time to ``timings_ms``: planned on the
+    model's union of parts (``max_grasps`` None: the planner's own default)."""
     from robocell.core_cy.grasp import plan_grasps
     from robocell.core_cy.gripper import grasps_to_json
 
     start = time.perf_counter()
+    limit = {} if max_grasps is None else {"max_grasps": max_grasps}
     grasps = plan_grasps(result.parts, bundle.support_plane, gripper, residual=result.residual,
-                         silhouette_iou=result.silhouette_iou, points=result.points, max_grasps=max_grasps)
+                         silhouette_iou=result.silhouette_iou, points=result.points, **limit)
     ms = (time.perf_counter() - start) * 1e3
     timings = line["timings_ms"]
     timings["grasp"] = round(ms, 3)
@@ -136,7 +138,7 @@ def _reconstruct(args: argparse.Namespace) -> int:
             if args.masks_out is not None:
                 _write_masks(args.masks_out, scan, result.silhouettes)
             if gripper is not None:
-                line = _with_grasps(line, result, bundle, gripper, args.max_grasps or 10)
+                line = _with_grasps(line, result, bundle, gripper, args.max_grasps)
             if args.next_view:
                 line = _with_next_view(line, result, bundle)
         except (BundleError, CoreError, OSError) as exc:
