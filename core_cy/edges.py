@@ -36,6 +36,8 @@ _BORDER_PX = 2
 # A mask's edge is found on the mask blurred by this much (px), within its box grown by the margin.
 _MASK_BLUR_PX = 1.2
 _MASK_MARGIN = 8
+# An image crossing this far (px) from a silhouette's edge placed on the image's step is another step.
+_ON_EDGE_PX = 0.5
 
 
 def silhouette_outline(silhouette: np.ndarray) -> np.ndarray:
@@ -53,7 +55,7 @@ def silhouette_outline(silhouette: np.ndarray) -> np.ndarray:
 
 
 def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray | None = None, *,
-                 count: int = 64, camera: Camera | None = None) -> np.ndarray:
+                 count: int = 64, camera: Camera | None = None, on_edge: bool = False) -> np.ndarray:
     """Up to ``count`` points on the object's edge, spread evenly along its outline.
 
     Parameters
@@ -70,6 +72,13 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
     camera : Camera, optional
         With lens distortion, the samples are moved to where the ideal
         pinhole camera would see them.
+    on_edge : bool
+        The silhouette's edge already lies on the image's own colour step,
+        placed with more than one profile knows (``auto`` places it so, with
+        the table's colour and the shadow beside the object known): a crossing
+        in the image over :data:`_ON_EDGE_PX` from the silhouette's own
+        half-way line is another step (a print's, a shadow's, a seam's), and
+        the silhouette's edge is kept there.
 
     Returns
     -------
@@ -108,18 +117,24 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
     found = np.zeros(len(points), np.uint8)
     if image is not None:
         edge_crossings(image, points, normals, _REACH_PX, _STEP_PX, _MIN_CONTRAST, shift, found)
-    if not found.all():
+    # Where the image gives no crossing, and everywhere when the silhouette's own edge is to judge it.
+    missing = (found == 0) | on_edge
+    if missing.any():
         # A mask knows its edge only to the pixel; blurred along the edge, a slanted staircase of
         # pixels averages to the line it steps along.
-        missing = found == 0
         x, y, w, h = cv2.boundingRect(outline)
         x0, y0 = max(0, x - _MASK_MARGIN), max(0, y - _MASK_MARGIN)
         x1, y1 = min(width, x + w + _MASK_MARGIN), min(height, y + h + _MASK_MARGIN)
         smooth = cv2.GaussianBlur(silhouette[y0:y1, x0:x1], (0, 0), _MASK_BLUR_PX, borderType=cv2.BORDER_REPLICATE)
-        rest, rest_found = np.zeros(missing.sum()), np.zeros(missing.sum(), np.uint8)
+        own, own_found = np.zeros(missing.sum()), np.zeros(missing.sum(), np.uint8)
         edge_crossings(smooth[:, :, None], np.ascontiguousarray(points[missing] - (x0, y0)),
-                       np.ascontiguousarray(normals[missing]), _REACH_PX, _STEP_PX, 1.0, rest, rest_found)
-        shift[missing] = rest
+                       np.ascontiguousarray(normals[missing]), _REACH_PX, _STEP_PX, 1.0, own, own_found)
+        if on_edge:
+            # The image's crossing is the more precise where it agrees with the silhouette's edge.
+            elsewhere = (found == 0) | (np.abs(shift - own) > _ON_EDGE_PX)
+            shift[elsewhere] = own[elsewhere]
+        else:
+            shift[missing] = own
     points += shift[:, None] * normals
     if camera is not None and camera.dist is not None and len(points):
         points = np.asarray(cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K),

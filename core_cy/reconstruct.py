@@ -269,12 +269,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             boxes.append(cv2.boundingRect(silhouettes[-1]))
         lap("segment")
         if options.silhouette_fit:
-            # auto's silhouette already has its edge on the image's own colour step, found along the whole
-            # outline at once (core_cy.auto_segment): looked for again sample by sample, the nearest strong
-            # step may be another (a shadow's, a print's, a seam's).
-            placed = is_mask or segmentation.method == "auto"
-            edges.append(edge_samples(outline, silhouette, None if placed else data, count=options.edge_samples,
-                                      camera=view.camera))
+            edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
+                                      camera=view.camera, on_edge=segmentation.method == "auto"))
             lap("edges")
     cameras = [view.camera for view in views]
     centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)

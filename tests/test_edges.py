@@ -57,6 +57,30 @@ def test_samples_sit_on_the_true_edge_to_a_tenth_of_a_pixel(angle):
     assert np.abs(distance(outline)).max() > 0.4
 
 
+def test_an_edge_placed_on_the_image_s_step_keeps_it_where_the_image_shows_another():
+    """A silhouette whose edge was placed on the image's own step (``auto`` places it so) is refined by
+    the image where the two agree, to the image's precision, and kept where the image's nearest
+    crossing is another step (a print, a shadow): here the square's left side is printed with a white band
+    from 2 px inside its edge, and the crossing between the table's colour and the band's is the band's."""
+    image, corners, distance = _square_scene(0.0)
+    silhouette, outline = segment_with_outline(image)
+    left = int(round(corners[:, 0].min()))
+    printed = image.copy()
+    printed[70:170, left + 2:left + 12] = 255  # a white band, away from the corners
+    samples = {on_edge: edge_samples(outline, silhouette, printed, count=64, on_edge=on_edge)
+               for on_edge in (False, True)}
+    band = (samples[True][:, 0] < left + 1) & (samples[True][:, 1] > 75) & (samples[True][:, 1] < 165)
+    assert band.sum() >= 4
+    assert np.abs(distance(samples[False][band])).min() > 1.0  # the image alone takes the band's step
+    assert np.abs(distance(samples[True][band])).max() < 0.55  # the silhouette's own edge, to its pixel
+    # On the other sides the image's crossing agrees, and is kept: as precise as without the silhouette's say.
+    others = np.linalg.norm(samples[True][:, None] - corners[None], axis=2).min(axis=1) > 3.0
+    others &= samples[True][:, 0] > left + 10
+    assert others.sum() > 30
+    assert np.array_equal(samples[True][others], samples[False][others])
+    assert np.abs(distance(samples[True][others])).max() < 0.1
+
+
 def test_a_mask_is_read_half_way_between_its_pixels():
     mask = np.zeros((60, 80), np.uint8)
     mask[10:40, 20:61] = 255
