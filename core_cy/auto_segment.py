@@ -36,6 +36,7 @@ from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
+from scipy.special import erfinv
 
 from ._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps, project_into_mask,
                                windowed_correlation)
@@ -1310,8 +1311,8 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     table = _wrapped_median(np.median(ends, axis=1), _TABLE_NORMALS)
     spread = _wrapped_median(np.median(np.linalg.norm(ends - table[:, None, :], axis=2), axis=1), _TABLE_NORMALS)
     unlike = np.maximum(_unlike_table(colours, table) - (2 * spread + _TABLE_TOLERANCE)[:, None], 0.0) * _EDGE_STEP
-    # What lies beyond a candidate (from a pixel outside it, past the edge's blur) and is not table.
-    gap = int(round(1.0 / _EDGE_STEP))
+    # What lies beyond a candidate (from one blur's width outside it, past the edge's blur) and is not table.
+    gap = max(1, int(round(_edge_blur(colours[:, :depth, :].mean(axis=1), table, step[:, :candidates]) / _EDGE_STEP)))
     beyond = np.zeros_like(unlike)
     beyond[:, :len(offsets) - gap - 1] = np.cumsum(unlike[:, ::-1], axis=1)[:, ::-1][:, gap + 1:]
     cost = np.ascontiguousarray((_OUTSIDE_WEIGHT * beyond - step)[:, :candidates], dtype=np.float64)
@@ -1327,6 +1328,29 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     fraction = np.where(interior, 0.5 * (before - after) / np.where(interior, curvature, -1.0), 0.0)
     # Each offset is found on one noisy profile, while the edge runs on smoothly from one to the next.
     return _smoothed_round(offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP, _EDGE_SMOOTHING)
+
+
+def _edge_blur(inside: np.ndarray, table: np.ndarray, steps: np.ndarray) -> float:
+    """How far (px, a Gaussian's standard deviation) the image blurs the object's edge: from each normal's
+    contrast between the object's colour at its inner end and the table's (``inside``, ``table``: (M, 3))
+    and its steepest step over one pixel (``steps``: (M, K)), a step of contrast C blurred by sigma being
+    C erf(1 / (2 sqrt(2) sigma)) over a pixel at its steepest; the median over the normals of contrast
+    :data:`_BLUR_CONTRAST` or more, one pixel where there are fewer than :data:`_BLUR_NORMALS`.
+
+    A softer lens, or a larger image of the same scene, spreads the object's colour further beyond its
+    edge; counted as colour unlike the table beyond a candidate, it pushed the edge outward."""
+    contrast = np.linalg.norm(inside - table, axis=1)
+    sure = contrast >= _BLUR_CONTRAST
+    if int(sure.sum()) < _BLUR_NORMALS:
+        return 1.0
+    share = np.clip(steps[sure].max(axis=1) / contrast[sure], 1e-3, 1.0 - 1e-6)
+    return float(np.median(0.5 / (np.sqrt(2.0) * erfinv(share))))
+
+
+#: Normals whose object and table colours differ by less (grey levels) say little of the blur.
+_BLUR_CONTRAST = 40.0
+#: Fewer normals of that contrast than this, and the blur is taken to be a pixel's.
+_BLUR_NORMALS = 10
 
 
 def _smoothed_round(values: np.ndarray, sigma: float) -> np.ndarray:

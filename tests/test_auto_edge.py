@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from robocell.core_cy import auto_segment
+from robocell.core_cy.auto_segment import auto_silhouettes
 from robocell.core_cy._edges_cy import smoothest_path
 from robocell.core_cy.camera import Camera
+from tests.seg_scenes import Scene, render_scan
 
 _SAMPLES = 8
 _SIZE = (640, 480)
@@ -143,3 +146,38 @@ def test_smoothest_path_follows_a_step_it_can_afford():
     smoothest_path(cost, 0.5, 1, path)
     assert path[5:18].tolist() == [1] * 13 and path[25:38].tolist() == [4] * 13
     assert np.all(np.abs(np.diff(path)) <= 1)
+
+
+@pytest.mark.parametrize("sigma", [0.7, 1.5, 3.0])
+def test_the_edge_s_blur_is_read_from_its_profiles(sigma):
+    """Profiles across an edge between two colours, blurred by a Gaussian of ``sigma`` px and sampled as
+    the refinement samples them (half-pixel candidates, each step taken over one pixel): the blur read
+    from them is ``sigma``."""
+    from scipy.special import ndtr
+
+    rng = np.random.default_rng(0)
+    count = 40
+    inside = rng.uniform(120, 250, (count, 3))
+    table = rng.uniform(0, 60, (count, 3))
+    offsets = np.arange(-6.0, 6.0 + 1e-9, 0.5) + rng.uniform(-0.25, 0.25, (count, 1))  # the edge anywhere
+
+    def profile(x):  # the object's colour inside (x < 0), the table's outside
+        share = 1.0 - ndtr(x / sigma)
+        return share[..., None] * inside[:, None, :] + (1.0 - share[..., None]) * table[:, None, :]
+
+    steps = np.linalg.norm(profile(offsets + 0.5) - profile(offsets - 0.5), axis=2)
+    assert auto_segment._edge_blur(inside, table, steps) == pytest.approx(sigma, rel=0.05)
+
+
+def test_a_soft_lens_does_not_swell_the_silhouette():
+    """A white box on a dark mat through a soft lens (the images blurred by a Gaussian of 2 px): the object's
+    colour reaches further beyond its edge, and counted as unlike the table from a fixed pixel beyond a
+    candidate edge it pushed every edge outward (mean IoU 0.953, the area 4-6 % over the truth). The
+    colour is counted from the edge's own blur, read from the image."""
+    scene = Scene(object_bgr=(230, 230, 230), table_bgr=(30, 32, 35), light=(-0.4, 0.5, 0.8))
+    images, truths, cams = render_scan(scene, seed=1)
+    cameras = [Camera(K=K, T_world_cam=T, view=index) for index, (K, T) in enumerate(cams)]
+    soft = [cv2.GaussianBlur(image, (0, 0), 2.0) for image in images]
+    found = auto_silhouettes(soft, cameras, support_plane=[0.0, 0.0, 1.0, 0.0])
+    ious = [float(((s > 0) & (t > 0)).sum() / ((s > 0) | (t > 0)).sum()) for (s, _), t in zip(found, truths)]
+    assert np.mean(ious) > 0.96, ious
