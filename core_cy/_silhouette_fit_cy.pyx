@@ -591,6 +591,25 @@ cdef inline double _support_kept(const double* a, const _Exponents* q, const dou
     return s.h
 
 
+cdef inline void _supports_kept3(const double* a, const _Exponents* q, double v[3][3], _Support* s) noexcept nogil:
+    """:func:`_support_kept` along three directions, each support the same arithmetic, but step by
+    step for all three together: the three chains of logarithms and exponentials do not wait on
+    each other, so the processor works on them at once."""
+    cdef double T
+    cdef int j, k
+    for j in range(3):
+        for k in range(3):
+            s[j].v[k] = v[j][k]
+            T = fabs(a[k] * v[j][k])
+            s[j].lT[k] = log(T if T > _TINY else _TINY)
+    for j in range(3):
+        s[j].lS = _log_sum_ratio(q.q2 * s[j].lT[0], q.q2 * s[j].lT[1], &s[j].rS, &s[j].xS)
+    for j in range(3):
+        s[j].lG = _log_sum_ratio(q.q12 * s[j].lS, q.q1 * s[j].lT[2], &s[j].rG, &s[j].xG)
+    for j in range(3):
+        s[j].h = exp(s[j].lG / q.q1)
+
+
 cdef inline void _support_derivatives(const double* a, const double* e, const _Exponents* q, const _Support* s,
                                       double* dh_da, double* dh_de, double* dh_dv) noexcept nogil:
     """dh/da, dh/de and dh/dv of :func:`_support_kept`'s support (as ``_superquadric_cy._support``
@@ -614,7 +633,7 @@ cdef inline void _support_derivatives(const double* a, const double* e, const _E
 
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
                                 const _Exponents* e, const double* t, double R[3][3], const double* cosines,
-                                const double* sines, double tilt, double bound, double* best_m,
+                                const double* sines, double tilt, double bound, bint eager, double* best_m,
                                 _Support* best_support) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
     ray by -tilt, 0, tilt and the parabola's vertex (``e``: the part's :func:`_exponents`); best_m
@@ -627,6 +646,19 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
     cdef _Support support
     cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
     cdef int j, k, step
+    cdef double ms[3][3]
+    cdef double vs[3][3]
+    cdef double offsets[3]
+    cdef _Support supports[3]
+    eager = eager and tilt > 0
+    if eager:
+        for j in range(3):
+            for k in range(3):
+                ms[j][k] = cosines[j] * planes[p, i, k] + sines[j] * planes[p, i, 5 + k]
+            offsets[j] = cosines[j] * planes[p, i, 3] + sines[j] * planes[p, i, 8]
+            for k in range(3):
+                vs[j][k] = R[0][k] * ms[j][0] + R[1][k] * ms[j][1] + R[2][k] * ms[j][2]
+        _supports_kept3(a, e, vs, supports)
     for step in range(4):
         j = 1 if step == 0 else (0 if step == 1 else step)  # untilted, -tilt, +tilt, the vertex
         if j < 3:
@@ -641,12 +673,19 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
                 break
             cs = cos(psi)
             sn = sin(psi)
-        for k in range(3):
-            m[k] = cs * planes[p, i, k] + sn * planes[p, i, 5 + k]
-        offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
-        for k in range(3):
-            v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
-        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
+        if eager and j < 3:
+            for k in range(3):
+                m[k] = ms[j][k]
+            offset = offsets[j]
+            support = supports[j]
+            reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + support.h - offset
+        else:
+            for k in range(3):
+                m[k] = cs * planes[p, i, k] + sn * planes[p, i, 5 + k]
+            offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
+            for k in range(3):
+                v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+            reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
         if j < 3:
             reaches[j] = reach
         if reach < best:
@@ -774,7 +813,8 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                             continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
                     reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &exponents[p], t[p], R[p],
-                                                          cosines, sines, tilt, best / planes[p, i, 4], m, &found)
+                                                          cosines, sines, tilt, best / planes[p, i, 4], q == 0, m,
+                                                          &found)
                     # Of parts that reach alike, the first answers.
                     if reach > best or (reach == best and p < chosen):
                         best = reach
