@@ -46,13 +46,14 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
     :func:`normal_equations`.
     """
     cdef double[::1] trig = np.empty(4 * omega.shape[0])
-    cdef double[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2)
+    cdef unsigned char[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2, np.uint8)
+    cdef Py_ssize_t[::1] rows = np.empty(eta.shape[0] * omega.shape[0] + 2, np.intp)
     cdef double[:, ::1] angles = outline_angles(eta, omega)
     cdef bint in_front
     _check_outline(eta.shape[0], angles, projections, centres, grid, uv, counts)
     with nogil:
         in_front = _outline_points(x, R0, t0, scale, eta.shape[0], angles, projections, centres, grid, uv, counts,
-                                   trig, facing)
+                                   trig, facing, rows)
     return in_front
 
 
@@ -93,9 +94,10 @@ cdef _check_outline(Py_ssize_t n_eta, const double[:, ::1] angles, const double[
 cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
                           Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
                           const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv,
-                          Py_ssize_t[::1] counts, double[::1] trig, double[::1] facing) noexcept nogil:
+                          Py_ssize_t[::1] counts, double[::1] trig, unsigned char[::1] facing,
+                          Py_ssize_t[::1] rows) noexcept nogil:
     """As :func:`outline_points`, the angles as :func:`outline_angles` (``n_eta`` of them eta's);
-    ``trig`` (4 len(omega)) and ``facing`` (len(grid)) are scratch."""
+    ``trig`` (4 len(omega)), ``facing`` and ``rows`` (len(grid) each) are scratch."""
     cdef Py_ssize_t n_omega = angles.shape[0] - n_eta, n_grid = n_eta * n_omega
     cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
     cdef double R[3][3]
@@ -107,7 +109,8 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
     cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz
     cdef double[::1] co = trig[:n_omega], so = trig[n_omega:2 * n_omega]
     cdef double[::1] nco = trig[2 * n_omega:3 * n_omega], nso = trig[3 * n_omega:]
-    cdef bint in_front = True, candidate, front
+    cdef bint in_front = True
+    cdef Py_ssize_t listed
     _pose(x, R0, t0, scale, R, dR, a, t)
     # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
     for j in range(n_omega):
@@ -142,34 +145,25 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
                     + R[2][k] * (centres[v, 2] - t[2]))
         for row in range(n_grid + 2):
             facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
-                           + grid[row, 5] * (grid[row, 2] - c[2]))
+                           + grid[row, 5] * (grid[row, 2] - c[2])) > 0
+        # The candidates, row by row of the grid (i, j): its neighbours along omega wrapping round, along
+        # eta ending at the poles; then the poles, always candidates. Listed first without a branch (a
+        # row's index is written, and kept where it differs from a neighbour), then projected.
         count = 0
-        # Row by row of the grid (i, j), its neighbours along omega wrapping round, along eta ending
-        # at the poles; then the poles, always candidates.
-        i = 0
-        j = 0
-        for row in range(n_grid + 2):
-            if row >= n_grid:
-                candidate = True
-            else:
-                front = facing[row] > 0
-                other = row + 1 if j + 1 < n_omega else row + 1 - n_omega
-                candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row - 1 if j > 0 else row + n_omega - 1
-                    candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row + n_omega if i + 1 < n_eta else n_grid + 1
-                    candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row - n_omega if i > 0 else n_grid
-                    candidate = front != (facing[other] > 0)
-                j += 1
-                if j == n_omega:
-                    j = 0
-                    i += 1
-            if not candidate:
-                continue
+        for i in range(n_eta):
+            for j in range(n_omega):
+                row = i * n_omega + j
+                rows[count] = row
+                count += ((facing[row] ^ facing[row + 1 if j + 1 < n_omega else row + 1 - n_omega])
+                          | (facing[row] ^ facing[row - 1 if j > 0 else row + n_omega - 1])
+                          | (facing[row] ^ facing[row + n_omega if i + 1 < n_eta else n_grid + 1])
+                          | (facing[row] ^ facing[row - n_omega if i > 0 else n_grid]))
+        rows[count] = n_grid
+        rows[count + 1] = n_grid + 1
+        listed = count + 2
+        count = 0
+        for other in range(listed):
+            row = rows[other]
             for k in range(3):
                 w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
             hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
@@ -390,7 +384,8 @@ def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not Non
     """
     cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], n_parts = R0.shape[0], v, h, p
     cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
-    cdef double[::1] facing = np.empty(n_rows)
+    cdef unsigned char[::1] facing = np.empty(n_rows, np.uint8)
+    cdef Py_ssize_t[::1] rows = np.empty(n_rows, np.intp)
     cdef double[:, ::1] edges = np.empty((n_rows, 8))
     cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
     cdef bint ok = True
@@ -411,7 +406,7 @@ def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not Non
     with nogil:
         for p in range(n_parts):
             ok = _outline_points(x[11 * p: 11 * p + 11], R0[p], t0[p], scale[p], n_eta, angles, projections,
-                                 centres, grid, uv, counts, trig, facing)
+                                 centres, grid, uv, counts, trig, facing, rows)
             for v in range(n_views):
                 if not ok:
                     break
