@@ -46,13 +46,14 @@ def outline_points(const double[::1] x not None, const double[:, ::1] R0 not Non
     :func:`normal_equations`.
     """
     cdef double[::1] trig = np.empty(4 * omega.shape[0])
-    cdef double[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2)
+    cdef unsigned char[::1] facing = np.empty(eta.shape[0] * omega.shape[0] + 2, np.uint8)
+    cdef Py_ssize_t[::1] rows = np.empty(eta.shape[0] * omega.shape[0] + 2, np.intp)
     cdef double[:, ::1] angles = outline_angles(eta, omega)
     cdef bint in_front
     _check_outline(eta.shape[0], angles, projections, centres, grid, uv, counts)
     with nogil:
         in_front = _outline_points(x, R0, t0, scale, eta.shape[0], angles, projections, centres, grid, uv, counts,
-                                   trig, facing)
+                                   trig, facing, rows)
     return in_front
 
 
@@ -93,9 +94,10 @@ cdef _check_outline(Py_ssize_t n_eta, const double[:, ::1] angles, const double[
 cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const double[::1] t0, double scale,
                           Py_ssize_t n_eta, const double[:, ::1] angles, const double[:, :, ::1] projections,
                           const double[:, ::1] centres, double[:, ::1] grid, float[:, :, ::1] uv,
-                          Py_ssize_t[::1] counts, double[::1] trig, double[::1] facing) noexcept nogil:
+                          Py_ssize_t[::1] counts, double[::1] trig, unsigned char[::1] facing,
+                          Py_ssize_t[::1] rows) noexcept nogil:
     """As :func:`outline_points`, the angles as :func:`outline_angles` (``n_eta`` of them eta's);
-    ``trig`` (4 len(omega)) and ``facing`` (len(grid)) are scratch."""
+    ``trig`` (4 len(omega)), ``facing`` and ``rows`` (len(grid) each) are scratch."""
     cdef Py_ssize_t n_omega = angles.shape[0] - n_eta, n_grid = n_eta * n_omega
     cdef Py_ssize_t n_views = projections.shape[0], i, j, k, v, row, count, other
     cdef double R[3][3]
@@ -107,7 +109,8 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
     cdef double e1 = x[3], e2 = x[4], ce, se, ne, nz, hx, hy, hz
     cdef double[::1] co = trig[:n_omega], so = trig[n_omega:2 * n_omega]
     cdef double[::1] nco = trig[2 * n_omega:3 * n_omega], nso = trig[3 * n_omega:]
-    cdef bint in_front = True, candidate, front
+    cdef bint in_front = True
+    cdef Py_ssize_t listed
     _pose(x, R0, t0, scale, R, dR, a, t)
     # Points (a1 C^e1(eta) C^e2(omega), ...) and normals (C^(2-e1)(eta) C^(2-e2)(omega) / a1, ...).
     for j in range(n_omega):
@@ -142,34 +145,25 @@ cdef bint _outline_points(const double[::1] x, const double[:, ::1] R0, const do
                     + R[2][k] * (centres[v, 2] - t[2]))
         for row in range(n_grid + 2):
             facing[row] = (grid[row, 3] * (grid[row, 0] - c[0]) + grid[row, 4] * (grid[row, 1] - c[1])
-                           + grid[row, 5] * (grid[row, 2] - c[2]))
+                           + grid[row, 5] * (grid[row, 2] - c[2])) > 0
+        # The candidates, row by row of the grid (i, j): its neighbours along omega wrapping round, along
+        # eta ending at the poles; then the poles, always candidates. Listed first without a branch (a
+        # row's index is written, and kept where it differs from a neighbour), then projected.
         count = 0
-        # Row by row of the grid (i, j), its neighbours along omega wrapping round, along eta ending
-        # at the poles; then the poles, always candidates.
-        i = 0
-        j = 0
-        for row in range(n_grid + 2):
-            if row >= n_grid:
-                candidate = True
-            else:
-                front = facing[row] > 0
-                other = row + 1 if j + 1 < n_omega else row + 1 - n_omega
-                candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row - 1 if j > 0 else row + n_omega - 1
-                    candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row + n_omega if i + 1 < n_eta else n_grid + 1
-                    candidate = front != (facing[other] > 0)
-                if not candidate:
-                    other = row - n_omega if i > 0 else n_grid
-                    candidate = front != (facing[other] > 0)
-                j += 1
-                if j == n_omega:
-                    j = 0
-                    i += 1
-            if not candidate:
-                continue
+        for i in range(n_eta):
+            for j in range(n_omega):
+                row = i * n_omega + j
+                rows[count] = row
+                count += ((facing[row] ^ facing[row + 1 if j + 1 < n_omega else row + 1 - n_omega])
+                          | (facing[row] ^ facing[row - 1 if j > 0 else row + n_omega - 1])
+                          | (facing[row] ^ facing[row + n_omega if i + 1 < n_eta else n_grid + 1])
+                          | (facing[row] ^ facing[row - n_omega if i > 0 else n_grid]))
+        rows[count] = n_grid
+        rows[count + 1] = n_grid + 1
+        listed = count + 2
+        count = 0
+        for other in range(listed):
+            row = rows[other]
             for k in range(3):
                 w[k] = t[k] + R[k][0] * grid[row, 0] + R[k][1] * grid[row, 1] + R[k][2] * grid[row, 2]
             hz = projections[v, 2, 0] * w[0] + projections[v, 2, 1] * w[1] + projections[v, 2, 2] * w[2] + projections[v, 2, 3]
@@ -390,7 +384,8 @@ def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not Non
     """
     cdef Py_ssize_t n_views = projections.shape[0], n_rows = grid.shape[0], n_parts = R0.shape[0], v, h, p
     cdef double[::1] trig = np.empty(4 * max(angles.shape[0] - n_eta, 0))
-    cdef double[::1] facing = np.empty(n_rows)
+    cdef unsigned char[::1] facing = np.empty(n_rows, np.uint8)
+    cdef Py_ssize_t[::1] rows = np.empty(n_rows, np.intp)
     cdef double[:, ::1] edges = np.empty((n_rows, 8))
     cdef float[:, ::1] hull = np.empty((2 * n_rows, 2), np.float32)
     cdef bint ok = True
@@ -411,7 +406,7 @@ def part_planes(const double[::1] x not None, const double[:, :, ::1] R0 not Non
     with nogil:
         for p in range(n_parts):
             ok = _outline_points(x[11 * p: 11 * p + 11], R0[p], t0[p], scale[p], n_eta, angles, projections,
-                                 centres, grid, uv, counts, trig, facing)
+                                 centres, grid, uv, counts, trig, facing, rows)
             for v in range(n_views):
                 if not ok:
                     break
@@ -591,6 +586,25 @@ cdef inline double _support_kept(const double* a, const _Exponents* q, const dou
     return s.h
 
 
+cdef inline void _supports_kept3(const double* a, const _Exponents* q, double v[3][3], _Support* s) noexcept nogil:
+    """:func:`_support_kept` along three directions, each support the same arithmetic, but step by
+    step for all three together: the three chains of logarithms and exponentials do not wait on
+    each other, so the processor works on them at once."""
+    cdef double T
+    cdef int j, k
+    for j in range(3):
+        for k in range(3):
+            s[j].v[k] = v[j][k]
+            T = fabs(a[k] * v[j][k])
+            s[j].lT[k] = log(T if T > _TINY else _TINY)
+    for j in range(3):
+        s[j].lS = _log_sum_ratio(q.q2 * s[j].lT[0], q.q2 * s[j].lT[1], &s[j].rS, &s[j].xS)
+    for j in range(3):
+        s[j].lG = _log_sum_ratio(q.q12 * s[j].lS, q.q1 * s[j].lT[2], &s[j].rG, &s[j].xG)
+    for j in range(3):
+        s[j].h = exp(s[j].lG / q.q1)
+
+
 cdef inline void _support_derivatives(const double* a, const double* e, const _Exponents* q, const _Support* s,
                                       double* dh_da, double* dh_de, double* dh_dv) noexcept nogil:
     """dh/da, dh/de and dh/dv of :func:`_support_kept`'s support (as ``_superquadric_cy._support``
@@ -614,7 +628,7 @@ cdef inline void _support_derivatives(const double* a, const double* e, const _E
 
 cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py_ssize_t i, const double* a,
                                 const _Exponents* e, const double* t, double R[3][3], const double* cosines,
-                                const double* sines, double tilt, double bound, double* best_m,
+                                const double* sines, double tilt, double bound, bint eager, double* best_m,
                                 _Support* best_support) noexcept nogil:
     """Part p's least reach (world units) beyond the planes through sample i's ray, turned about the
     ray by -tilt, 0, tilt and the parabola's vertex (``e``: the part's :func:`_exponents`); best_m
@@ -627,6 +641,19 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
     cdef _Support support
     cdef double best = 1e300, cs, sn, psi, curvature, offset, reach
     cdef int j, k, step
+    cdef double ms[3][3]
+    cdef double vs[3][3]
+    cdef double offsets[3]
+    cdef _Support supports[3]
+    eager = eager and tilt > 0
+    if eager:
+        for j in range(3):
+            for k in range(3):
+                ms[j][k] = cosines[j] * planes[p, i, k] + sines[j] * planes[p, i, 5 + k]
+            offsets[j] = cosines[j] * planes[p, i, 3] + sines[j] * planes[p, i, 8]
+            for k in range(3):
+                vs[j][k] = R[0][k] * ms[j][0] + R[1][k] * ms[j][1] + R[2][k] * ms[j][2]
+        _supports_kept3(a, e, vs, supports)
     for step in range(4):
         j = 1 if step == 0 else (0 if step == 1 else step)  # untilted, -tilt, +tilt, the vertex
         if j < 3:
@@ -641,12 +668,19 @@ cdef inline double _least_reach(const double[:, :, ::1] planes, Py_ssize_t p, Py
                 break
             cs = cos(psi)
             sn = sin(psi)
-        for k in range(3):
-            m[k] = cs * planes[p, i, k] + sn * planes[p, i, 5 + k]
-        offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
-        for k in range(3):
-            v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
-        reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
+        if eager and j < 3:
+            for k in range(3):
+                m[k] = ms[j][k]
+            offset = offsets[j]
+            support = supports[j]
+            reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + support.h - offset
+        else:
+            for k in range(3):
+                m[k] = cs * planes[p, i, k] + sn * planes[p, i, 5 + k]
+            offset = cs * planes[p, i, 3] + sn * planes[p, i, 8]
+            for k in range(3):
+                v[k] = R[0][k] * m[0] + R[1][k] * m[1] + R[2][k] * m[2]
+            reach = m[0] * t[0] + m[1] * t[1] + m[2] * t[2] + _support_kept(a, e, v, &support) - offset
         if j < 3:
             reaches[j] = reach
         if reach < best:
@@ -774,7 +808,8 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                             continue
                     # A part whose reach (in pixels) falls below the best so far cannot answer for the sample.
                     reach = planes[p, i, 4] * _least_reach(planes, p, i, a[p], &exponents[p], t[p], R[p],
-                                                          cosines, sines, tilt, best / planes[p, i, 4], m, &found)
+                                                          cosines, sines, tilt, best / planes[p, i, 4], q == 0, m,
+                                                          &found)
                     # Of parts that reach alike, the first answers.
                     if reach > best or (reach == best and p < chosen):
                         best = reach
