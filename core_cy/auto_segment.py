@@ -280,31 +280,57 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
     return view.fine[key]
 
 
-def _window_statistics(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _sensor_noise(view: _View) -> float:
+    """The standard deviation (grey levels) of the sensor's noise in the view's fine grey image: Immerkaer's
+    estimate (the image filtered by the difference of two Laplacians, which leaves little of any smooth
+    shading or of an edge), from the median of its magnitude so that edges and grain weigh little."""
+    if "noise" not in view.fine:
+        residual = cv2.filter2D(_fine_grey(view), cv2.CV_32F, _NOISE_KERNEL)[1:-1, 1:-1]
+        view.fine["noise"] = np.float32(median(np.ascontiguousarray(np.abs(residual).ravel())) / 0.6745 / 6.0)
+    return float(view.fine["noise"])
+
+
+_NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+#: A window's texture stands clear of the sensor's noise where its variance is this many times the noise's: under
+#: twice, it is half noise or more, and its correlation with another view's is at most a half on the table too.
+_NOISE_CLEARANCE = 2.0
+
+
+def _flat_below(view: _View) -> float:
+    """The grey-level variance below which a window of the view's fine image is flat (its correlation with
+    another is the sensor's noise): :data:`_TEXTURE_FLOOR`, or more in a noisy picture (a camera's high gain
+    in dim light): in a flat window the noise alone would pass for a grain that no other view shares."""
+    return max(_TEXTURE_FLOOR, _NOISE_CLEARANCE * _sensor_noise(view) ** 2)
+
+
+def _window_statistics(image: np.ndarray,
+                       flat: float = _TEXTURE_FLOOR) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A grey image, and its mean and variance over :data:`_TEXTURE_PATCH` windows at every pixel, and the
-    variance below which its window is flat (:func:`_local_correlation`)."""
+    variance below which its window is flat (:func:`_local_correlation`; ``flat``, or more where the
+    window is bright: a grain counts by its contrast)."""
     window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
     mean = cv2.blur(image, window)
     variance = np.maximum(cv2.blur(image * image, window) - mean * mean, 0.0)
     # A shadow darkens the grain with the light and keeps its contrast (the table's dark face-coloured shadow
     # beside a dark face keeps the table's grain, the face shows its own), so a grain counts by its contrast;
     # but it must stand clear of the sensor's noise and of what JPEG drops, a few grey levels whatever the light.
-    floor = np.maximum((_TEXTURE_CONTRAST * mean) ** 2, _TEXTURE_FLOOR)
+    floor = np.maximum((_TEXTURE_CONTRAST * mean) ** 2, flat)
     return image, mean, variance, floor
 
 
 def _local_correlation(a: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-                       b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                       b: np.ndarray, flat: float = _TEXTURE_FLOOR) -> tuple[np.ndarray, np.ndarray]:
     """Normalised cross-correlation of two grey images over a small window at every pixel (-1 to 1), and
     where both windows hold a texture that stands clear of the noise (elsewhere it says nothing). ``a``
-    comes as its :func:`_window_statistics`, made once for every image it is compared with."""
+    comes as its :func:`_window_statistics`, made once for every image it is compared with; ``b``'s window
+    is flat under the variance ``flat``."""
     window = (_TEXTURE_PATCH, _TEXTURE_PATCH)
     a_image, mean_a, var_a, floor_a = a
     correlation = np.empty(b.shape, np.float32)
     textured = np.empty(b.shape, np.uint8)
     # The window sums by OpenCV's box filter; the dozen operations that combine them, in one pass.
     windowed_correlation(mean_a, var_a, floor_a, cv2.blur(b, window), cv2.blur(b * b, window),
-                         cv2.blur(a_image * b, window), _TEXTURE_CONTRAST, _TEXTURE_FLOOR, correlation, textured)
+                         cv2.blur(a_image * b, window), _TEXTURE_CONTRAST, flat, correlation, textured)
     return correlation, textured.view(bool)
 
 
@@ -363,8 +389,8 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
             warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_REPLICATE)
             if own is None:
-                own = _window_statistics(grey)
-            view.correlations[key] = _local_correlation(own, warped)
+                own = _window_statistics(grey, _flat_below(view))
+            view.correlations[key] = _local_correlation(own, warped, _flat_below(other))
         correlation, textured = view.correlations[key]
         seeing = inside[window_rows][:, window_columns]
         known = textured & seeing
