@@ -325,9 +325,10 @@ _TEXTURE_REACH = 0.2
 
 
 def _in_window(view: _View, window: tuple[slice, slice], fine: np.ndarray) -> np.ndarray:
-    """A fine map of the window, averaged into the coarse image's pixels (NaN outside the window)."""
+    """A fine map of the window (of one channel or a few), averaged into the coarse image's pixels (NaN outside
+    the window)."""
     cw, ch = view.coarse_size
-    coarse = np.full((ch, cw), np.nan, np.float32)
+    coarse = np.full((ch, cw) + fine.shape[2:], np.nan, np.float32)
     rows, columns = window
     if rows.stop > rows.start and columns.stop > columns.start and fine.size:
         coarse[window] = cv2.resize(fine, (columns.stop - columns.start, rows.stop - rows.start),
@@ -389,13 +390,17 @@ def _nearest_indices(size: tuple[int, int], to: tuple[int, int]) -> tuple[np.nda
 _NEAREST_INDICES: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
     1: none; 0 where the grain does not stand clear of the noise; NaN out of the window around the aim,
     coarse pixel ``centre``): a shadow darkens the grain by the same factor as its brightness, and its
     soft edge, a slope unrelated to the grain, does not weaken it; a face that hides the grain, even one
     of the table's colour, loses it. And the share of each coarse pixel's fine pixels whose grain stands
-    clear of the noise and is mostly kept (:data:`_GRAIN_KEPT`): there the table is seen, lit or not."""
+    clear of the noise and is mostly kept (:data:`_GRAIN_KEPT`): there the table is seen, lit or not.
+    And (h, w, 4), per coarse pixel, the means over its fine pixels of what :func:`_keeps_the_grain` sums
+    over a piece of a shadow (NaN out of the window): the image's grain brought back to the empty
+    workspace's light times the empty workspace's grain, the latter squared, the former squared, and what
+    the sensor's noise alone leaves of the former less the latter."""
     window, fine_window = _aim_window(view, centre)
     image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
     image_grain, empty_grain = _grain(image), _grain(empty)
@@ -413,7 +418,63 @@ def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.nda
     expected = strength * np.minimum(dimmed, 1.0) ** 2
     grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
     lost = _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
-    return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32))
+    # Brought back to the light (the dimming over the grain's window: a shadow's soft edge dims it smoothly,
+    # by no one factor), the image's grain in a shadow is the empty workspace's. Each picture's own noise is
+    # about half of the two pictures' difference on the table, the image's scaled up with it.
+    lit = np.maximum(dimmed, 0.05)
+    relit = image_grain / lit
+    planes = np.stack([relit * empty_grain, empty_grain * empty_grain, relit * relit,
+                       0.5 * noise * (1.0 / (lit * lit) + 1.0)], axis=-1).astype(np.float32)
+    return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32)), \
+        _in_window(view, window, planes)
+
+
+def _keeps_the_grain(candidates: np.ndarray, sums: np.ndarray, fine_per_coarse: float) -> np.ndarray:
+    """The pieces of ``candidates`` (h, w bool) in which the image is the empty workspace's grain dimmed by
+    the light, and nothing else, told over each piece whole (``sums``, the third of :func:`_texture_change`;
+    ``fine_per_coarse``, fine pixels in a coarse one).
+
+    A shadow dims the table and keeps its grain exactly: brought back to the light, the image's grain is
+    the empty workspace's (a regression's slope of 1, within :data:`_KEPT_TOLERANCE`, standing clear of its
+    own uncertainty by :data:`_KEPT_CLEAR` standard errors) and what it leaves is the sensor's noise (within
+    :data:`_KEPT_NOISE` of it). A face hides the grain: the slope is nought. A face printed with another
+    stretch of the table's own pattern may correlate with the grain behind it where its stripes run alike,
+    but its own pattern is left over. A grain too faint for a pixel's window (a fine weave, dimmed in a
+    shadow) is told so over a piece of a shadow."""
+    found = np.zeros(candidates.shape, bool)
+    count, labels = cv2.connectedComponents(candidates.astype(np.uint8), connectivity=8)
+    if count <= 1:
+        return found
+    # Told inside each piece: along its outline the grain's windows hold the piece's neighbours too (the
+    # object beside its shadow, the lit table beyond its soft edge).
+    inner = cv2.erode(candidates.astype(np.uint8), _SMALL) > 0
+    known = np.isfinite(sums[..., 0]) & (labels > 0) & inner
+    flat = labels[known]
+    totals = np.stack([np.bincount(flat, weights=sums[..., k][known], minlength=count) for k in range(4)], axis=-1)
+    pixels = np.bincount(flat, minlength=count).astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shared, power, own, expected = (totals / np.maximum(pixels, 1.0)[:, None]).T
+        slope = shared / power
+        residual = np.maximum(own - slope * shared, 0.0)
+        standard_error = np.sqrt(residual / (pixels * fine_per_coarse * power))
+        kept = ((pixels > 0) & (power > 0) & (slope > _KEPT_CLEAR * standard_error)
+                & (np.abs(slope - 1.0) < _KEPT_TOLERANCE) & (residual < _KEPT_NOISE * expected))
+    kept[0] = False
+    return kept[labels]
+
+
+#: A shadow's grain, brought back to the light, is the empty workspace's within this share, its slope clear
+#: of this many standard errors, and what it leaves within this share of the sensor's noise.
+_KEPT_TOLERANCE = 0.4
+_KEPT_CLEAR = 3.0
+_KEPT_NOISE = 1.5
+
+
+def _fine_per_coarse(view: _View) -> float:
+    """How many fine pixels a coarse pixel holds."""
+    fh, fw = _fine_grey(view).shape
+    cw, ch = view.coarse_size
+    return fh * fw / float(cw * ch)
 
 
 def _grain(image: np.ndarray) -> np.ndarray:
@@ -1766,12 +1827,15 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures, tables = {}, {}, {}
+    changed, textures, tables, shades, grains = {}, {}, {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        texture, grain_kept = _texture_change(view, _coarse_aim(view, aim))
+        texture, grain_kept, grains[view.index] = _texture_change(view, _coarse_aim(view, aim))
         # Darker than the empty workspace, of its chromaticity, its grain kept: a shadow on the table.
-        tables[view.index] = _shadow_of_table(view) & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
+        shade = _shadow_of_table(view)
+        tables[view.index] = shade & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
+        # Where the grain is too faint for a pixel's own window, it may still be told over a piece whole.
+        shades[view.index] = shade & ~tables[view.index]
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
         score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
@@ -1782,15 +1846,15 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -1802,12 +1866,15 @@ _OCCLUDER_ITERATIONS = 1
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
-                textures: dict[int, np.ndarray], tables: dict[int, np.ndarray], changed: dict[int, np.ndarray],
+                textures: dict[int, np.ndarray], tables: dict[int, np.ndarray],
+                faint: tuple[dict[int, np.ndarray], dict[int, np.ndarray]], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
     where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
     grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too;
-    ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept)."""
+    ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept);
+    ``faint``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
+    tell, and the sums such a shadow is told by over a piece whole (:func:`_texture_change`)."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -1818,7 +1885,12 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # says it is a shadow (the object's foot, or a face whose table points it covers).
         # But a shadow that keeps the empty workspace's grain is the table: the strip under a lying can,
         # which the can hides from every other view.
-        score = np.where(np.isnan(score), np.where(tables[view.index], 0.0, _HIDDEN), score)
+        # A grain too faint for a pixel's own window is told over each piece of such a shadow whole.
+        hidden = np.isnan(score)
+        shades, grains = faint
+        table = tables[view.index] | _keeps_the_grain(hidden & shades[view.index], grains[view.index],
+                                                      _fine_per_coarse(view))
+        score = np.where(hidden, np.where(table, 0.0, _HIDDEN), score)
         score = np.maximum(score, textures[view.index])
         if occluders is not None:
             # The tint against the other views' through the plane, as without a background (_first_cut):

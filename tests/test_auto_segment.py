@@ -320,3 +320,12 @@ def test_a_face_of_the_table_s_own_grain_that_the_colour_models_drop_is_kept(tmp
     touching the silhouette, is a face: kept."""
     ious = _printed_scene_ious(tmp_path, 1, "oak-table-colour-box", backgrounds=False)
     assert ious[0] > 0.85 and min(ious) > 0.78, ious
+
+
+def test_a_shadow_that_no_other_view_sees_keeps_a_grain_too_faint_for_one_pixel(tmp_path):
+    """The strip of shadow under a lying tin on wood, with the empty workspace: the tin hides it from every
+    other view, and the wood's weave, dimmed in the shadow, is too faint against the sensor's noise for any
+    pixel's own window to say that it is kept, so the strip was taken for the tin's foot (0.73 before).
+    Told over the strip whole, the image is the empty workspace's grain dimmed, and nothing else: table."""
+    ious = _printed_scene_ious(tmp_path, 2, "wood-tin-lying-can", backgrounds=True)
+    assert min(ious) > 0.9, ious
