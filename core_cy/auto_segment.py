@@ -1085,8 +1085,79 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     else:
         hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
-        masks = _bays_looked_into(views, masks, scores, hulls or _Hulls(views, masks, plane, aim), done)
+        hulls = hulls or _Hulls(views, masks, plane, aim)
+        looked = _bays_looked_into(views, masks, scores, hulls, done)
+        if plane is not None:
+            # The hulls of the silhouettes as they are, carved again only where a bay changed one. Each look
+            # may find part of the foot only: again while the hull floats and the look found something.
+            if any(new is not old for new, old in zip(looked, masks)):
+                hulls = None
+            for _ in range(len(views)):
+                found = _foot_found(views, looked, scores, plane, aim, hulls)
+                if all(new is old for new, old in zip(found, looked)):
+                    break
+                looked, hulls = found, None
+        masks = looked
     return masks
+
+
+def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+                plane: np.ndarray, aim: np.ndarray, hulls: _Hulls | None = None) -> list[np.ndarray]:
+    """The silhouettes, each looked into again down to the table where their hull floats above it.
+
+    What stands on the table touches it, and the point where it does is the object's: every view has it
+    inside its silhouette, so the hull of the silhouettes reaches down to the plane. A hull that stops
+    short of it by more than :data:`_FLOATING` voxels is missing the object's foot in some views (a dark
+    can's lower body taken for the shadow beside it in two views, each confirming the other's). Below the
+    hull, down to the plane, is where the foot is looked for: each view whose silhouette leaves over
+    :data:`_BAY` of it out is cut again within its silhouette and the column's picture, by the colour
+    models its own evidence trains. ``hulls``, those of ``masks`` if already carved."""
+    hulls = hulls or _Hulls(views, masks, plane, aim)
+    everyone = set(range(len(views)))
+    inside = np.ones(len(hulls.grid), bool)
+    for i in everyone:
+        inside &= hulls.inside[i]
+    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
+    if not inside.any():
+        return masks
+    heights = hulls.height[inside]
+    low = float(heights.min())
+    if low <= _FLOATING * hulls.voxel:
+        return masks
+    # The hull let down to the plane (its lowest voxels of each column, half a voxel at a time).
+    points = hulls.grid[inside]
+    drops = np.arange(0.5 * hulls.voxel, low + hulls.voxel, 0.5 * hulls.voxel)
+    column = (points[:, None, :] - drops[None, :, None] * plane[:3]).reshape(-1, 3)
+    column = column[column @ plane[:3] + plane[3] >= 0.0]
+    found = list(masks)
+    for i in everyone:
+        score = scores[i]
+        if score is None:
+            continue
+        view = views[i]
+        uv, depth = view.project(column)
+        coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+        cw, ch = view.coarse_size
+        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
+        picture = np.zeros((ch, cw), np.uint8)
+        picture[coarse[seen, 1], coarse[seen, 0]] = 255
+        footprint = hulls.voxel * view.camera.focal_length / float(np.median(depth[seen])) / min(view.sx, view.sy) \
+            if seen.any() else 1.0
+        size = 2 * int(np.ceil(footprint)) + 1
+        picture = cv2.dilate(picture, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        missing = cv2.countNonZero(cv2.bitwise_and(picture, cv2.bitwise_not(masks[i])))
+        if missing <= _BAY * cv2.countNonZero(masks[i]):
+            continue
+        try:
+            cut = _cut_within(view, cv2.bitwise_or(masks[i], picture), score)
+        except SilhouetteError:
+            continue
+        found[i] = _filled_region(cv2.bitwise_or(masks[i], cut), view)
+    return found
+
+
+#: A hull whose lowest voxels stand this many voxels above the plane floats: some view missed the foot.
+_FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
@@ -1194,6 +1265,8 @@ class _Hulls:
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
+        self.grid = grid
+        self.height = None if plane is None else grid @ plane[:3] + plane[3]
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
