@@ -1182,11 +1182,57 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull)
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull,
+                                              lambda i=i: _seen_alike(views, masks, hulls, i))
     return looked
 
 
-def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray) -> np.ndarray:
+def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hulls, i: int) -> np.ndarray:
+    """(h, w) bool: the coarse pixels of view ``i`` on which a point of the other views' hull, above the
+    plane, projects that looks alike from another view which has it well inside its silhouette.
+
+    A point on the object looks alike from every view that sees it (a matte surface sends the same light
+    every way); so a pixel of view ``i`` whose ray passes through such a point may see the object there,
+    even where its own evidence says nothing (its table point hidden from every other view). The other
+    view must have the point a coarse pixel inside its silhouette, whose edge is known to that, and may
+    hold a pixel of table; and the point must stand over :data:`_ALIKE_ABOVE` voxels above the plane, where
+    the table seen alike through it would be no sign of anything. Each point is compared with the other
+    view's colours within a pixel of it (the points project to the nearest coarse pixel), relative to the
+    colour's brightness as :func:`_relative_difference` does, and alike within :data:`_ALIKE`."""
+    view = views[i]
+    others = [other.index for other in views if other.index != i]
+    points = np.ones(len(hulls.grid), bool) if hulls.height is None else hulls.height > _ALIKE_ABOVE * hulls.voxel
+    for j in others:
+        points &= hulls.inside[j] & hulls.pixels[j][1]
+    coarse, seen, _ = hulls.pixels[i]
+    points &= seen
+    found = np.zeros(masks[i].shape, bool)
+    if not points.any():
+        return found
+    here = view.coarse[coarse[points, 1], coarse[points, 0]]
+    best = np.full(len(here), np.inf, np.float32)
+    for j in others:
+        there = hulls.pixels[j][0][points]
+        well_inside = cv2.erode(masks[j], _SMALL)[there[:, 1], there[:, 0]] > 0
+        low = cv2.erode(views[j].coarse, _SMALL)[there[:, 1], there[:, 0]]
+        high = cv2.dilate(views[j].coarse, _SMALL)[there[:, 1], there[:, 0]]
+        difference = (np.maximum(low - here, 0) + np.maximum(here - high, 0)).sum(axis=1) / (here.sum(axis=1) + 30.0)
+        np.minimum(best, np.where(well_inside, difference, np.inf), out=best)
+    alike = best < _ALIKE
+    found[coarse[points, 1][alike], coarse[points, 0][alike]] = True
+    # A voxel is larger than a coarse pixel where it projects: its neighbours are on its ray's side too.
+    return cv2.dilate(found.astype(np.uint8), _SMALL) > 0
+
+
+#: Two views' colours of one point are alike within this relative difference (the plane's parallax on a
+#: flat table, JPEG and a pixel's misregistration, stays within it), for a point over this many voxels
+#: above the plane.
+_ALIKE = 0.08
+_ALIKE_ABOVE = 1.5
+
+
+def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
+                          seen_alike: Callable[[], np.ndarray] | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1203,9 +1249,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     Only where the hull is of two views, and so cannot show a face missing: with three carving views or
     more a view without its face leaves the others reaching out of its hull, and :func:`_agreed` finds
     it; and only on the plane's parallax (an empty workspace shows a face of the table's colour anyway).
-    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette) and mostly seen: where
-    the object hides the table points behind it from the other views, the view has no evidence there,
-    and the first look's graph cut has already decided."""
+    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette). Where the object hides
+    the table points behind most of it from the other views (a tall box's white top, whose table points
+    lie behind the box from the others), the view has no evidence there; such a piece is kept where the
+    other views see it alike (``seen_alike``, called only then: :func:`_seen_alike`) over most of it."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1218,12 +1265,21 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
     seen = score != _HIDDEN
     grown = mask.copy()
+    alike = None
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
         evidence = score[piece & seen]
         # A piece apart from the silhouette is not a face of it.
-        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask) or 2 * len(evidence) <= area:
+        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask):
+            continue
+        if 2 * len(evidence) <= area:
+            # Mostly hidden from the other views' table: a face the others see, alike, over most of it.
+            if seen_alike is not None:
+                if alike is None:
+                    alike = seen_alike()
+                if np.count_nonzero(alike[piece]) * 2 > area:
+                    grown[piece] = 255
             continue
         if median(np.ascontiguousarray(evidence, np.float32)) > 1.0:
             grown[piece] = 255
