@@ -115,6 +115,10 @@ class _View:
         self.full_background = background
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
+        # With the empty workspace: per coarse pixel, the sums its grain is told by over a region
+        # (:func:`_texture_change`).
+        self.grain_sums: np.ndarray | None = None
+        self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -1087,22 +1091,34 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     if len(views) > 2:
         hulls = hulls or _Hulls(views, masks, plane, aim)
         looked = _bays_looked_into(views, masks, scores, hulls, done)
-        if plane is not None:
-            # The hulls of the silhouettes as they are, carved again only where a bay changed one. Each look
-            # may find part of the foot only: again while the hull floats and the look found something.
-            if any(new is not old for new, old in zip(looked, masks)):
-                hulls = None
+        if plane is not None and _floats(hulls) is not None:
+            # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
+            # one that floated is carved again from the silhouettes as they are now. Each look may find part
+            # of the foot only: again while the hull floats and the look found something.
             for _ in range(len(views)):
-                found = _foot_found(views, looked, scores, plane, aim, hulls)
+                found = _foot_found(views, looked, scores, plane, aim)
                 if all(new is old for new, old in zip(found, looked)):
                     break
-                looked, hulls = found, None
+                looked = found
         masks = looked
     return masks
 
 
+def _floats(hulls: _Hulls) -> np.ndarray | None:
+    """Whether the hull of all the views stands over :data:`_FLOATING` voxels above the plane: the voxels
+    inside every view's silhouette (and seen by two at least) if it does, else None."""
+    everyone = range(len(hulls.views))
+    inside = np.ones(len(hulls.grid), bool)
+    for i in everyone:
+        inside &= hulls.inside[i]
+    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
+    if hulls.height is None or not inside.any() or float(hulls.height[inside].min()) <= _FLOATING * hulls.voxel:
+        return None
+    return inside
+
+
 def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                plane: np.ndarray, aim: np.ndarray, hulls: _Hulls | None = None) -> list[np.ndarray]:
+                plane: np.ndarray, aim: np.ndarray) -> list[np.ndarray]:
     """The silhouettes, each looked into again down to the table where their hull floats above it.
 
     What stands on the table touches it, and the point where it does is the object's: every view has it
@@ -1111,20 +1127,14 @@ def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequenc
     can's lower body taken for the shadow beside it in two views, each confirming the other's). Below the
     hull, down to the plane, is where the foot is looked for: each view whose silhouette leaves over
     :data:`_BAY` of it out is cut again within its silhouette and the column's picture, by the colour
-    models its own evidence trains. ``hulls``, those of ``masks`` if already carved."""
-    hulls = hulls or _Hulls(views, masks, plane, aim)
+    models its own evidence trains."""
+    hulls = _Hulls(views, masks, plane, aim)
     everyone = set(range(len(views)))
-    inside = np.ones(len(hulls.grid), bool)
-    for i in everyone:
-        inside &= hulls.inside[i]
-    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
-    if not inside.any():
+    inside = _floats(hulls)
+    if inside is None:
         return masks
-    heights = hulls.height[inside]
-    low = float(heights.min())
-    if low <= _FLOATING * hulls.voxel:
-        return masks
-    # The hull let down to the plane (its lowest voxels of each column, half a voxel at a time).
+    low = float(hulls.height[inside].min())
+    # The hull let down to the plane, half a voxel at a time.
     points = hulls.grid[inside]
     drops = np.arange(0.5 * hulls.voxel, low + hulls.voxel, 0.5 * hulls.voxel)
     column = (points[:, None, :] - drops[None, :, None] * plane[:3]).reshape(-1, 3)
@@ -1184,10 +1194,78 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
         if len(views) == 3 and views[i].background is None:
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull,
                                               lambda i=i: _seen_alike(views, masks, hulls, i))
+        elif views[i].grain_sums is not None and hulls.height is not None:
+            looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull,
+                                                lambda where, i=i: _seen_alike(views, masks, hulls, i, where))
     return looked
 
 
-def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hulls, i: int) -> np.ndarray:
+def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
+                            seen_alike: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``mask`` with the pieces beyond it, within the other views' ``hull``, that hide the table's grain.
+
+    Against the empty workspace a face of the table's colour and light (a dark can's top on a dark mat)
+    changes nothing but the grain, and a grain too faint for a pixel's window (a rubber mat's) says nothing
+    pixel by pixel. Beyond the silhouette, within the other views' hull, a piece that those views see
+    alike (``seen_alike``, :func:`_seen_alike` within a region, called only where the hull reaches a
+    face's size beyond the silhouette: the voxels there look as a point on the object does), that has
+    no shadow's look over half of it, touches the silhouette and is of a face's size (:data:`_BAY`), is
+    told whole: the image's grain regressed on the empty workspace's (the sums of :func:`_texture_change`)
+    over the piece's inner pixels, against the same over the table round it beyond the hull. The piece is
+    a face where the table round it keeps a grain (a slope over :data:`_GRAIN_TABLE_SLOPE`, clear of 3
+    standard errors) and the piece has lost it (its slope under half the table's by 3 standard errors).
+    The table is taken round each piece: a grain far away (another floor) says nothing of this one."""
+    area = cv2.countNonZero(mask)
+    beyond = cv2.morphologyEx(cv2.bitwise_and(hull, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _CLOSING)
+    if cv2.countNonZero(beyond) <= _BAY * area:
+        return mask
+    beyond[~seen_alike(cv2.dilate(beyond, _SMALL))] = 0
+    beyond = cv2.morphologyEx(beyond, cv2.MORPH_OPEN, _CLOSING)
+    count, labels = cv2.connectedComponents(beyond, connectivity=8)
+    if count <= 1:
+        return mask
+    assert view.grain_sums is not None
+    per_coarse = _fine_per_coarse(view)
+    outside = cv2.dilate(cv2.bitwise_or(hull, mask), _SMALL, iterations=2) == 0
+    touching = cv2.dilate(mask, _SMALL) > 0
+    shade = view.shadow_look if view.shadow_look is not None else _shadow_of_table(view)
+    grown = mask.copy()
+    for label in range(1, count):
+        piece = labels == label
+        if not (piece & touching).any() or piece.sum() <= _BAY * area or shade[piece].mean() >= 0.5:
+            continue
+        round_it = outside & ~shade & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+        table = _pooled_grain(view.grain_sums, round_it, per_coarse)
+        if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
+            continue
+        found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
+        if found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]:
+            grown[piece] = 255
+    return _filled_region(grown, view)
+
+
+def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
+    """The slope of the image's grain (brought back to the light) regressed on the empty workspace's over
+    ``region`` whole (``sums`` as :func:`_texture_change` gives them), and its standard error; None where
+    the region holds no grain known."""
+    known = region & np.isfinite(sums[..., 0])
+    count = int(np.count_nonzero(known))
+    if not count:
+        return None
+    shared, power, own, _ = sums[known].astype(np.float64).mean(axis=0)
+    if power <= 0.0:
+        return None
+    slope = shared / power
+    return slope, float(np.sqrt(max(own - slope * shared, 0.0) / (count * fine_per_coarse * power)))
+
+
+#: The table round a piece keeps a grain where its slope (the image's grain on the empty workspace's, which
+#: the empty workspace's own noise lowers on a faint grain) is over this.
+_GRAIN_TABLE_SLOPE = 0.2
+
+
+def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hulls, i: int,
+                where: np.ndarray | None = None) -> np.ndarray:
     """(h, w) bool: the coarse pixels of view ``i`` on which a point of the other views' hull, above the
     plane, projects that looks alike from another view which has it well inside its silhouette.
 
@@ -1198,7 +1276,8 @@ def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hul
     hold a pixel of table; and the point must stand over :data:`_ALIKE_ABOVE` voxels above the plane, where
     the table seen alike through it would be no sign of anything. Each point is compared with the other
     view's colours within a pixel of it (the points project to the nearest coarse pixel), relative to the
-    colour's brightness as :func:`_relative_difference` does, and alike within :data:`_ALIKE`."""
+    colour's brightness as :func:`_relative_difference` does, and alike within :data:`_ALIKE`. Only the
+    points that project within ``where`` (0/255), if given, are looked at."""
     view = views[i]
     others = [other.index for other in views if other.index != i]
     points = np.ones(len(hulls.grid), bool) if hulls.height is None else hulls.height > _ALIKE_ABOVE * hulls.voxel
@@ -1207,19 +1286,25 @@ def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hul
     coarse, seen, _ = hulls.pixels[i]
     points &= seen
     found = np.zeros(masks[i].shape, bool)
-    if not points.any():
+    index = np.flatnonzero(points)
+    at = coarse[index]
+    if where is not None:
+        within = where[at[:, 1], at[:, 0]] > 0
+        index, at = index[within], at[within]
+    if not len(index):
         return found
-    here = view.coarse[coarse[points, 1], coarse[points, 0]]
+    here = view.coarse[at[:, 1], at[:, 0]]
     best = np.full(len(here), np.inf, np.float32)
     for j in others:
-        there = hulls.pixels[j][0][points]
-        well_inside = cv2.erode(masks[j], _SMALL)[there[:, 1], there[:, 0]] > 0
-        low = cv2.erode(views[j].coarse, _SMALL)[there[:, 1], there[:, 0]]
-        high = cv2.dilate(views[j].coarse, _SMALL)[there[:, 1], there[:, 0]]
+        there = hulls.pixels[j][0][index]
+        rows, columns = there[:, 1], there[:, 0]
+        well_inside = cv2.erode(masks[j], _SMALL)[rows, columns] > 0
+        low = cv2.erode(views[j].coarse, _SMALL)[rows, columns]
+        high = cv2.dilate(views[j].coarse, _SMALL)[rows, columns]
         difference = (np.maximum(low - here, 0) + np.maximum(here - high, 0)).sum(axis=1) / (here.sum(axis=1) + 30.0)
         np.minimum(best, np.where(well_inside, difference, np.inf), out=best)
     alike = best < _ALIKE
-    found[coarse[points, 1][alike], coarse[points, 0][alike]] = True
+    found[at[alike, 1], at[alike, 0]] = True
     # A voxel is larger than a coarse pixel where it projects: its neighbours are on its ray's side too.
     return cv2.dilate(found.astype(np.uint8), _SMALL) > 0
 
@@ -1960,8 +2045,9 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
         texture, grain_kept, grains[view.index] = _texture_change(view, _coarse_aim(view, aim))
+        view.grain_sums = grains[view.index]
         # Darker than the empty workspace, of its chromaticity, its grain kept: a shadow on the table.
-        shade = _shadow_of_table(view)
+        shade = view.shadow_look = _shadow_of_table(view)
         tables[view.index] = shade & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
         # Where the grain is too faint for a pixel's own window, it may still be told over a piece whole.
         shades[view.index] = shade & ~tables[view.index]
