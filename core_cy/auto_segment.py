@@ -116,6 +116,10 @@ class _View:
         self.full_background = background
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
+        # With the empty workspace: per coarse pixel, the sums its grain is told by over a region
+        # (:func:`_texture_change`).
+        self.grain_sums: np.ndarray | None = None
+        self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -352,9 +356,10 @@ _TEXTURE_REACH = 0.2
 
 
 def _in_window(view: _View, window: tuple[slice, slice], fine: np.ndarray) -> np.ndarray:
-    """A fine map of the window, averaged into the coarse image's pixels (NaN outside the window)."""
+    """A fine map of the window (of one channel or a few), averaged into the coarse image's pixels (NaN outside
+    the window)."""
     cw, ch = view.coarse_size
-    coarse = np.full((ch, cw), np.nan, np.float32)
+    coarse = np.full((ch, cw) + fine.shape[2:], np.nan, np.float32)
     rows, columns = window
     if rows.stop > rows.start and columns.stop > columns.start and fine.size:
         coarse[window] = cv2.resize(fine, (columns.stop - columns.start, rows.stop - rows.start),
@@ -416,13 +421,17 @@ def _nearest_indices(size: tuple[int, int], to: tuple[int, int]) -> tuple[np.nda
 _NEAREST_INDICES: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How much of the empty workspace's grain each coarse pixel has lost, at the fine scale (0: all kept,
     1: none; 0 where the grain does not stand clear of the noise; NaN out of the window around the aim,
     coarse pixel ``centre``): a shadow darkens the grain by the same factor as its brightness, and its
     soft edge, a slope unrelated to the grain, does not weaken it; a face that hides the grain, even one
     of the table's colour, loses it. And the share of each coarse pixel's fine pixels whose grain stands
-    clear of the noise and is mostly kept (:data:`_GRAIN_KEPT`): there the table is seen, lit or not."""
+    clear of the noise and is mostly kept (:data:`_GRAIN_KEPT`): there the table is seen, lit or not.
+    And (h, w, 4), per coarse pixel, the means over its fine pixels of what :func:`_keeps_the_grain` sums
+    over a piece of a shadow (NaN out of the window): the image's grain brought back to the empty
+    workspace's light times the empty workspace's grain, the latter squared, the former squared, and what
+    the sensor's noise alone leaves of the former less the latter."""
     window, fine_window = _aim_window(view, centre)
     image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
     image_grain, empty_grain = _grain(image), _grain(empty)
@@ -440,7 +449,63 @@ def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.nda
     expected = strength * np.minimum(dimmed, 1.0) ** 2
     grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
     lost = _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
-    return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32))
+    # Brought back to the light (the dimming over the grain's window: a shadow's soft edge dims it smoothly,
+    # by no one factor), the image's grain in a shadow is the empty workspace's. Each picture's own noise is
+    # about half of the two pictures' difference on the table, the image's scaled up with it.
+    lit = np.maximum(dimmed, 0.05)
+    relit = image_grain / lit
+    planes = np.stack([relit * empty_grain, empty_grain * empty_grain, relit * relit,
+                       0.5 * noise * (1.0 / (lit * lit) + 1.0)], axis=-1).astype(np.float32)
+    return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32)), \
+        _in_window(view, window, planes)
+
+
+def _keeps_the_grain(candidates: np.ndarray, sums: np.ndarray, fine_per_coarse: float) -> np.ndarray:
+    """The pieces of ``candidates`` (h, w bool) in which the image is the empty workspace's grain dimmed by
+    the light, and nothing else, told over each piece whole (``sums``, the third of :func:`_texture_change`;
+    ``fine_per_coarse``, fine pixels in a coarse one).
+
+    A shadow dims the table and keeps its grain exactly: brought back to the light, the image's grain is
+    the empty workspace's (a regression's slope of 1, within :data:`_KEPT_TOLERANCE`, standing clear of its
+    own uncertainty by :data:`_KEPT_CLEAR` standard errors) and what it leaves is the sensor's noise (within
+    :data:`_KEPT_NOISE` of it). A face hides the grain: the slope is nought. A face printed with another
+    stretch of the table's own pattern may correlate with the grain behind it where its stripes run alike,
+    but its own pattern is left over. A grain too faint for a pixel's window (a fine weave, dimmed in a
+    shadow) is told so over a piece of a shadow."""
+    found = np.zeros(candidates.shape, bool)
+    count, labels = cv2.connectedComponents(candidates.astype(np.uint8), connectivity=8)
+    if count <= 1:
+        return found
+    # Told inside each piece: along its outline the grain's windows hold the piece's neighbours too (the
+    # object beside its shadow, the lit table beyond its soft edge).
+    inner = cv2.erode(candidates.astype(np.uint8), _SMALL) > 0
+    known = np.isfinite(sums[..., 0]) & (labels > 0) & inner
+    flat = labels[known]
+    totals = np.stack([np.bincount(flat, weights=sums[..., k][known], minlength=count) for k in range(4)], axis=-1)
+    pixels = np.bincount(flat, minlength=count).astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shared, power, own, expected = (totals / np.maximum(pixels, 1.0)[:, None]).T
+        slope = shared / power
+        residual = np.maximum(own - slope * shared, 0.0)
+        standard_error = np.sqrt(residual / (pixels * fine_per_coarse * power))
+        kept = ((pixels > 0) & (power > 0) & (slope > _KEPT_CLEAR * standard_error)
+                & (np.abs(slope - 1.0) < _KEPT_TOLERANCE) & (residual < _KEPT_NOISE * expected))
+    kept[0] = False
+    return kept[labels]
+
+
+#: A shadow's grain, brought back to the light, is the empty workspace's within this share, its slope clear
+#: of this many standard errors, and what it leaves within this share of the sensor's noise.
+_KEPT_TOLERANCE = 0.4
+_KEPT_CLEAR = 3.0
+_KEPT_NOISE = 1.5
+
+
+def _fine_per_coarse(view: _View) -> float:
+    """How many fine pixels a coarse pixel holds."""
+    fh, fw = _fine_grey(view).shape
+    cw, ch = view.coarse_size
+    return fh * fw / float(cw * ch)
 
 
 def _grain(image: np.ndarray) -> np.ndarray:
@@ -1052,8 +1117,85 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     else:
         hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
-        masks = _bays_looked_into(views, masks, scores, hulls or _Hulls(views, masks, plane, aim), done)
+        hulls = hulls or _Hulls(views, masks, plane, aim)
+        looked = _bays_looked_into(views, masks, scores, hulls, done)
+        if plane is not None and _floats(hulls) is not None:
+            # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
+            # one that floated is carved again from the silhouettes as they are now. Each look may find part
+            # of the foot only: again while the hull floats and the look found something.
+            for _ in range(len(views)):
+                found = _foot_found(views, looked, scores, plane, aim)
+                if all(new is old for new, old in zip(found, looked)):
+                    break
+                looked = found
+        masks = looked
     return masks
+
+
+def _floats(hulls: _Hulls) -> np.ndarray | None:
+    """Whether the hull of all the views stands over :data:`_FLOATING` voxels above the plane: the voxels
+    inside every view's silhouette (and seen by two at least) if it does, else None."""
+    everyone = range(len(hulls.views))
+    inside = np.ones(len(hulls.grid), bool)
+    for i in everyone:
+        inside &= hulls.inside[i]
+    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
+    if hulls.height is None or not inside.any() or float(hulls.height[inside].min()) <= _FLOATING * hulls.voxel:
+        return None
+    return inside
+
+
+def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+                plane: np.ndarray, aim: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes, each looked into again down to the table where their hull floats above it.
+
+    What stands on the table touches it, and the point where it does is the object's: every view has it
+    inside its silhouette, so the hull of the silhouettes reaches down to the plane. A hull that stops
+    short of it by more than :data:`_FLOATING` voxels is missing the object's foot in some views (a dark
+    can's lower body taken for the shadow beside it in two views, each confirming the other's). Below the
+    hull, down to the plane, is where the foot is looked for: each view whose silhouette leaves over
+    :data:`_BAY` of it out is cut again within its silhouette and the column's picture, by the colour
+    models its own evidence trains."""
+    hulls = _Hulls(views, masks, plane, aim)
+    everyone = set(range(len(views)))
+    inside = _floats(hulls)
+    if inside is None:
+        return masks
+    low = float(hulls.height[inside].min())
+    # The hull let down to the plane, half a voxel at a time.
+    points = hulls.grid[inside]
+    drops = np.arange(0.5 * hulls.voxel, low + hulls.voxel, 0.5 * hulls.voxel)
+    column = (points[:, None, :] - drops[None, :, None] * plane[:3]).reshape(-1, 3)
+    column = column[column @ plane[:3] + plane[3] >= 0.0]
+    found = list(masks)
+    for i in everyone:
+        score = scores[i]
+        if score is None:
+            continue
+        view = views[i]
+        uv, depth = view.project(column)
+        coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+        cw, ch = view.coarse_size
+        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
+        picture = np.zeros((ch, cw), np.uint8)
+        picture[coarse[seen, 1], coarse[seen, 0]] = 255
+        footprint = hulls.voxel * view.camera.focal_length / float(np.median(depth[seen])) / min(view.sx, view.sy) \
+            if seen.any() else 1.0
+        size = 2 * int(np.ceil(footprint)) + 1
+        picture = cv2.dilate(picture, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        missing = cv2.countNonZero(cv2.bitwise_and(picture, cv2.bitwise_not(masks[i])))
+        if missing <= _BAY * cv2.countNonZero(masks[i]):
+            continue
+        try:
+            cut = _cut_within(view, cv2.bitwise_or(masks[i], picture), score)
+        except SilhouetteError:
+            continue
+        found[i] = _filled_region(cv2.bitwise_or(masks[i], cut), view)
+    return found
+
+
+#: A hull whose lowest voxels stand this many voxels above the plane floats: some view missed the foot.
+_FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
@@ -1078,11 +1220,132 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull)
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull,
+                                              lambda i=i: _seen_alike(views, masks, hulls, i))
+        elif views[i].grain_sums is not None and hulls.height is not None:
+            looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull,
+                                                lambda where, i=i: _seen_alike(views, masks, hulls, i, where))
     return looked
 
 
-def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray) -> np.ndarray:
+def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
+                            seen_alike: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``mask`` with the pieces beyond it, within the other views' ``hull``, that hide the table's grain.
+
+    Against the empty workspace a face of the table's colour and light (a dark can's top on a dark mat)
+    changes nothing but the grain, and a grain too faint for a pixel's window (a rubber mat's) says nothing
+    pixel by pixel. Beyond the silhouette, within the other views' hull, a piece that those views see
+    alike (``seen_alike``, :func:`_seen_alike` within a region, called only where the hull reaches a
+    face's size beyond the silhouette: the voxels there look as a point on the object does), that has
+    no shadow's look over half of it, touches the silhouette and is of a face's size (:data:`_BAY`), is
+    told whole: the image's grain regressed on the empty workspace's (the sums of :func:`_texture_change`)
+    over the piece's inner pixels, against the same over the table round it beyond the hull. The piece is
+    a face where the table round it keeps a grain (a slope over :data:`_GRAIN_TABLE_SLOPE`, clear of 3
+    standard errors) and the piece has lost it (its slope under half the table's by 3 standard errors).
+    The table is taken round each piece: a grain far away (another floor) says nothing of this one."""
+    area = cv2.countNonZero(mask)
+    beyond = cv2.morphologyEx(cv2.bitwise_and(hull, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _CLOSING)
+    if cv2.countNonZero(beyond) <= _BAY * area:
+        return mask
+    beyond[~seen_alike(cv2.dilate(beyond, _SMALL))] = 0
+    beyond = cv2.morphologyEx(beyond, cv2.MORPH_OPEN, _CLOSING)
+    count, labels = cv2.connectedComponents(beyond, connectivity=8)
+    if count <= 1:
+        return mask
+    assert view.grain_sums is not None
+    per_coarse = _fine_per_coarse(view)
+    outside = cv2.dilate(cv2.bitwise_or(hull, mask), _SMALL, iterations=2) == 0
+    touching = cv2.dilate(mask, _SMALL) > 0
+    shade = view.shadow_look if view.shadow_look is not None else _shadow_of_table(view)
+    grown = mask.copy()
+    for label in range(1, count):
+        piece = labels == label
+        if not (piece & touching).any() or piece.sum() <= _BAY * area or shade[piece].mean() >= 0.5:
+            continue
+        round_it = outside & ~shade & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+        table = _pooled_grain(view.grain_sums, round_it, per_coarse)
+        if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
+            continue
+        found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
+        if found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]:
+            grown[piece] = 255
+    return _filled_region(grown, view)
+
+
+def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
+    """The slope of the image's grain (brought back to the light) regressed on the empty workspace's over
+    ``region`` whole (``sums`` as :func:`_texture_change` gives them), and its standard error; None where
+    the region holds no grain known."""
+    known = region & np.isfinite(sums[..., 0])
+    count = int(np.count_nonzero(known))
+    if not count:
+        return None
+    shared, power, own, _ = sums[known].astype(np.float64).mean(axis=0)
+    if power <= 0.0:
+        return None
+    slope = shared / power
+    return slope, float(np.sqrt(max(own - slope * shared, 0.0) / (count * fine_per_coarse * power)))
+
+
+#: The table round a piece keeps a grain where its slope (the image's grain on the empty workspace's, which
+#: the empty workspace's own noise lowers on a faint grain) is over this.
+_GRAIN_TABLE_SLOPE = 0.2
+
+
+def _seen_alike(views: Sequence[_View], masks: Sequence[np.ndarray], hulls: _Hulls, i: int,
+                where: np.ndarray | None = None) -> np.ndarray:
+    """(h, w) bool: the coarse pixels of view ``i`` on which a point of the other views' hull, above the
+    plane, projects that looks alike from another view which has it well inside its silhouette.
+
+    A point on the object looks alike from every view that sees it (a matte surface sends the same light
+    every way); so a pixel of view ``i`` whose ray passes through such a point may see the object there,
+    even where its own evidence says nothing (its table point hidden from every other view). The other
+    view must have the point a coarse pixel inside its silhouette, whose edge is known to that, and may
+    hold a pixel of table; and the point must stand over :data:`_ALIKE_ABOVE` voxels above the plane, where
+    the table seen alike through it would be no sign of anything. Each point is compared with the other
+    view's colours within a pixel of it (the points project to the nearest coarse pixel), relative to the
+    colour's brightness as :func:`_relative_difference` does, and alike within :data:`_ALIKE`. Only the
+    points that project within ``where`` (0/255), if given, are looked at."""
+    view = views[i]
+    others = [other.index for other in views if other.index != i]
+    points = np.ones(len(hulls.grid), bool) if hulls.height is None else hulls.height > _ALIKE_ABOVE * hulls.voxel
+    for j in others:
+        points &= hulls.inside[j] & hulls.pixels[j][1]
+    coarse, seen, _ = hulls.pixels[i]
+    points &= seen
+    found = np.zeros(masks[i].shape, bool)
+    index = np.flatnonzero(points)
+    at = coarse[index]
+    if where is not None:
+        within = where[at[:, 1], at[:, 0]] > 0
+        index, at = index[within], at[within]
+    if not len(index):
+        return found
+    here = view.coarse[at[:, 1], at[:, 0]]
+    best = np.full(len(here), np.inf, np.float32)
+    for j in others:
+        there = hulls.pixels[j][0][index]
+        rows, columns = there[:, 1], there[:, 0]
+        well_inside = cv2.erode(masks[j], _SMALL)[rows, columns] > 0
+        low = cv2.erode(views[j].coarse, _SMALL)[rows, columns]
+        high = cv2.dilate(views[j].coarse, _SMALL)[rows, columns]
+        difference = (np.maximum(low - here, 0) + np.maximum(here - high, 0)).sum(axis=1) / (here.sum(axis=1) + 30.0)
+        np.minimum(best, np.where(well_inside, difference, np.inf), out=best)
+    alike = best < _ALIKE
+    found[at[alike, 1], at[alike, 0]] = True
+    # A voxel is larger than a coarse pixel where it projects: its neighbours are on its ray's side too.
+    return cv2.dilate(found.astype(np.uint8), _SMALL) > 0
+
+
+#: Two views' colours of one point are alike within this relative difference (the plane's parallax on a
+#: flat table, JPEG and a pixel's misregistration, stays within it), for a point over this many voxels
+#: above the plane.
+_ALIKE = 0.08
+_ALIKE_ABOVE = 1.5
+
+
+def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
+                          seen_alike: Callable[[], np.ndarray] | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1099,9 +1362,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     Only where the hull is of two views, and so cannot show a face missing: with three carving views or
     more a view without its face leaves the others reaching out of its hull, and :func:`_agreed` finds
     it; and only on the plane's parallax (an empty workspace shows a face of the table's colour anyway).
-    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette) and mostly seen: where
-    the object hides the table points behind it from the other views, the view has no evidence there,
-    and the first look's graph cut has already decided."""
+    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette). Where the object hides
+    the table points behind most of it from the other views (a tall box's white top, whose table points
+    lie behind the box from the others), the view has no evidence there; such a piece is kept where the
+    other views see it alike (``seen_alike``, called only then: :func:`_seen_alike`) over most of it."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1114,12 +1378,21 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
     seen = score != _HIDDEN
     grown = mask.copy()
+    alike = None
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
         evidence = score[piece & seen]
         # A piece apart from the silhouette is not a face of it.
-        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask) or 2 * len(evidence) <= area:
+        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask):
+            continue
+        if 2 * len(evidence) <= area:
+            # Mostly hidden from the other views' table: a face the others see, alike, over most of it.
+            if seen_alike is not None:
+                if alike is None:
+                    alike = seen_alike()
+                if np.count_nonzero(alike[piece]) * 2 > area:
+                    grown[piece] = 255
             continue
         if median(np.ascontiguousarray(evidence, np.float32)) > 1.0:
             grown[piece] = 255
@@ -1161,6 +1434,8 @@ class _Hulls:
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
+        self.grid = grid
+        self.height = None if plane is None else grid @ plane[:3] + plane[3]
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -1496,6 +1771,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
                                   [standing[v.index] for v in views if v is not view], _chroma_difference)
         tint_score = _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
         score = np.where(np.isnan(score), score, np.fmax(score, tint_score))
+    texture_score = None
     if plane is not None and view.background is None:
         # A face of the table's colour differs from the table mapped through the plane by its grain alone.
         texture = _texture_parallax(view, [v for v in views if v is not view], plane,
@@ -1555,7 +1831,40 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # The colour models could not tell object from table (an object of the table's own colour and
         # grain): the evidence alone draws the silhouette.
         cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
+    if texture_score is not None:
+        cut = _with_faces_of_grain(view, cut, region, score, np.nan_to_num(texture_score))
     return cut, score
+
+
+def _with_faces_of_grain(view: _View, cut: np.ndarray, region: np.ndarray, score: np.ndarray,
+                         texture_score: np.ndarray) -> np.ndarray:
+    """``cut`` with the faces beside it that stand out by their grain alone and that the graph cut left out.
+
+    A face of the table's colour and grain (a box cut from the table's own wood) stands out through the
+    plane by its grain only: its colour is the table's, so the colour models give it to the table whatever
+    the evidence says. Where the grain alone carries the evidence (the texture's score is the pixel's) over
+    a piece of the region that touches the silhouette, the piece is such a face, if it is wider than the
+    band that the grain's window leaves beside any edge: the table just beyond an object's outline maps, in
+    the other views, to windows that hold the object's edge too, and so stands out as a thin band along
+    the outline; a face is wider than the band everywhere, and a 5-pixel disc fits in it."""
+    grain = np.where((texture_score >= score) & (score > 2.5) & (region > 0) & (cut == 0), 255, 0).astype(np.uint8)
+    grain = cv2.morphologyEx(grain, cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(grain, connectivity=8)
+    if count <= 1:
+        return cut
+    wide = cv2.morphologyEx(grain, cv2.MORPH_OPEN, _CLOSING)
+    touching = cv2.dilate(cut, _SMALL) > 0
+    faces = np.zeros(count, bool)
+    faces[np.unique(labels[(wide > 0)])] = True
+    beside = np.zeros(count, bool)
+    beside[np.unique(labels[touching & (grain > 0)])] = True
+    faces &= beside
+    faces[0] = False
+    if not faces.any():
+        return cut
+    # The face's pixels near its wide core (its fringe along the outline is the band's).
+    core = cv2.dilate(np.where(faces[labels] & (wide > 0), 255, 0).astype(np.uint8), _SMALL)
+    return _filled_region(cv2.bitwise_or(cut, cv2.bitwise_and(core, grain)), view)
 
 
 #: The tint's difference on the table is taken to be at least this many grey levels (over the three
@@ -1811,12 +2120,16 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures, tables = {}, {}, {}
+    changed, textures, tables, shades, grains = {}, {}, {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        texture, grain_kept = _texture_change(view, _coarse_aim(view, aim))
+        texture, grain_kept, grains[view.index] = _texture_change(view, _coarse_aim(view, aim))
+        view.grain_sums = grains[view.index]
         # Darker than the empty workspace, of its chromaticity, its grain kept: a shadow on the table.
-        tables[view.index] = _shadow_of_table(view) & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
+        shade = view.shadow_look = _shadow_of_table(view)
+        tables[view.index] = shade & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
+        # Where the grain is too faint for a pixel's own window, it may still be told over a piece whole.
+        shades[view.index] = shade & ~tables[view.index]
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
         score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
@@ -1827,15 +2140,15 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, tables, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -1847,12 +2160,15 @@ _OCCLUDER_ITERATIONS = 1
 
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
-                textures: dict[int, np.ndarray], tables: dict[int, np.ndarray], changed: dict[int, np.ndarray],
+                textures: dict[int, np.ndarray], tables: dict[int, np.ndarray],
+                faint: tuple[dict[int, np.ndarray], dict[int, np.ndarray]], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
     where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
     grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too;
-    ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept)."""
+    ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept);
+    ``faint``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
+    tell, and the sums such a shadow is told by over a piece whole (:func:`_texture_change`)."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -1863,7 +2179,12 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # says it is a shadow (the object's foot, or a face whose table points it covers).
         # But a shadow that keeps the empty workspace's grain is the table: the strip under a lying can,
         # which the can hides from every other view.
-        score = np.where(np.isnan(score), np.where(tables[view.index], 0.0, _HIDDEN), score)
+        # A grain too faint for a pixel's own window is told over each piece of such a shadow whole.
+        hidden = np.isnan(score)
+        shades, grains = faint
+        table = tables[view.index] | _keeps_the_grain(hidden & shades[view.index], grains[view.index],
+                                                      _fine_per_coarse(view))
+        score = np.where(hidden, np.where(table, 0.0, _HIDDEN), score)
         score = np.maximum(score, textures[view.index])
         if occluders is not None:
             # The tint against the other views' through the plane, as without a background (_first_cut):

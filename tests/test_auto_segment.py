@@ -379,3 +379,51 @@ def test_a_noisy_camera_s_noise_is_no_grain(tmp_path):
     found = auto_silhouettes(images, [view.camera for view in bundle.views], support_plane=bundle.support_plane)
     ious = [_iou(mask, truth) for (mask, _), truth in zip(found, truths)]
     assert min(ious) > 0.88, ious
+
+
+def test_a_face_of_the_table_s_own_grain_that_the_colour_models_drop_is_kept(tmp_path):
+    """A box printed with its oak table's own pattern: from one view its top is of the table's colour and
+    light, and stands out through the plane by its grain alone (another stretch of the oak than the table
+    point behind it). The colour models give it to the table, and the view lost its top (0.665 before). A
+    piece that the grain alone carries, wider than the band the grain's window leaves along any edge and
+    touching the silhouette, is a face: kept."""
+    ious = _printed_scene_ious(tmp_path, 1, "oak-table-colour-box", backgrounds=False)
+    assert ious[0] > 0.85 and min(ious) > 0.78, ious
+
+
+def test_a_shadow_that_no_other_view_sees_keeps_a_grain_too_faint_for_one_pixel(tmp_path):
+    """The strip of shadow under a lying tin on wood, with the empty workspace: the tin hides it from every
+    other view, and the wood's weave, dimmed in the shadow, is too faint against the sensor's noise for any
+    pixel's own window to say that it is kept, so the strip was taken for the tin's foot (0.73 before).
+    Told over the strip whole, the image is the empty workspace's grain dimmed, and nothing else: table."""
+    ious = _printed_scene_ious(tmp_path, 2, "wood-tin-lying-can", backgrounds=True)
+    assert min(ious) > 0.9, ious
+
+
+def test_a_foot_that_two_views_took_for_the_shadow_is_looked_for_below_the_floating_hull(tmp_path):
+    """A dark can on a dark rubber mat, with the empty workspace: in two views its lower body in the shade
+    is of the shadow's darkness and tint beside it, and each view's table point behind it is darkened
+    alike in the other, so both left it out (0.655 and 0.669 before). The hull of the three silhouettes
+    then stops short of the table, which what stands on it cannot: each view is looked into again down
+    to the plane below the hull."""
+    ious = _printed_scene_ious(tmp_path, 1, "rubber-mat-dark-can", backgrounds=True)
+    assert min(ious) > 0.78, ious
+
+
+def test_a_top_hidden_from_the_other_views_table_is_kept_where_they_see_it_alike(tmp_path):
+    """A tall white-and-blue box on white laminate: from one view its white top is of the laminate's colour
+    and light, and its table points lie behind the box from the other views, so the view has no evidence
+    there and its graph cut gave the top to the table (0.81 before). The other views see the top, and a
+    point of it looks alike from them and from this view: the piece is the box's."""
+    ious = _printed_scene_ious(tmp_path, 3, "laminate-sugar-box-tall-box", backgrounds=False)
+    assert min(ious) > 0.9, ious
+
+
+def test_a_top_of_the_mat_s_colour_is_found_by_the_grain_it_hides(tmp_path):
+    """A dark can on a dark rubber mat, with the empty workspace: from one view its top is of the mat's
+    colour and light, changed against the empty workspace in nothing but the mat's speckle, too faint for
+    a pixel's window (0.60 before). The other views see the top, alike, within their hull beyond this
+    view's silhouette; told over the piece whole, the image there has lost the grain that the mat round it
+    keeps: the can's top."""
+    ious = _printed_scene_ious(tmp_path, 2, "rubber-mat-dark-can", backgrounds=True)
+    assert min(ious) > 0.9, ious
