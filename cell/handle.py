@@ -110,6 +110,8 @@ class JobHandle:
         self._books = books
         self._clock = clock
         self._turn = asyncio.Lock()
+        #: Set once the job's end is stored, told and recorded.
+        self.ended = asyncio.Event()
 
     async def change(self, message: str, *, lifecycle: Lifecycle | None = None,
                      progress: Progress | None | bool = True, error_kind: str | None = None,
@@ -175,6 +177,8 @@ class JobHandle:
         job.lifecycle, job.progress = to, doing
         self._books.publish(event)
         self._books.record_event(job, event)
+        if to.finished:
+            self.ended.set()
         return event
 
 

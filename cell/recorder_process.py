@@ -66,7 +66,10 @@ def run_recorder(connection: Connection, reports: Connection, n_points: int, liv
                     continue  # its opening failed, and was logged
                 if kind == "close":
                     del recordings[job_id]
-                    report(job_id, recording.close())
+                    # The verdict is told as soon as the file is read back whole; the stream is
+                    # freed after, as nobody waits for that.
+                    report(job_id, recording.end())
+                    recording.release()
                     continue
                 recording.set_time(at)
                 if kind == "call":

@@ -32,13 +32,13 @@ import shutil
 import stat
 import threading
 import warnings
-from pathlib import Path
-
 from collections.abc import Sequence
+from pathlib import Path
 
 import cv2
 import numpy as np
 import rerun as rr
+import rerun_bindings
 from rerun.chunk import RrdReader
 from rerun.error_utils import RerunWarning
 
@@ -118,6 +118,7 @@ class JobRecording:
         self._time = 0.0
         self._closed = False
         self._problem: str | None = None
+        self._sweep = False  # ended, the stream awaits Rerun's sweep (release)
         self._write_failure: str | None = None  # why a flush failed, if one did
         self._cameras: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}  # K, T_world_cam, (w, h)
         self._silhouettes: set[int] = set()  # the views whose silhouettes were drawn
@@ -237,7 +238,7 @@ class JobRecording:
                                               vertex_normals=vertex_normals(all_vertices, all_triangles),
                                               vertex_colors=np.concatenate(colours).astype(np.uint8)))
         for index, (K, T_world_cam, (width, height)) in sorted(self._cameras.items()):
-            strips = union_outline(parts, K, T_world_cam, (width, height))
+            strips = union_outline(parts, K, T_world_cam, (width, height), vertices)  # one sampling of each part
             if strips:
                 self._log(f"world/camera{index}/outline", rr.LineStrips2D(strips, colors=_OUTLINE_COLOUR))
 
@@ -281,14 +282,15 @@ class JobRecording:
                 _log.warning("job %s: the recording could not be written: %s", self.job_id, exc)
 
     def close(self) -> str | None:
-        """Flush and write the file's footer. Idempotent.
+        """Flush and write the file's footer (:meth:`end`), then free the stream (:meth:`release`).
+        Idempotent. None when the file is complete (it reads back with its footer); else what is
+        wrong with it, as :func:`recording_problem` says (a failed write comes first)."""
+        problem = self.end()
+        self.release()
+        return problem
 
-        Returns
-        -------
-        str or None
-            None when the file is complete (it reads back with its footer); else what is wrong
-            with it, as :func:`recording_problem` says (a failed write comes first).
-        """
+    def end(self) -> str | None:
+        """:meth:`close`'s verdict, the stream not yet freed: the sweep that frees it says nothing of the file."""
         with self._lock:
             if self._closed:
                 return self._problem
@@ -313,16 +315,20 @@ class JobRecording:
                         ended = False
                         _log.warning("job %s: Rerun did not close a stream of the recording in %g s: left to it",
                                      self.job_id, _DISCONNECT_WAIT_S)
-                # Rerun's SDK keeps every stream, and its two threads, until the last reference is gone
-                # and orphans are swept (rerun-io/rerun#2116): else two threads more for every job.
-                # Not after a failed write: the sweep then waits on the writer that never ends.
                 self._streams.clear()
                 del self._rec
-                if ended and failure is None:
-                    from rerun_bindings import flush_and_cleanup_orphaned_recordings
-                    flush_and_cleanup_orphaned_recordings()
+                # Not after a failed write: the sweep then waits on the writer that never ends.
+                self._sweep = ended and failure is None
             self._problem = recording_problem(self.path, write_failure=failure)
             return self._problem
+
+    def release(self) -> None:
+        """After :meth:`end`: Rerun's SDK keeps every stream, and its two threads, until the last reference is
+        gone and orphans are swept (rerun-io/rerun#2116): else two threads more for every job."""
+        with self._lock:
+            sweep, self._sweep = self._sweep, False
+        if sweep:
+            rerun_bindings.flush_and_cleanup_orphaned_recordings()
 
 
 def recording_problem(path, *, write_failure: str | None = None) -> str | None:
@@ -370,14 +376,16 @@ def recording_problem(path, *, write_failure: str | None = None) -> str | None:
     return None
 
 
-def union_outline(parts: Sequence[Superquadric], K, T_world_cam, resolution: tuple[int, int]) -> list[np.ndarray]:
-    """The outline of a union of parts projected into a view: closed pixel polylines (each (M, 2),
-    float32), the outer contours of the union of each part's convex projection, within the image."""
+def union_outline(parts: Sequence[Superquadric], K, T_world_cam, resolution: tuple[int, int],
+                  surfaces: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
+    """The outline of a union of parts projected into a view: closed pixel polylines (each (M, 2), float32), the
+    outer contours of the union of each part's convex projection, within the image. ``surfaces``: each part's
+    surface points, if already taken (the vertices of its mesh)."""
     width, height = resolution
     camera = Camera(K=K, T_world_cam=T_world_cam)
     cover = np.zeros((height, width), np.uint8)
-    for part in parts:
-        uv = projected_outline(part, camera)
+    for index, part in enumerate(parts):
+        uv = projected_outline(part, camera, None if surfaces is None else surfaces[index])
         if len(uv) < 3 or not np.all(np.isfinite(uv)):
             continue
         uv = np.clip(uv, -4.0 * max(width, height), 4.0 * max(width, height))  # far off-image stays drawable

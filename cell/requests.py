@@ -4,6 +4,7 @@ jobs, the cell's status. Part of :class:`cell.daemon.CellDaemon`."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -34,6 +35,7 @@ __all__ = ["RequestHandlers"]
 
 _CANCEL_WAIT_S = 2.0
 _RECENT_FAILURES = 10       # failed jobs in a status answer, unless asked for another number
+_RESULT_WAIT_S = 3600.0     # the longest a result query waits for its job to end (parameter wait)
 
 
 class RequestHandlers:
@@ -140,16 +142,31 @@ class RequestHandlers:
             except (ValueError, JobTokenRefused) as exc:
                 raise RequestError(str(exc)) from None
             return Response((await self._cancel(job_id)).model_dump_json())
-        if what not in ("status", "result"):
+        if what == "result":
+            return Response(await self._result(job_id, request.parameters.get("wait")))
+        if what != "status":
             raise RequestError(f"unknown job query {what!r}: expected status, result or cancel")
+        return Response((await self._status(job_id)).model_dump_json())
+
+    async def _result(self, job_id: str, wait: str | None) -> str:
+        """The job's result as the store took it (validated then); with ``wait`` (seconds), once a job
+        under way has ended, or that many seconds have passed: a client asks as it submits, and has
+        its answer as the job ends (``AsyncCellClient.scan``)."""
+        try:
+            seconds = 0.0 if wait is None else min(float(wait), _RESULT_WAIT_S)
+        except ValueError:
+            raise RequestError(f"bad parameters: wait={wait!r} is not a number of seconds") from None
+        handle = self._live.get(job_id)
+        if seconds > 0 and handle is not None:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(seconds):
+                    await handle.ended.wait()
+        stored = self._jobs.result_json(job_id)
+        if stored is not None:
+            return stored
         status = await self._status(job_id)
-        if what == "status":
-            return Response(status.model_dump_json())
-        result = self._jobs.result(job_id)
-        if result is None:
-            raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
-                               + (f" ({status.error})" if status.error else ""))
-        return Response(result.model_dump_json())
+        raise RequestError(f"job {job_id} has no result: it is {status.state.value}"
+                           + (f" ({status.error})" if status.error else ""))
 
     async def _status(self, job_id: str) -> JobStatus:
         status = self._jobs.get(job_id)

@@ -240,6 +240,11 @@ class JobStore:
                           lambda row: ScanResult.model_validate_json(row[0]))
         return rows[0] if rows else None
 
+    def result_json(self, job_id: str) -> str | None:
+        """The job's result as stored, the JSON of a ScanResult (:meth:`result`, not read back), or None."""
+        rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id], lambda row: str(row[0]))
+        return rows[0] if rows else None
+
     def last_seq(self) -> int:
         """The number of the newest job (0: none yet); the next job's is one more."""
         return self._read("SELECT COALESCE(MAX(seq), 0) FROM jobs", [], lambda row: int(row[0]))[0]

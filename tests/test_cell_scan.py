@@ -189,6 +189,23 @@ def test_plain_zenoh_client_with_only_the_documented_keys(cell):
     assert all(e.get("result") is None for e in events[:-1])
 
 
+def test_a_result_asked_with_wait_is_answered_as_the_job_ends(cell):
+    """``jobs/<id>/result?wait=<s>``, the question a client asks as it submits: answered once the job has
+    succeeded (its status then says so), with the result the store took; a wait that is no number is refused."""
+    status = cell.submit(label="asked at once")
+
+    async def ask(parameters: str):
+        async with await Transport.open(cell.router) as transport:
+            return await transport.query(keys.result(cell.config.cell_id, status.job_id), timeout=JOB_TIMEOUT_S + 5,
+                                         parameters=parameters)
+
+    with pytest.raises(RemoteError, match="not a number of seconds"):
+        asyncio.run(ask("wait=soon"))
+    reply = asyncio.run(ask(f"wait={JOB_TIMEOUT_S}"))
+    assert cell.client.status(status.job_id).state is JobState.SUCCEEDED
+    assert json.loads(reply.payload) == cell.client.result(status.job_id).model_dump(mode="json")
+
+
 async def _ask(router: str, key: str, payload: str | bytes | None = None, parameters: str = ""):
     async with await Transport.open(router) as transport:
         return await transport.query(key, payload, timeout=10.0, parameters=parameters)

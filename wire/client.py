@@ -11,6 +11,7 @@ language can do the same. From a script::
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import threading
@@ -21,7 +22,7 @@ from . import keys
 from .access import roles_that_may, what_a_query_asks
 from .errors import AccessDenied, CellError, LinkDown, NoResponder, RemoteError, TransportError
 from .messages import CancelRequest, CellStatus, JobEvent, JobState, JobStatus, ScanRequest, ScanResult, parse
-from .transport import Subscription, Transport
+from .transport import Reply, Subscription, Transport
 
 __all__ = ["AsyncCellClient", "CellClient", "JobFailed"]
 
@@ -32,6 +33,7 @@ _EARLY_JOBS = 256
 _ALL_JOBS = "*"
 _KEPT_TOKENS = 1024        # the tokens of this many of the jobs it submitted, for its cancels
 _DAEMON_SEEN_S = 1.0       # how long a query that nobody answered waits to hear whether the daemon is up
+_ANSWER_GRACE_S = 1.0      # how long a success heard waits for the answer to the result asked at the submit
 
 
 class JobFailed(CellError):
@@ -244,13 +246,14 @@ class AsyncCellClient:
             del self._listeners[job_id]
 
     async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
-                             poll_s: float, heard_from_start: bool = False,
-                             want_result: bool = False) -> JobStatus | ScanResult:
+                             poll_s: float, heard_from_start: bool = False, want_result: bool = False,
+                             answer: asyncio.Future[Reply] | None = None) -> JobStatus | ScanResult:
         """The daemon's word on the job's end, heard from its events (or, should one be lost, from
         polling its status): its final status, or with ``want_result`` the result of a success.
 
         ``heard_from_start``: this client was listening before the job was submitted, so no
-        event of it can have been missed and the status need not be asked first.
+        event of it can have been missed and the status need not be asked first. ``answer``: a
+        result query already asked, that the daemon answers as the job ends (see :meth:`_ended`).
         """
         heard_from_start = self._subscribe_events() and heard_from_start
         queue = self._listen(job_id)
@@ -260,7 +263,7 @@ class AsyncCellClient:
             # Asked after subscribing: an end in between is not missed.
             state = JobState.QUEUED if heard_from_start else (await self.status(job_id)).state
             if state.finished:
-                return await self._ended(job_id, state, want_result)
+                return await self._ended(job_id, state, want_result, answer)
             while True:
                 remaining = deadline - loop.time()
                 if remaining <= 0:
@@ -274,12 +277,12 @@ class AsyncCellClient:
                     except LinkDown:
                         pass  # the router is away: the job goes on, and so does the wait
                     if state.finished:
-                        return await self._ended(job_id, state, want_result)
+                        return await self._ended(job_id, state, want_result, answer)
                     continue
                 if event.state.finished:
                     # An event is anyone's to publish on an open router: an end is believed only
                     # once the daemon confirms it (a forged one is dropped, and the wait goes on).
-                    final = await self._ended(job_id, event.state, want_result)
+                    final = await self._ended(job_id, event.state, want_result, answer)
                     confirmed = final.state if isinstance(final, JobStatus) else JobState.SUCCEEDED
                     if confirmed is not event.state:
                         log.warning("ignoring a %s event for job %s, which the daemon says is %s",
@@ -297,11 +300,18 @@ class AsyncCellClient:
         finally:
             self._unlisten(job_id, queue)
 
-    async def _ended(self, job_id: str, state: JobState, want_result: bool) -> JobStatus | ScanResult:
+    async def _ended(self, job_id: str, state: JobState, want_result: bool,
+                     answer: asyncio.Future[Reply] | None = None) -> JobStatus | ScanResult:
         """The daemon's word on a job that ``state`` says has ended: its status, or with ``want_result``
         and a success, its result. Only a job that succeeded has a result, so asking for it both
-        confirms the success and fetches it, in one question."""
+        confirms the success and fetches it, in one question: the question ``answer`` asked already,
+        if the daemon answers it within a moment (it answers as it tells the end), else asked again."""
         if want_result and state is JobState.SUCCEEDED:
+            if answer is not None:
+                await asyncio.wait({answer}, timeout=_ANSWER_GRACE_S)
+                if answer.done() and not answer.cancelled() and answer.exception() is None:
+                    with contextlib.suppress(ValueError):
+                        return parse(ScanResult, answer.result().payload)
             try:
                 return await self.result(job_id)
             except RemoteError:  # no result: it did not succeed after all
@@ -322,8 +332,16 @@ class AsyncCellClient:
         self.listen()  # before submitting: every event of the job is heard
         status = await self.submit(request)
         # The result is asked of the daemon, not taken from the event: anyone may publish an event.
-        final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event, poll_s=poll_s,
-                                          heard_from_start=True, want_result=True)
+        # It is asked at once, and the daemon answers as the job ends: the answer is on its way when
+        # the job's end is heard (a daemon that does not wait answers at once, and is asked again).
+        answer = asyncio.ensure_future(self._transport.query(
+            keys.result(self.cell, status.job_id), timeout=timeout + self.timeout, parameters=f"wait={timeout:g}"))
+        answer.add_done_callback(lambda asked: asked.cancelled() or asked.exception())  # a failure is no news
+        try:
+            final = await self._wait_finished(status.job_id, timeout=timeout, on_event=on_event, poll_s=poll_s,
+                                              heard_from_start=True, want_result=True, answer=answer)
+        finally:
+            answer.cancel()
         if isinstance(final, ScanResult):
             return final
         if final.state is JobState.SUCCEEDED:  # and no result to be had: the daemon's answer says why

@@ -78,7 +78,8 @@ def job(cell: str, job_id: str) -> str:
 
 
 def result(cell: str, job_id: str) -> str:
-    """Query; the reply is the job's ScanResult once it succeeded."""
+    """Query; the reply is the job's ScanResult once it succeeded. With the parameter ``wait=<seconds>``
+    the daemon answers once a job under way has ended (or after that many seconds)."""
     return f"{ROOT}/{cell}/jobs/{job_id}/result"
 
 
