@@ -32,6 +32,7 @@ ground, or a photograph whose background is not a plane.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 
 import cv2
@@ -290,7 +291,8 @@ def _sensor_noise(view: _View) -> float:
     shading or of an edge), from the median of its magnitude so that edges and grain weigh little."""
     if "noise" not in view.fine:
         residual = cv2.filter2D(_fine_grey(view), cv2.CV_32F, _NOISE_KERNEL)[1:-1, 1:-1]
-        view.fine["noise"] = np.float32(median(np.ascontiguousarray(np.abs(residual).ravel())) / 0.6745 / 6.0)
+        view.fine["noise"] = np.asarray(median(np.ascontiguousarray(np.abs(residual).ravel())) / 0.6745 / 6.0,
+                                        np.float32)
     return float(view.fine["noise"])
 
 
@@ -1079,7 +1081,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             view, score = views[culprit], scores[culprit]
             hull = hulls.of(everyone - {culprit})
             if score is None:
-                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull, _object_colours(views, masks, culprit))
+                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull,
+                                                 _object_colours(views, masks, culprit))
             else:
                 # The view's own evidence missed part of the object (a top of the table's colour and light,
                 # a dark face taken for the shadow beside it) that the others agree on: what the others'
@@ -1159,7 +1162,7 @@ def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequenc
     hulls = _Hulls(views, masks, plane, aim)
     everyone = set(range(len(views)))
     inside = _floats(hulls)
-    if inside is None:
+    if inside is None or hulls.height is None:
         return masks
     low = float(hulls.height[inside].min())
     # The hull let down to the plane, half a voxel at a time.
@@ -1221,10 +1224,10 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
         if len(views) == 3 and views[i].background is None:
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull,
-                                              lambda i=i: _seen_alike(views, masks, hulls, i))
+                                              functools.partial(_seen_alike, views, masks, hulls, i))
         elif views[i].grain_sums is not None and hulls.height is not None:
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull,
-                                                lambda where, i=i: _seen_alike(views, masks, hulls, i, where))
+                                                functools.partial(_seen_alike, views, masks, hulls, i))
     return looked
 
 
@@ -1847,7 +1850,8 @@ def _with_faces_of_grain(view: _View, cut: np.ndarray, region: np.ndarray, score
     band that the grain's window leaves beside any edge: the table just beyond an object's outline maps, in
     the other views, to windows that hold the object's edge too, and so stands out as a thin band along
     the outline; a face is wider than the band everywhere, and a 5-pixel disc fits in it."""
-    grain = np.where((texture_score >= score) & (score > 2.5) & (region > 0) & (cut == 0), 255, 0).astype(np.uint8)
+    grain: np.ndarray = np.where((texture_score >= score) & (score > 2.5) & (region > 0) & (cut == 0),
+                                 255, 0).astype(np.uint8)
     grain = cv2.morphologyEx(grain, cv2.MORPH_OPEN, _SMALL)
     count, labels = cv2.connectedComponents(grain, connectivity=8)
     if count <= 1:
