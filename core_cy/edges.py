@@ -74,8 +74,8 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
         pinhole camera would see them.
     on_edge : bool
         The silhouette's edge already lies on the image's own colour step,
-        placed with more than one profile knows (``auto`` places it so, with
-        the table's colour and the shadow beside the object known): a crossing
+        placed with more than a single profile can know (``auto`` places it
+        so, knowing the table's colour and the shadow beside the object): a crossing
         in the image over :data:`_ON_EDGE_PX` from the silhouette's own
         half-way line is another step (a print's, a shadow's, a seam's), and
         the silhouette's edge is kept there.
