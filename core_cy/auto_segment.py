@@ -482,7 +482,7 @@ def _keeps_the_grain(candidates: np.ndarray, sums: np.ndarray, fine_per_coarse: 
     # object beside its shadow, the lit table beyond its soft edge).
     inner = cv2.erode(candidates.astype(np.uint8), _SMALL) > 0
     known = np.isfinite(sums[..., 0]) & (labels > 0) & inner
-    flat = labels[known]
+    flat = labels[known].astype(np.intp)
     totals = np.stack([np.bincount(flat, weights=sums[..., k][known], minlength=count) for k in range(4)], axis=-1)
     pixels = np.bincount(flat, minlength=count).astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
