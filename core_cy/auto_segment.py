@@ -121,6 +121,7 @@ class _View:
         # (:func:`_texture_change`).
         self.grain_sums: np.ndarray | None = None
         self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
+        self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -289,11 +290,10 @@ def _sensor_noise(view: _View) -> float:
     """The standard deviation (grey levels) of the sensor's noise in the view's fine grey image: Immerkaer's
     estimate (the image filtered by the difference of two Laplacians, which leaves little of any smooth
     shading or of an edge), from the median of its magnitude so that edges and grain weigh little."""
-    if "noise" not in view.fine:
+    if view.noise is None:
         residual = cv2.filter2D(_fine_grey(view), cv2.CV_32F, _NOISE_KERNEL)[1:-1, 1:-1]
-        view.fine["noise"] = np.asarray(median(np.ascontiguousarray(np.abs(residual).ravel())) / 0.6745 / 6.0,
-                                        np.float32)
-    return float(view.fine["noise"])
+        view.noise = float(median(np.ascontiguousarray(np.abs(residual).ravel())) / 0.6745 / 6.0)
+    return view.noise
 
 
 _NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
@@ -1081,8 +1081,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             view, score = views[culprit], scores[culprit]
             hull = hulls.of(everyone - {culprit})
             if score is None:
-                masks[culprit] = _cut_around_aim(view, _coarse_aim(view, aim), hull,
-                                                 _object_colours(views, masks, culprit))
+                masks[culprit] = _cut_again_around_aim(views, masks, culprit, hull, aim)
             else:
                 # The view's own evidence missed part of the object (a top of the table's colour and light,
                 # a dark face taken for the shadow beside it) that the others agree on: what the others'
@@ -1102,16 +1101,14 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 break
             index = min(small, key=small.__getitem__)
             done.add(index)
-            view = views[index]
-            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hulls.of(everyone - {index}),
-                                           _object_colours(views, masks, index))
+            masks[index] = _cut_again_around_aim(views, masks, index, hulls.of(everyone - {index}), aim)
             continue
         index = max(candidates, key=excess.__getitem__)
         done.add(index)
         view, score = views[index], scores[index]
         hull = hulls.of(everyone - {index})
         if score is None:
-            masks[index] = _cut_around_aim(view, _coarse_aim(view, aim), hull, _object_colours(views, masks, index))
+            masks[index] = _cut_again_around_aim(views, masks, index, hull, aim)
         else:
             kept = cv2.bitwise_and(masks[index], hull)
             if cv2.countNonZero(kept) < 12:
@@ -1255,11 +1252,11 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     count, labels = cv2.connectedComponents(beyond, connectivity=8)
     if count <= 1:
         return mask
-    assert view.grain_sums is not None
+    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
     per_coarse = _fine_per_coarse(view)
     outside = cv2.dilate(cv2.bitwise_or(hull, mask), _SMALL, iterations=2) == 0
     touching = cv2.dilate(mask, _SMALL) > 0
-    shade = view.shadow_look if view.shadow_look is not None else _shadow_of_table(view)
+    shade = view.shadow_look
     grown = mask.copy()
     for label in range(1, count):
         piece = labels == label
@@ -2028,6 +2025,14 @@ def _filled_region(binary: np.ndarray, view: _View) -> np.ndarray:
     return filled
 
 
+def _cut_again_around_aim(views: Sequence[_View], masks: Sequence[np.ndarray], index: int, hull: np.ndarray,
+                          aim: np.ndarray) -> np.ndarray:
+    """View ``index``, seeded by the aim alone, cut again within the other views' ``hull``, where only the
+    colours their silhouettes hold (:func:`_object_colours`) seed the object."""
+    view = views[index]
+    return _cut_around_aim(view, _coarse_aim(view, aim), hull, _object_colours(views, masks, index))
+
+
 def _object_colours(views: Sequence[_View], masks: Sequence[np.ndarray], index: int) -> np.ndarray:
     """(h, w) bool: the pixels of view ``index`` whose colour the other views' silhouettes hold more often
     than the rest of their pictures. An object looks much alike from every view; a stretch of table that
@@ -2124,11 +2129,10 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures, tables, shades, grains = {}, {}, {}, {}, {}
+    changed, textures, tables, shades = {}, {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
-        texture, grain_kept, grains[view.index] = _texture_change(view, _coarse_aim(view, aim))
-        view.grain_sums = grains[view.index]
+        texture, grain_kept, view.grain_sums = _texture_change(view, _coarse_aim(view, aim))
         # Darker than the empty workspace, of its chromaticity, its grain kept: a shadow on the table.
         shade = view.shadow_look = _shadow_of_table(view)
         tables[view.index] = shade & (np.nan_to_num(grain_kept) > _GRAIN_SEEN)
@@ -2144,15 +2148,15 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders)
     for _ in range(_OCCLUSION_ROUNDS):
         cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, tables, (shades, grains), changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -2165,14 +2169,14 @@ _OCCLUDER_ITERATIONS = 1
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
                 textures: dict[int, np.ndarray], tables: dict[int, np.ndarray],
-                faint: tuple[dict[int, np.ndarray], dict[int, np.ndarray]], changed: dict[int, np.ndarray],
+                shades: dict[int, np.ndarray], changed: dict[int, np.ndarray],
                 occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
     where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
     grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too;
     ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept);
-    ``faint``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
-    tell, and the sums such a shadow is told by over a piece whole (:func:`_texture_change`)."""
+    ``shades``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
+    tell (such a shadow is told over a piece whole by the view's ``grain_sums``, :func:`_texture_change`)."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -2185,8 +2189,8 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
         # which the can hides from every other view.
         # A grain too faint for a pixel's own window is told over each piece of such a shadow whole.
         hidden = np.isnan(score)
-        shades, grains = faint
-        table = tables[view.index] | _keeps_the_grain(hidden & shades[view.index], grains[view.index],
+        assert view.grain_sums is not None
+        table = tables[view.index] | _keeps_the_grain(hidden & shades[view.index], view.grain_sums,
                                                       _fine_per_coarse(view))
         score = np.where(hidden, np.where(table, 0.0, _HIDDEN), score)
         score = np.maximum(score, textures[view.index])
