@@ -236,12 +236,12 @@ class JobStore:
 
     def result(self, job_id: str) -> ScanResult | None:
         """The job's result, or None if it has none (yet)."""
-        rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id],
-                          lambda row: ScanResult.model_validate_json(row[0]))
-        return rows[0] if rows else None
+        stored = self.result_json(job_id)
+        return None if stored is None else ScanResult.model_validate_json(stored)
 
     def result_json(self, job_id: str) -> str | None:
-        """The job's result as stored, the JSON of a ScanResult (:meth:`result`, not read back), or None."""
+        """The job's result as stored, the JSON of a ScanResult (validated when it was stored; what a
+        result query answers), or None if it has none (yet)."""
         rows = self._read("SELECT result FROM results WHERE job_id = ?", [job_id], lambda row: str(row[0]))
         return rows[0] if rows else None
 
