@@ -157,8 +157,9 @@ class Recorder:
         """:meth:`finish` awaited: None once the job's recording at ``path`` is complete, else what
         is wrong with it; after ``within_s`` without the recorder's word, that it may be incomplete."""
         try:
-            return await asyncio.wait_for(asyncio.wrap_future(self.finish(job_id)), within_s)
-        except asyncio.TimeoutError:
+            async with asyncio.timeout(within_s):
+                return await asyncio.wrap_future(self.finish(job_id))
+        except TimeoutError:
             return (f"the recorder had not closed the recording {path} {within_s:g} s after the job ended: "
                     f"it may be incomplete")
 

@@ -333,8 +333,9 @@ class CellProcesses:
         if signum != signal.SIGKILL:
             process.send_signal(signal.SIGCONT)  # a frozen child must wake up to hear the SIGTERM
         try:
-            await asyncio.wait_for(process.wait(), _STOP_WAIT_S)
-        except asyncio.TimeoutError:
+            async with asyncio.timeout(_STOP_WAIT_S):
+                await process.wait()
+        except TimeoutError:
             log.warning("%s did not stop in %g s: killing it", child.name, _STOP_WAIT_S)
             process.kill()
             await process.wait()
@@ -431,8 +432,9 @@ def _listener(port: int) -> str | None:
 async def _listening(host: str, port: int) -> bool:
     """Whether something takes TCP connections at ``host:port`` now."""
     try:
-        _, writer = await asyncio.wait_for(asyncio.open_connection(host, port), 1.0)
-    except (OSError, asyncio.TimeoutError):
+        async with asyncio.timeout(1.0):
+            _, writer = await asyncio.open_connection(host, port)
+    except (OSError, TimeoutError):
         return False
     writer.close()
     try:

@@ -186,8 +186,9 @@ class KvpClient:
         writer, self._reader, self._writer = self._writer, None, None
         if writer is not None:
             writer.close()
-            with contextlib.suppress(OSError, asyncio.TimeoutError):
-                await asyncio.wait_for(writer.wait_closed(), 1.0)
+            with contextlib.suppress(OSError, TimeoutError):
+                async with asyncio.timeout(1.0):
+                    await writer.wait_closed()
 
     async def _request(self, function: int, name: str, value: str | None) -> tuple[str, bool]:
         what = f"{'reading' if function == READ else 'writing'} {name}"

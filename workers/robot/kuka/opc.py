@@ -227,6 +227,7 @@ class OpcClient:
         # Pyro5's own time-outs bound the thread; this bound is for the caller, should they not.
         limit = self.connect_timeout + 2 * self.request_timeout + 1.0
         try:
-            return await asyncio.wait_for(future, limit)
+            async with asyncio.timeout(limit):
+                return await future
         except TimeoutError:
             raise KukaTimeout(f"{what}: {self.address} did not answer within {limit:g} s") from None
