@@ -1058,7 +1058,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     out of it. Which is which: a view without which none of the others reaches out holds too little,
     and is cut again within their hull (seeded by its evidence: within their hull and its own
     silhouette, by the colour models of its own seeds);
-    failing that, the view that reaches out most is cut again with what lies outside marked table;
+    failing that, the view that reaches out most is cut again with what lies outside marked table (a
+    view seeded by its own evidence only when no other view reaches out);
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
     others' hull is cut again within it.
     """
@@ -1089,10 +1090,13 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 # nothing beyond the two is.
                 masks[culprit] = _cut_within(view, cv2.bitwise_or(masks[culprit], hull), score)
             continue
-        # Only a view seeded by the aim alone is cut again within the others' hull: a view whose evidence
-        # seeded it (the plane's parallax, the empty workspace) knows better than a hull that the other
-        # views' misses carved too small (on the benchmark's printed scenes every such cut lost).
-        candidates = [i for i in everyone - done if excess[i] > 1.0 and scores[i] is None]
+        # A view seeded by the aim alone is cut again within the others' hull. A view whose evidence seeded
+        # it (the plane's parallax, the empty workspace) knows better than a hull that another view's miss
+        # carved too small (on the benchmark's printed scenes every such cut lost), unless it is the only
+        # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
+        # all see empty space where it sees more (a tint that JPEG put on the table in that view alone).
+        candidates = [i for i in everyone - done if excess[i] > 1.0 and (scores[i] is None or _alone_in_excess(
+            i, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -1130,6 +1134,11 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 looked = found
         masks = looked
     return masks
+
+
+def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
+    """Whether view ``index`` is the only one of three or more that reaches out of the others' hull."""
+    return len(excess) > 2 and all(share <= 1.0 for other, share in excess.items() if other != index)
 
 
 def _floats(hulls: _Hulls) -> np.ndarray | None:
