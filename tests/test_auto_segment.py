@@ -427,3 +427,26 @@ def test_a_top_of_the_mat_s_colour_is_found_by_the_grain_it_hides(tmp_path):
     keeps: the can's top."""
     ious = _printed_scene_ious(tmp_path, 2, "rubber-mat-dark-can", backgrounds=True)
     assert min(ious) > 0.9, ious
+
+
+def test_unsure_pixels_are_the_table_s_shade_about_the_silhouette():
+    """A blue-grey table, a red square on it and a shadow (the table at 40 % of its light) beside the
+    square, part of it inside the silhouette: the shadow is unsure on either side of the silhouette's
+    edge, the square and the lit table are sure."""
+    from robocell.core_cy.auto_segment import unsure_pixels
+
+    table = np.array([150, 140, 120], np.float64)
+    image = np.tile(table.astype(np.uint8), (200, 300, 1))
+    image[60:140, 60:140] = (30, 40, 200)  # the object
+    image[60:140, 140:190] = np.round(0.4 * table).astype(np.uint8)  # its shadow
+    silhouette = np.zeros((200, 300), np.uint8)
+    silhouette[60:140, 60:170] = 255  # the object and the shadow's near half
+    unsure = unsure_pixels(image, silhouette)
+    assert not unsure[60:140, 60:140].any()
+    assert unsure[60:140, 140:170].all()  # the shadow taken in
+    assert unsure[60:140, 170:190].all()  # the shadow left out, within a quarter of the size of the silhouette
+    lit = np.ones((200, 300), bool)
+    lit[60:140, 60:190] = False
+    assert not unsure[lit].any()
+    with pytest.raises(ImageError):
+        unsure_pixels(image[:, :, 0], silhouette)
