@@ -870,12 +870,12 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
 def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
     """(H, W) bool: the pixels about ``silhouette`` whose side its colours cannot confirm (issue 21).
 
-    They are those of the table's shade, darker than the table's median colour and of its colour (a
-    shadow dims the table's light, not its colour): inside the silhouette, a shadow may have been taken
-    in; outside it, a face of the object turned from the light may have been left out, and the two look
-    alike. The table's colour is the median of a ring around the silhouette (:data:`_TABLE_RING`); a
-    colour darker than it and within :data:`_TABLE_FAR` of it, or of it darkened, is of its shade (the
-    darker half of a grained table's own colours too: the fit's choices there are no evidence either).
+    They are those clearly darker than the table (:data:`_SHADE_CLEAR`): inside the silhouette, those
+    of the table's colour too (a shadow dims the table's light, not its colour: within
+    :data:`_TABLE_FAR` of it, or of it darkened), where a shadow may have been taken in; outside it, any
+    such, where a face of the object turned from the light may have been left out (in the dark, a face's
+    colour tells it from a shadow's little). The table is the ring around the silhouette
+    (:data:`_TABLE_RING`): its median colour, and its brightness's median and spread.
 
     Parameters
     ----------
@@ -911,11 +911,14 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
     if not len(table):
         return unsure
     table_colour = np.median(table, axis=0).astype(np.float64)
+    brightness = table.sum(axis=1, dtype=np.float64)
+    spread = np.median(np.abs(brightness - np.median(brightness)))
     rows, columns = np.nonzero(near)
     colours = window[rows, columns].astype(np.float64)
-    in_shade = ((_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR)
-                & (colours.sum(axis=1) < table_colour.sum()))
-    unsure[rows[in_shade] + y0, columns[in_shade] + x0] = True
+    darker = colours.sum(axis=1) < np.median(brightness) - _SHADE_CLEAR * spread
+    doubtful = darker & ((inside[y0:y1, x0:x1][rows, columns] == 0)
+                         | (_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR))
+    unsure[rows[doubtful] + y0, columns[doubtful] + x0] = True
     return unsure
 
 
@@ -923,6 +926,9 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
 #: pixels are asked about; between it and the second lies the ring whose median colour is the table's:
 #: beyond the object's blurred rim and most of its shadow, near enough to be lit as the table under it.
 _TABLE_RING = (0.25, 0.6)
+#: A pixel is darker than the table when its brightness lies this many times the ring's median absolute
+#: deviation below the ring's median: beyond the table's own grain and print.
+_SHADE_CLEAR = 3.0
 
 
 #: A look that adds over this share of a view's silhouette found a part the looks before missed (a face);
