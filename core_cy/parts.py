@@ -9,7 +9,9 @@ dumbbell's two weights without the gap between them, hidden behind them in the o
 views). Where the segmentation says which pixels it cannot confirm (``auto``: the table's
 shade about its silhouettes, where a shadow may have been taken in or a dark face left
 out), a part must pay as much with what changes there set aside: a union that explains a
-segmentation's error explains nothing a camera saw. So where the silhouettes and
+segmentation's error explains nothing a camera saw. A part that no view sees rise off the
+table pays on the silhouettes as they are, and leaves the model at the end: it is the shadow
+they took in, which it kept off the other parts' outlines. So where the silhouettes and
 the one superquadric disagree by less than that, no part can pay and the object stays
 one superquadric: decided before anything else is done, from the pixels where they
 disagree farther from the other's outline than the edges' noise (a band along the
@@ -355,7 +357,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         if not proposals:
             break
         winner = fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX, within=within)
-        candidate, candidate_ious = _paying(fitter.result(winner).parts, fitter, rasters)
+        candidate, candidate_ious = _paying(fitter.result(winner).parts, fitter, rasters, plane)
         verdict = _verdict(candidate, candidate_ious, current, ious, base, trial is None, fitter, rasters)
         if verdict is None:
             # The screening ranks the proposals by their cost after a few steps, a guess at where they
@@ -370,7 +372,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
                                   key=lambda descent: descent.cost):
                 if not within():
                     break
-                other, other_ious = _paying(fitter.result(descent.run(_ITERATIONS)).parts, fitter, rasters)
+                other, other_ious = _paying(fitter.result(descent.run(_ITERATIONS)).parts, fitter, rasters, plane)
                 other_verdict = _verdict(other, other_ious, current, ious, base, trial is None, fitter, rasters)
                 if other_verdict is None:
                     continue
@@ -387,7 +389,28 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
     if len(current) > 1 and plane is not None:
         current, ious = _rested(current, fitter, plane, ious, rasters)
+        if rasters.any_unsure:
+            # A part that no view sees rise off the table is the shadow the silhouettes took in: it kept
+            # the shadow off the other parts' outlines, and is no part of the object.
+            seen = tuple(part for part in current if not _flat_on_table(part, rasters.cameras, plane))
+            if seen and len(seen) < len(current):
+                current, ious = seen, rasters.ious(seen)[0]
     return PartsFit(current, ious, fitter.evaluations)
+
+
+def _flat_on_table(part: Superquadric, cameras, plane: np.ndarray) -> bool:
+    """Whether no view sees the part's top rise off the plane by more than the edges' noise: to the
+    cameras it is paint on the table, or a shadow."""
+    R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+    normal = plane[:3]
+    height = float(normal @ centre + plane[3])
+    foot = centre - height * normal
+    top = foot + (height + float(np.abs(normal @ R) @ part.size)) * normal
+    for camera in cameras:
+        (foot_uv, top_uv), _ = camera.project(np.stack([foot, top]))
+        if np.hypot(*(top_uv - foot_uv)) > _EDGE_BAND_PX:
+            return False
+    return True
 
 
 def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fitter: _Fitter,
@@ -462,14 +485,20 @@ def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
     return Superquadric(size, part.shape, T)
 
 
-def _paying(parts, fitter: _Fitter, rasters: _Rasters) -> tuple[tuple[Superquadric, ...], list[float]]:
-    """The parts less those that do not pay (the least useful dropped first, the rest refined)."""
+def _paying(parts, fitter: _Fitter, rasters: _Rasters, plane) -> tuple[tuple[Superquadric, ...], list[float]]:
+    """The parts less those that do not pay (the least useful dropped first, the rest refined). A part
+    flat on the table (``plane``; :func:`_flat_on_table`) pays on the silhouettes as they are: what it
+    explains is the shadow they took in, which their unsure pixels set aside."""
     parts = tuple(parts)
     while True:
         ious, without = rasters.ious(parts)
         if len(parts) == 1:
             return parts, ious
-        pays = _pays(rasters.gains(parts) if rasters.any_unsure else np.asarray(ious)[None, :] - without)
+        gains = np.asarray(ious)[None, :] - without
+        if rasters.any_unsure:
+            flat = [plane is not None and _flat_on_table(part, rasters.cameras, plane) for part in parts]
+            gains = np.where(np.array(flat)[:, None], gains, rasters.gains(parts))
+        pays = _pays(gains)
         weakest = int(np.argmin(pays))
         if pays[weakest] >= _views_to_pay(len(rasters.cameras)):
             return parts, ious
