@@ -47,7 +47,7 @@ from .carve import check_support_plane
 from .errors import GeometryError, ImageError, SilhouetteError
 from .segment import mask_with_outline
 
-__all__ = ["auto_silhouettes", "aim_point"]
+__all__ = ["auto_silhouettes", "aim_point", "unsure_pixels"]
 
 #: The coarse images' longer side, px: the cues and the graph cut work there.
 COARSE_SIDE = 200
@@ -865,6 +865,70 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
     return [_refined(view, mask) for view, mask in zip(views, masks)]
+
+
+def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels about ``silhouette`` whose side its colours cannot confirm (issue 21).
+
+    They are those clearly darker than the table (:data:`_SHADE_CLEAR`): inside the silhouette, those
+    of the table's colour too (a shadow dims the table's light, not its colour: within
+    :data:`_TABLE_FAR` of it, or of it darkened), where a shadow may have been taken in; outside it, any
+    such, where a face of the object turned from the light may have been left out (in the dark, a face's
+    colour tells it from a shadow's little). The table is the ring around the silhouette
+    (:data:`_TABLE_RING`): its median colour, and its brightness's median and spread.
+
+    Parameters
+    ----------
+    image : (H, W, 3) ndarray of uint8
+        The view's BGR photograph, on the silhouette's pixel grid.
+    silhouette : (H, W) ndarray of uint8
+        Nonzero on the object, as :func:`auto_silhouettes` draws it.
+
+    Raises
+    ------
+    ImageError
+        If the image is not (H, W, 3) uint8 or its size is not the silhouette's.
+    """
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise ImageError("expected a (H, W, 3) uint8 BGR image")
+    if silhouette.shape != image.shape[:2]:
+        raise ImageError(f"the silhouette is {silhouette.shape[1]}x{silhouette.shape[0]} pixels, but its image is "
+                         f"{image.shape[1]}x{image.shape[0]}")
+    inside = (silhouette > 0).astype(np.uint8)
+    size = np.sqrt(cv2.countNonZero(inside))
+    unsure = np.zeros(inside.shape, bool)
+    if not size:
+        return unsure
+    # Within the silhouette's box grown by the ring, each pixel's distance from the silhouette.
+    x, y, w, h = cv2.boundingRect(inside)
+    reach = int(np.ceil(_TABLE_RING[1] * size))
+    x0, y0 = max(0, x - reach), max(0, y - reach)
+    x1, y1 = min(inside.shape[1], x + w + reach), min(inside.shape[0], y + h + reach)
+    distance = cv2.distanceTransform(1 - inside[y0:y1, x0:x1], cv2.DIST_L2, 3)
+    near = distance <= _TABLE_RING[0] * size
+    window = image[y0:y1, x0:x1]
+    table = window[~near & (distance <= _TABLE_RING[1] * size)]
+    if not len(table):
+        return unsure
+    table_colour = np.median(table, axis=0).astype(np.float64)
+    brightness = table.sum(axis=1, dtype=np.float64)
+    spread = np.median(np.abs(brightness - np.median(brightness)))
+    rows, columns = np.nonzero(near)
+    colours = window[rows, columns].astype(np.float64)
+    darker = colours.sum(axis=1) < np.median(brightness) - _SHADE_CLEAR * spread
+    doubtful = darker & ((inside[y0:y1, x0:x1][rows, columns] == 0)
+                         | (_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR))
+    unsure[rows[doubtful] + y0, columns[doubtful] + x0] = True
+    return unsure
+
+
+#: Within the first distance from the silhouette (a share of the square root of its area, its size) the
+#: pixels are asked about; between it and the second lies the ring whose median colour is the table's:
+#: beyond the object's blurred rim and most of its shadow, near enough to be lit as the table under it.
+_TABLE_RING = (0.25, 0.6)
+#: A pixel is darker than the table when its brightness lies this many times the ring's median absolute
+#: deviation below the ring's median: beyond the table's own grain and print.
+_SHADE_CLEAR = 3.0
 
 
 #: A look that adds over this share of a view's silhouette found a part the looks before missed (a face);

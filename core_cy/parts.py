@@ -4,8 +4,14 @@ The one-superquadric fit comes first. A part must pay for itself: it is kept onl
 when, without it, the union's silhouette IoU would drop by at least
 ``PART_GAIN`` in at least two views (in every view, with fewer); a part seen in one
 view only has no depth. A union may also carve away what one view shows empty, with
-no more volume: twice ``PART_GAIN`` there (a dumbbell's two weights without the gap
-between them, hidden behind them in the other views). So where the silhouettes and
+no more volume: twice ``PART_GAIN`` there, by covering less of what it shows empty (a
+dumbbell's two weights without the gap between them, hidden behind them in the other
+views). Where the segmentation says which pixels it cannot confirm (``auto``: the table's
+shade about its silhouettes, where a shadow may have been taken in or a dark face left
+out), a part must pay as much with what changes there set aside: a union that explains a
+segmentation's error explains nothing a camera saw. A part that no view sees rise off the
+table pays on the silhouettes as they are, and leaves the model at the end: it is the shadow
+they took in, which it kept off the other parts' outlines. So where the silhouettes and
 the one superquadric disagree by less than that, no part can pay and the object stays
 one superquadric: decided before anything else is done, from the pixels where they
 disagree farther from the other's outline than the edges' noise (a band along the
@@ -128,8 +134,10 @@ class _Rasters:
     (:func:`core_cy.quality.hull_covers`) for the union last drawn: a round's IoUs, the share it
     leaves unexplained and the next round's additions all look at the union it kept, drawn once."""
 
-    def __init__(self, cameras, silhouettes, boxes) -> None:
+    def __init__(self, cameras, silhouettes, boxes, unsure=None) -> None:
         self.cameras, self.silhouettes, self.boxes = list(cameras), list(silhouettes), list(boxes)
+        # Per view, the pixels whose side the segmentation cannot confirm (None: every pixel is sure).
+        self.unsure = [None] * len(self.cameras) if unsure is None else list(unsure)
         self._parts: tuple[Superquadric, ...] = ()
         self._drawn: list = []
 
@@ -146,16 +154,58 @@ class _Rasters:
 
     def ious(self, parts) -> tuple[list[float], np.ndarray]:
         """As :func:`union_ious`."""
-        ious, without = [], np.zeros((len(parts), len(self.cameras)))
-        for v, (object_pixels, covers, _) in enumerate(self.drawn(parts)):
+        tallies = self._tallies(parts, each=True)
+        without = _tally_iou(tallies[:, 1:]).T if len(parts) > 1 else np.zeros((len(parts), len(self.cameras)))
+        return _tally_iou(tallies[:, 0]).tolist(), without
+
+    @property
+    def any_unsure(self) -> bool:
+        return any(unsure is not None for unsure in self.unsure)
+
+    def gains(self, parts, before=None) -> np.ndarray:
+        """(P, V) how much each view's IoU drops without each part, or (V,) how much more ``parts``
+        explain than ``before``: the less of two readings of the silhouettes, as they are and with
+        what changes on their unsure pixels set aside (a change there is no evidence), so that what
+        pays pays on the pixels the segmentation is sure of as well as on all of them."""
+        tallies = self._tallies(parts, each=before is None)
+        if before is None:
+            union, without = tallies[:, :1], tallies[:, 1:]
+            plain = _tally_iou(union) - _tally_iou(without)
+            sure = _tally_iou(union) - _tally_iou(_as_on_unsure(without, union))
+        else:
+            earlier = self._tallies(before, each=False)
+            plain = _tally_iou(tallies) - _tally_iou(earlier)
+            sure = _tally_iou(_as_on_unsure(tallies, earlier)) - _tally_iou(earlier)
+        gains = np.minimum(plain, sure)  # (V, P) or (V, 1)
+        return gains[:, 0] if before is not None else gains.T
+
+    def _tallies(self, parts, each: bool) -> np.ndarray:
+        """(V, 1 + P, 5) per view, for the union and (``each``) for it without each part, else (V, 1, 5):
+        the silhouette's pixels, those covered, the empty ones covered, and those two on unsure pixels."""
+        parts = tuple(parts)
+        tallies = np.zeros((len(self.cameras), 1 + len(parts) if each else 1, 5))
+        for v, ((object_pixels, covers, (x0, y0)), unsure) in enumerate(zip(self.drawn(parts), self.unsure)):
             if object_pixels is None:
-                ious.append(0.0)
                 continue
-            ious.append(_iou(object_pixels, covers))
-            if len(parts) > 1:
-                for p in range(len(parts)):
-                    without[p, v] = _iou(object_pixels, covers[:p] + covers[p + 1:])
-        return ious, without
+            aside = (None if unsure is None
+                     else unsure[y0:y0 + object_pixels.shape[0], x0:x0 + object_pixels.shape[1]])
+            area = int(np.count_nonzero(object_pixels))
+            unions = [covers] + [covers[:p] + covers[p + 1:] for p in range(len(parts)) if each and len(parts) > 1]
+            for u, union in enumerate(unions):
+                covered = np.any(np.stack(union), axis=0) if union else np.zeros_like(object_pixels)
+                explained, extra = object_pixels & covered, covered & ~object_pixels
+                tallies[v, u] = (area, np.count_nonzero(explained), np.count_nonzero(extra),
+                                 0 if aside is None else np.count_nonzero(explained & aside),
+                                 0 if aside is None else np.count_nonzero(extra & aside))
+        return tallies
+
+    def carved_ious(self, before, after) -> np.ndarray:
+        """(V,) each view's IoU of ``before`` with what ``after`` covers of what the view shows empty
+        instead of its own: how much ``after`` explains the more by covering less of the empty."""
+        explained = self._tallies(before, each=False)[:, 0, 1]
+        after = self._tallies(after, each=False)[:, 0]
+        union = after[:, 0] + after[:, 2]
+        return np.divide(explained, union, out=np.zeros_like(union), where=union > 0)
 
     def unexplained(self, parts, band: float = _EDGE_BAND_PX) -> list[float]:
         """As :func:`unexplained_shares`."""
@@ -177,10 +227,20 @@ class _Rasters:
         return shares
 
 
-def _iou(object_pixels: np.ndarray, covers: list[np.ndarray]) -> float:
-    covered = np.any(np.stack(covers), axis=0) if covers else np.zeros_like(object_pixels)
-    union = int(np.count_nonzero(object_pixels | covered))
-    return int(np.count_nonzero(object_pixels & covered)) / union if union else 0.0
+def _tally_iou(tallies: np.ndarray) -> np.ndarray:
+    """IoUs of tallies (as :meth:`_Rasters._tallies`, last axis)."""
+    area, explained, extra = tallies[..., 0], tallies[..., 1], tallies[..., 2]
+    union = area + extra
+    return np.divide(explained, union, out=np.zeros_like(union), where=union > 0)
+
+
+def _as_on_unsure(tallies: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``tallies`` with what they cover of the unsure pixels replaced by what ``reference`` covers there."""
+    changed = tallies.copy()
+    changed[..., 1] += reference[..., 3] - tallies[..., 3]
+    changed[..., 2] += reference[..., 4] - tallies[..., 4]
+    changed[..., 3:] = reference[..., 3:]
+    return changed
 
 
 def _views_to_pay(views: int) -> int:
@@ -199,9 +259,9 @@ def _could_pay(shares) -> bool:
     return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or float(np.max(shares)) >= _CARVED_GAIN)
 
 
-def _pays(ious, without: np.ndarray) -> np.ndarray:
-    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1)."""
-    gains = np.asarray(ious)[None, :] - without
+def _pays(gains: np.ndarray) -> np.ndarray:
+    """(P,) how many views each part pays in, plus its mean gain (a tie-break below 1); ``gains``
+    (P, V) as :meth:`_Rasters.gains`."""
     return _views_paid(gains) + np.clip(gains.mean(axis=1), 0.0, 0.999)
 
 
@@ -210,7 +270,8 @@ def _volume(parts) -> float:
 
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
-              support_plane=None, max_parts: int = MAX_PARTS, single_evaluations: int | None = None) -> PartsFit:
+              support_plane=None, max_parts: int = MAX_PARTS, single_evaluations: int | None = None,
+              unsure=None) -> PartsFit:
     """The union of superquadrics that explains the silhouettes, from the one-superquadric fit.
 
     Parameters
@@ -235,13 +296,17 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         The evaluations of the cost the one superquadric took: proposals left behind by a round go
         on only while the search has taken fewer than ``_BUDGET`` times as many (each part of a
         union counted); without it, while they leave the silhouettes unexplained.
+    unsure : sequence of ((H, W) ndarray of bool or None), optional
+        Per view, the pixels whose side the segmentation cannot confirm
+        (:func:`core_cy.auto_segment.unsure_pixels`); None for a view whose silhouette is sure (a
+        mask given). A part must pay with them set aside as well as with them as they are.
 
     Returns
     -------
     PartsFit
         ``(single,)`` when no part could pay for itself.
     """
-    rasters = _Rasters(cameras, silhouettes, boxes)
+    rasters = _Rasters(cameras, silhouettes, boxes, unsure)
     if ious is None:
         ious, _ = rasters.ious((single,))
     ious = list(ious)
@@ -292,8 +357,8 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         if not proposals:
             break
         winner = fitter.best_of(proposals, _ITERATIONS, finalists=1, explained_px=_EXPLAINED_PX, within=within)
-        candidate, candidate_ious = _paying(fitter.result(winner).parts, fitter, rasters)
-        verdict = _verdict(candidate, candidate_ious, current, ious, base, trial is None, fitter)
+        candidate, candidate_ious = _paying(fitter.result(winner).parts, fitter, rasters, plane)
+        verdict = _verdict(candidate, candidate_ious, current, ious, base, trial is None, fitter, rasters)
         if verdict is None:
             # The screening ranks the proposals by their cost after a few steps, a guess at where they
             # end: the winner may be a start already at its minimum, its extra part paying for nothing,
@@ -307,8 +372,8 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
                                   key=lambda descent: descent.cost):
                 if not within():
                     break
-                other, other_ious = _paying(fitter.result(descent.run(_ITERATIONS)).parts, fitter, rasters)
-                other_verdict = _verdict(other, other_ious, current, ious, base, trial is None, fitter)
+                other, other_ious = _paying(fitter.result(descent.run(_ITERATIONS)).parts, fitter, rasters, plane)
+                other_verdict = _verdict(other, other_ious, current, ious, base, trial is None, fitter, rasters)
                 if other_verdict is None:
                     continue
                 rank = (other_verdict != "kept", fitter.descent(other).cost)
@@ -324,23 +389,51 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
     if len(current) > 1 and plane is not None:
         current, ious = _rested(current, fitter, plane, ious, rasters)
+        if rasters.any_unsure:
+            # A part that no view sees rise off the table is the shadow the silhouettes took in: it kept
+            # the shadow off the other parts' outlines, and is no part of the object.
+            seen = tuple(part for part in current if not _flat_on_table(part, rasters.cameras, plane))
+            if seen and len(seen) < len(current):
+                current, ious = seen, rasters.ious(seen)[0]
     return PartsFit(current, ious, fitter.evaluations)
 
 
-def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fitter: _Fitter) -> str | None:
+def _flat_on_table(part: Superquadric, cameras, plane: np.ndarray) -> bool:
+    """Whether no view sees the part's top rise off the plane by more than the edges' noise: to the
+    cameras it is paint on the table, or a shadow."""
+    R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+    normal = plane[:3]
+    height = float(normal @ centre + plane[3])
+    foot = centre - height * normal
+    top = foot + (height + float(np.abs(normal @ R) @ part.size)) * normal
+    for camera in cameras:
+        (foot_uv, top_uv), _ = camera.project(np.stack([foot, top]))
+        if np.hypot(*(top_uv - foot_uv)) > _EDGE_BAND_PX:
+            return False
+    return True
+
+
+def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fitter: _Fitter,
+             rasters: _Rasters) -> str | None:
     """Whether a round's union, its parts all paying, is kept ("kept"), goes one round on ("trial")
     or is given up (None), against the model before it, ``current`` with its IoUs ``ious``."""
     # More parts must explain more: as much as one part must pay, in as many views. A union of no
     # more parts that explains as much more, its outlines nearer the edges too, is a better minimum found on the way
     # (not the one superquadric: that is the single fit's, from its own starts).
     gains = np.asarray(candidate_ious) - np.asarray(ious)
+    if rasters.any_unsure:
+        gains = rasters.gains(candidate, current)
     gained = int(_views_paid(gains))
-    # A union that explains more in one view only, with no more volume, carves away what that
-    # view shows empty (a dumbbell's weights without the gap between them, which the other
-    # views see hidden behind them); one that adds volume seen in one view, its depth unseen,
-    # may add it in the wrong place (a mug's handle behind its body): that pays in two views.
-    explains_more = (gained >= _views_to_pay(len(candidate_ious))
-                     or (float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current)))
+    # A union that explains more in one view only, by covering less of what that view shows empty,
+    # carves it away (a dumbbell's weights without the gap between them, which the other views see
+    # hidden behind them); one that explains more there by covering more adds volume seen in one
+    # view, its depth unseen, perhaps in the wrong place (a mug's handle behind its body; a thin slab
+    # held edge-on to the other views, on a shadow that one view's silhouette took in): that pays in
+    # two views. Less volume is not enough: a thin part lies in the views' blind spot.
+    explains_more = gained >= _views_to_pay(len(candidate_ious))
+    if not explains_more and float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current):
+        carved = rasters.carved_ious(current, candidate) - np.asarray(ious)
+        explains_more = float(np.max(carved)) >= _CARVED_GAIN
     if explains_more and len(candidate) <= len(current):
         explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
     if explains_more:
@@ -392,14 +485,20 @@ def _grounded(part: Superquadric, plane: np.ndarray) -> Superquadric | None:
     return Superquadric(size, part.shape, T)
 
 
-def _paying(parts, fitter: _Fitter, rasters: _Rasters) -> tuple[tuple[Superquadric, ...], list[float]]:
-    """The parts less those that do not pay (the least useful dropped first, the rest refined)."""
+def _paying(parts, fitter: _Fitter, rasters: _Rasters, plane) -> tuple[tuple[Superquadric, ...], list[float]]:
+    """The parts less those that do not pay (the least useful dropped first, the rest refined). A part
+    flat on the table (``plane``; :func:`_flat_on_table`) pays on the silhouettes as they are: what it
+    explains is the shadow they took in, which their unsure pixels set aside."""
     parts = tuple(parts)
     while True:
         ious, without = rasters.ious(parts)
         if len(parts) == 1:
             return parts, ious
-        pays = _pays(ious, without)
+        gains = np.asarray(ious)[None, :] - without
+        if rasters.any_unsure:
+            flat = [plane is not None and _flat_on_table(part, rasters.cameras, plane) for part in parts]
+            gains = np.where(np.array(flat)[:, None], gains, rasters.gains(parts))
+        pays = _pays(gains)
         weakest = int(np.argmin(pays))
         if pays[weakest] >= _views_to_pay(len(rasters.cameras)):
             return parts, ious

@@ -17,7 +17,7 @@ from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, 
 from .edges import edge_samples
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
-from .auto_segment import auto_silhouettes
+from .auto_segment import auto_silhouettes, unsure_pixels
 from .parts import MAX_PARTS, fit_parts, union_ious
 from .quality import radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
@@ -238,6 +238,9 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         last = now
 
     silhouettes, boxes, edges = [], [], []
+    # Per view, the pixels of auto's silhouette that its colours cannot confirm (None for a mask given):
+    # a part must pay on the rest too.
+    unsure: list[np.ndarray | None] = []
     evaluations: dict[str, int] = {}
     decoded = [_decoded(index, view) for index, view in enumerate(views)]
     found: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -261,12 +264,17 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             silhouette, outline = found[index]
         else:
             silhouette, outline = segment_with_outline(data, segmentation, view=index)
+        doubtful = (unsure_pixels(data, silhouette)
+                    if index in found and options.silhouette_fit and options.max_parts > 1 else None)
         if view.camera.dist is None:
             silhouettes.append(silhouette)
             boxes.append(cv2.boundingRect(outline))
         else:
             silhouettes.append(undistort_mask(silhouette, view.camera))
             boxes.append(cv2.boundingRect(silhouettes[-1]))
+            if doubtful is not None:
+                doubtful = undistort_mask(np.where(doubtful, 255, 0).astype(np.uint8), view.camera) > 0
+        unsure.append(doubtful)
         lap("segment")
         if options.silhouette_fit:
             edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
@@ -336,7 +344,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
                           support_plane=plane, max_parts=options.max_parts,
-                          single_evaluations=evaluations["fit"])
+                          single_evaluations=evaluations["fit"], unsure=unsure)
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
