@@ -1241,10 +1241,11 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike)
-        elif len(views) == 3 and plane is not None and views[i].shadow_look is not None:
+        elif plane is not None and views[i].shadow_look is not None:
             # The empty workspace does not show a face of the table's colour and light either (a white box's
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
-            # it decides, and a piece with a shadow's look must be seen alike by the others too.
+            # it decides, and a piece with a shadow's look must be seen alike by the others too; in a scan of
+            # any number of views (_faces_beyond_outline says why).
             others = [view for view in views if view is not views[i]]
             parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike,
@@ -1385,12 +1386,14 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     face above the plane are not quite those of the table point behind it); where another view confirms
     the table point behind a piece within the table's own noise over most of it, the piece is table.
 
-    Only where the hull is of two views, and so cannot show a face missing: with three carving views or
-    more a view without its face leaves the others reaching out of its hull, and :func:`_agreed` finds
-    it. A piece counts when it is of a face's size (:data:`_BAY` of the silhouette). Where the object hides
-    the table points behind most of it from the other views (a tall box's white top, whose table points
-    lie behind the box from the others), the view has no evidence there; such a piece is kept where the
-    other views see it alike (``seen_alike``, called only then: :func:`_seen_alike`) over most of it.
+    Without an empty workspace, only in a scan of three views, where the hull is of two and cannot show a
+    face missing. With one, in a scan of any number: the hull of three views or more forgives one view's
+    miss (:meth:`_Hulls.into`), so :func:`_agreed` does not see a face that one view alone missed either,
+    and here the evidence decides each piece. A piece counts when it is of a face's size (:data:`_BAY` of
+    the silhouette). Where the object hides the table points behind most of it from the other views (a
+    tall box's white top, whose table points lie behind the box from the others), the view has no
+    evidence there; such a piece is kept where the other views see it alike (``seen_alike``, called only
+    then: :func:`_seen_alike`) over most of it.
 
     ``parallax``, the plane's parallax in units of its noise (:data:`_HIDDEN` where hidden) where ``score``
     is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a shadow's look

@@ -460,3 +460,13 @@ def test_a_dark_face_that_changed_like_its_shadow_stands_out_by_its_colour(tmp_p
     above the table (issue 20)."""
     ious = _printed_scene_ious(tmp_path, 1, "wood-printed-box", backgrounds=True)
     assert ious[0] > 0.93 and min(ious) > 0.85, ious
+
+
+def test_a_face_that_one_view_of_six_missed_is_looked_for_beyond_its_outline(tmp_path):
+    """A printed ellipsoid on a dark rubber mat, six views with the empty workspace: from two views its dark
+    lower band in the shade changed as its shadow did and was left out (0.83 and 0.89 before). The hull of
+    five views forgives one view's miss, so no other view reaches out of it; but it holds the band beyond
+    the view's outline, where the graph cut finds it, the plane's parallax says it stands, and the other
+    views see it alike (issue 20)."""
+    ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-printed-ellipsoid", backgrounds=True)
+    assert min(ious) > 0.9, ious
