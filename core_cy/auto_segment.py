@@ -258,6 +258,14 @@ def _parallax_evidence(view: _View, others: Sequence[_View], plane: np.ndarray,
     return evidence
 
 
+def _colour_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
+                     standing: Sequence[np.ndarray]) -> np.ndarray:
+    """:func:`_parallax_evidence` of the colour in units of its noise (NaN where hidden): the evidence the
+    view has without a background, for a view that has one."""
+    evidence = _parallax_evidence(view, others, plane, standing)
+    return evidence / max(_noise_level(evidence), _NOISE_FLOOR)
+
+
 #: The fine images' longer side, px, at most: a table's grain (wood, a weave) is a few pixels wide and
 #: the coarse images average it away; texture is compared here.
 FINE_SIDE = 800
@@ -1186,7 +1194,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
         hulls = hulls or _Hulls(views, masks, plane, aim)
-        looked = _bays_looked_into(views, masks, scores, hulls, done)
+        looked = _bays_looked_into(views, masks, scores, hulls, done, plane)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
@@ -1272,7 +1280,7 @@ _FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      hulls: _Hulls, done: set[int]) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int], plane: np.ndarray | None) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -1292,12 +1300,21 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
         if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
             found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
+        seen_alike = functools.partial(_seen_alike, views, masks, hulls, i)
+        if views[i].grain_sums is not None and hulls.height is not None:
+            looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull,
-                                              functools.partial(_seen_alike, views, masks, hulls, i))
-        elif views[i].grain_sums is not None and hulls.height is not None:
-            looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull,
-                                                functools.partial(_seen_alike, views, masks, hulls, i))
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike)
+        elif plane is not None and views[i].shadow_look is not None:
+            # The empty workspace does not show a face of the table's colour and light either (a white box's
+            # top on white laminate changes hardly at all): the plane's parallax that the view has without
+            # it decides, and a piece with a shadow's look must be seen alike by the others too; in a scan of
+            # any number of views (_faces_beyond_outline says why).
+            others = [view for view in views if view is not views[i]]
+            parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike,
+                                              np.where(np.isnan(parallax), _HIDDEN, parallax),
+                                              views[i].shadow_look)
     return looked
 
 
@@ -1418,7 +1435,8 @@ _ALIKE_ABOVE = 1.5
 
 
 def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
-                          seen_alike: Callable[[], np.ndarray] | None = None) -> np.ndarray:
+                          seen_alike: Callable[[], np.ndarray] | None = None,
+                          parallax: np.ndarray | None = None, shadow: np.ndarray | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1432,13 +1450,20 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     face above the plane are not quite those of the table point behind it); where another view confirms
     the table point behind a piece within the table's own noise over most of it, the piece is table.
 
-    Only where the hull is of two views, and so cannot show a face missing: with three carving views or
-    more a view without its face leaves the others reaching out of its hull, and :func:`_agreed` finds
-    it; and only on the plane's parallax (an empty workspace shows a face of the table's colour anyway).
-    A piece counts when it is of a face's size (:data:`_BAY` of the silhouette). Where the object hides
-    the table points behind most of it from the other views (a tall box's white top, whose table points
-    lie behind the box from the others), the view has no evidence there; such a piece is kept where the
-    other views see it alike (``seen_alike``, called only then: :func:`_seen_alike`) over most of it."""
+    Without an empty workspace, only in a scan of three views, where the hull is of two and cannot show a
+    face missing. With one, in a scan of any number: the hull of three views or more forgives one view's
+    miss (:meth:`_Hulls.into`), so :func:`_agreed` does not see a face that one view alone missed either,
+    and here the evidence decides each piece. A piece counts when it is of a face's size (:data:`_BAY` of
+    the silhouette). Where the object hides the table points behind most of it from the other views (a
+    tall box's white top, whose table points lie behind the box from the others), the view has no
+    evidence there; such a piece is kept where the other views see it alike (``seen_alike``, called only
+    then: :func:`_seen_alike`) over most of it.
+
+    ``parallax``, the plane's parallax in units of its noise (:data:`_HIDDEN` where hidden) where ``score``
+    is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a shadow's look
+    against the empty workspace, if it has one. A piece with a shadow's look over half of it may be the
+    shadow beside the object, whose table points the other views' feet hide from them here and there: it
+    is kept only where both the parallax and the other views seeing it alike say a face."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1448,27 +1473,34 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     if count <= 1:
         return mask
     touching = cv2.dilate(mask, _SMALL) > 0
+    if parallax is None:
+        parallax = score
     # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
-    seen = score != _HIDDEN
+    seen = parallax != _HIDDEN
     grown = mask.copy()
     alike = None
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
-        evidence = score[piece & seen]
+        evidence = parallax[piece & seen]
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask):
             continue
-        if 2 * len(evidence) <= area:
-            # Mostly hidden from the other views' table: a face the others see, alike, over most of it.
-            if seen_alike is not None:
-                if alike is None:
-                    alike = seen_alike()
-                if np.count_nonzero(alike[piece]) * 2 > area:
-                    grown[piece] = 255
+        stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > 1.0
+        if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
+            if not stands:
+                continue
+        elif 2 * len(evidence) > area:
+            if stands:
+                grown[piece] = 255
             continue
-        if median(np.ascontiguousarray(evidence, np.float32)) > 1.0:
-            grown[piece] = 255
+        # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
+        # over most of it.
+        if seen_alike is not None:
+            if alike is None:
+                alike = seen_alike()
+            if np.count_nonzero(alike[piece]) * 2 > area:
+                grown[piece] = 255
     return _filled_region(grown, view)
 
 
@@ -2017,7 +2049,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     inside = region[crop] > 0
     mask[inside] = cv2.GC_PR_FGD
     sure = cv2.erode(region, _SMALL)[crop] > 0
-    mask[sure & (score[crop] > 5.0)] = cv2.GC_FGD
+    mask[sure & (score[crop] > _SURE)] = cv2.GC_FGD
     low = score[crop] < 1.0
     if view.background is not None:
         # Against the empty workspace what shows no change is table for sure, but not within the region that
@@ -2048,6 +2080,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
 
 #: The graph cut's box reaches this share of the region's size beyond it: table enough for its colour model.
 _CUT_MARGIN = 0.5
+#: Evidence over this many units of its noise, well within what stands out, seeds the object for sure.
+_SURE = 5.0
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -2224,12 +2258,16 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, None)
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
     scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders)
-    for _ in range(_OCCLUSION_ROUNDS):
+    # The last evidence, with the silhouettes cut hiding the most of the table behind them, counts the
+    # colour's parallax too (_stands_out), for the last cut only: fed back as what hides the table in the
+    # next look, the colour found at one view's foot makes the table beside the others' feet stand out.
+    for round_ in range(1, _OCCLUSION_ROUNDS + 1):
         cuts = _background_cut(views, aim, scores, standing, _OCCLUDER_ITERATIONS)
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders)
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders,
+                                       colour=round_ == _OCCLUSION_ROUNDS)
     return _background_cut(views, aim, scores, standing)
 
 
@@ -2243,13 +2281,16 @@ _OCCLUDER_ITERATIONS = 1
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
                 textures: dict[int, np.ndarray], tables: dict[int, np.ndarray],
                 shades: dict[int, np.ndarray], changed: dict[int, np.ndarray],
-                occluders: dict[int, np.ndarray] | None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+                occluders: dict[int, np.ndarray] | None,
+                colour: bool = False) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
     where it does (0/255), the table behind ``occluders`` hidden. ``textures``, per view, how much of its
     grain is lost against the empty workspace's (in units of its noise): a grain lost stands out too;
     ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept);
     ``shades``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
-    tell (such a shadow is told over a piece whole by the view's ``grain_sums``, :func:`_texture_change`)."""
+    tell (such a shadow is told over a piece whole by the view's ``grain_sums``, :func:`_texture_change`);
+    ``colour``, whether the colour against the other views' through the plane counts too where it clearly
+    stands (:func:`_background_cuts` says when)."""
     scores, standing = {}, {}
     for view in views:
         others = [v for v in views if v is not view]
@@ -2276,6 +2317,16 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
                                       _chroma_difference)
             score = np.maximum(score, _over_a_block(view, np.nan_to_num(
                 tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))))
+        if colour:
+            assert occluders is not None
+            # A dark face (a box's side turned from the lamp, a can's lower body) changes against the empty
+            # workspace as the shadow beside it does, and where another view sees that shadow at the face's
+            # table point, the two change alike: a shadow, by the change. Its colour is still not the colour
+            # of that table point, which is the plane's parallax the view has without a background. Only
+            # where it stands out clearly: at an object's foot a pixel's misregistration of the other view's
+            # silhouette shows its object's colour against the shadow there, a little above the noise.
+            parallax = np.nan_to_num(_colour_parallax(view, others, plane, [occluders[v.index] for v in others]))
+            score = np.maximum(score, np.where(parallax > _SURE, parallax, 0.0))
         score = np.where(changed[view.index] > 0, score, 0.0).astype(np.float32)
         stands = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
         # A table point no other view sees (the top of a tall object maps far behind it, out of their
