@@ -1136,6 +1136,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     others' hull is cut again within it.
     """
     done: set[int] = set()
+    refused: set[int] = set()  # views whose cut again was given up: they keep their silhouettes, uncorrected
     everyone = set(range(len(views)))
     hulls: _Hulls | None = None
     for _ in range(len(views)):
@@ -1167,8 +1168,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # carved too small (on the benchmark's printed scenes every such cut lost), unless it is the only
         # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
         # all see empty space where it sees more (a tint that JPEG put on the table in that view alone).
-        candidates = [i for i in everyone - done if excess[i] > 1.0 and (scores[i] is None or _alone_in_excess(
-            i, excess))]
+        candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
+            scores[i] is None or _alone_in_excess(i, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -1189,7 +1190,15 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             kept = cv2.bitwise_and(masks[index], hull)
             if cv2.countNonZero(kept) < 12:
                 raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
-            masks[index] = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+            cut = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
+            # The cut is to drop what lies beyond the others' hull, not what they agree on: one that keeps
+            # less than _KEPT_BY_CUT of that failed to model the object there (a box of its table's colour),
+            # and the view keeps its silhouette, as one not corrected (its bays are looked into below).
+            if cv2.countNonZero(cv2.bitwise_and(cut, kept)) >= _KEPT_BY_CUT * cv2.countNonZero(kept):
+                masks[index] = cut
+            else:
+                done.discard(index)
+                refused.add(index)
     else:
         hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
