@@ -13,12 +13,12 @@ import pytest
 
 from robocell.wire.messages import JobState
 
-from tests.cell_fixtures import JOB_TIMEOUT_S, cell_config, running_cell, wait_until
+from tests.cell_fixtures import JOB_TIMEOUT_S, SMALL_CAMERA, cell_config, running_cell, wait_until
 
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("outages"), cell_id="outages",
+    config = cell_config(tmp_path_factory.mktemp("outages"), cell_id="outages", camera=SMALL_CAMERA,
                          robot={"move_time_s": 0.2}, timeouts={"outage_s": 30.0})
     with running_cell(config) as running:
         yield running

@@ -24,7 +24,7 @@ from robocell.wire.messages import JobState, ScanRequest
 from robocell.workers.sim.scene import target_from_config
 from robocell.cell.store import JobStore
 
-from tests.cell_fixtures import RunningCell, cell_config, running_cell, wait_until
+from tests.cell_fixtures import SMALL_CAMERA, RunningCell, cell_config, running_cell, wait_until
 
 JOB_WAIT_S = 60.0   # a job's views and its way to a worker, on a loaded machine
 
@@ -32,9 +32,9 @@ JOB_WAIT_S = 60.0   # a job's views and its way to a worker, on a loaded machine
 @pytest.fixture(scope="module")
 def cells(tmp_path_factory):
     root = tmp_path_factory.mktemp("scale-cells")
-    north = cell_config(root / "north", cell_id="north", timeouts={"outage_s": 5.0})
-    south = cell_config(root / "south", cell_id="south", zenoh={"router": north.zenoh.router}, max_queued=2,
-                        timeouts={"outage_s": 5.0})
+    north = cell_config(root / "north", cell_id="north", camera=SMALL_CAMERA, timeouts={"outage_s": 5.0})
+    south = cell_config(root / "south", cell_id="south", camera=SMALL_CAMERA, zenoh={"router": north.zenoh.router},
+                        max_queued=2, timeouts={"outage_s": 5.0})
     with running_cell(north, reconstructors=0, workers={"shared-a": 0.0, "shared-b": 0.0}) as n:
         with running_cell(south, with_router=False, reconstructors=0) as s:
             yield n, s
