@@ -1,8 +1,18 @@
-import shutil
+"""Shared fixtures; and the core runs here as the ``robocell`` command runs it, on one BLAS thread."""
 
-import pytest
+import os
 
-from tests.bundles import write_sphere_bundle
+# As robocell/cli/main.py does, and before numpy is imported: the fit's small problems gain nothing from
+# BLAS threads and lose much to them beside other work (the suite's core tests, and every child process
+# the cell tests start through ``robocell``, then run alike).
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+import shutil  # noqa: E402
+
+import pytest  # noqa: E402
+
+from tests.bundles import write_sphere_bundle  # noqa: E402
 
 
 @pytest.fixture(scope="session")

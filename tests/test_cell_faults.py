@@ -22,8 +22,8 @@ from robocell.wire.transport import Transport
 from robocell.cell.recording import recording_problem
 from robocell.cell.store import JobStore
 
-from tests.cell_fixtures import (GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell, cell_config,
-                                 running_cell, wait_until)
+from tests.cell_fixtures import (SMALL_CAMERA, GatedReconstructor, InProcessSimCamera, InProcessWorker, RunningCell,
+                                 cell_config, running_cell, wait_until)
 
 PASSWORD = "s3cret"
 
@@ -48,7 +48,7 @@ class Rig:
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     config = cell_config(tmp_path_factory.mktemp("cell-faults"), cell_id="faults",
-                         camera={"username": "root", "password": PASSWORD, "timeout_s": 2.0})
+                         camera={**SMALL_CAMERA, "username": "root", "password": PASSWORD, "timeout_s": 2.0})
     with running_cell(config, reconstructors=0, sim_camera=False) as cell:
         camera = InProcessSimCamera(config)
         try:

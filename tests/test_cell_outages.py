@@ -13,12 +13,12 @@ import pytest
 
 from robocell.wire.messages import JobState
 
-from tests.cell_fixtures import cell_config, running_cell
+from tests.cell_fixtures import JOB_TIMEOUT_S, SMALL_CAMERA, cell_config, running_cell, wait_until
 
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("outages"), cell_id="outages",
+    config = cell_config(tmp_path_factory.mktemp("outages"), cell_id="outages", camera=SMALL_CAMERA,
                          robot={"move_time_s": 0.2}, timeouts={"outage_s": 30.0})
     with running_cell(config) as running:
         yield running
@@ -44,32 +44,46 @@ def test_jobs_queued_across_a_router_restart_all_succeed(cell):
 def test_a_robot_worker_away_for_a_while_costs_no_job(cell):
     ids = [cell.submit(label=f"robot away {k}").job_id for k in range(2)]
     assert cell.loop.run(cell.processes.stop_child("robot")) == 0
-    time.sleep(2.0)
+    # Away until the daemon has seen it go; then away as long as a robot worker takes to start.
+    wait_until(lambda: not cell.status().workers["robot"], timeout=JOB_TIMEOUT_S, interval=0.05,
+               what="the daemon to see the robot worker gone")
     cell.loop.run(cell.processes.start_child("robot"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]
     assert [f.state for f in finals] == [JobState.SUCCEEDED] * 2, [f.error for f in finals]
 
 
 def test_a_camera_restarted_costs_no_job(cell):
-    """The simulated camera (an HTTP server) is away for 3 s: the camera worker, still up, answers
-    that it cannot connect, and the daemon tries again until the camera is back."""
+    """The simulated camera (an HTTP server) is away until a job has found it so: the camera worker,
+    still up, answers that it cannot connect, and the daemon tries again until the camera is back."""
     ids = [cell.submit(label=f"camera away {k}").job_id for k in range(3)]
     cell.loop.run(cell.processes.stop_child("sim-camera"))
-    time.sleep(3.0)
+
+    def camera_missed() -> bool:
+        return any("then trying again" in e.message for job_id in ids for e in cell.events(job_id))
+
+    wait_until(camera_missed, timeout=JOB_TIMEOUT_S, interval=0.05, what="a job to find the camera away")
     cell.loop.run(cell.processes.start_child("sim-camera"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]
     assert [f.state for f in finals] == [JobState.SUCCEEDED] * 3, [f.error for f in finals]
 
 
 def test_a_reconstructor_paused_for_a_while_costs_no_job(cell):
-    """The only reconstructor stops (SIGSTOP) for longer than the heartbeat allows: its job is
-    taken from it, and waits, with the queued ones, for a worker that answers."""
-    worker = cell.processes.child("reconstruct-0").process
+    """The only reconstructor stops (SIGSTOP) until the daemon no longer counts on it (its heartbeat
+    silent, or its session dropped by the router, whichever the daemon hears of first): its job is
+    taken from it (if it had not answered yet), and waits, with the queued ones, for a worker that
+    answers."""
+    child = cell.processes.child("reconstruct-0")
+    worker, worker_id = child.process, child.argv[-1]
     ids = [cell.submit(label=f"reconstructor paused {k}").job_id for k in range(3)]
     cell.wait_state(ids[0], {JobState.RECONSTRUCTING})
     os.kill(worker.pid, signal.SIGSTOP)
     try:
-        time.sleep(cell.config.timeouts.heartbeat_s + 3.0)
+        def given_up() -> bool:
+            seen = cell.reconstructor(worker_id)
+            return seen is None or not seen.healthy
+
+        wait_until(given_up, timeout=cell.config.timeouts.heartbeat_s + JOB_TIMEOUT_S, interval=0.05,
+                   what=f"the daemon to give up on {worker_id}")
     finally:
         os.kill(worker.pid, signal.SIGCONT)
     finals = [cell.wait(job_id) for job_id in ids]

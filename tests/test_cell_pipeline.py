@@ -17,14 +17,14 @@ from robocell.wire.errors import RemoteError
 from robocell.wire.client import AsyncCellClient
 from robocell.wire.messages import JobEvent, JobState, PickRequest
 
-from tests.cell_fixtures import cell_config, running_cell, wait_for_footer, wait_until
+from tests.cell_fixtures import SMALL_CAMERA, cell_config, running_cell, wait_for_footer, wait_until
 
 MOVE_TIME_S = 0.25
 
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("cell-pipeline"), cell_id="pipeline",
+    config = cell_config(tmp_path_factory.mktemp("cell-pipeline"), cell_id="pipeline", camera=SMALL_CAMERA,
                          robot={"move_time_s": MOVE_TIME_S}, timeouts={"outage_s": 5.0})
     with running_cell(config) as running:
         yield running

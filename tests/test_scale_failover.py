@@ -21,7 +21,7 @@ import pytest
 from robocell.wire.messages import JobState
 from robocell.wire.transport import RequestError
 
-from tests.cell_fixtures import (START_TIMEOUT_S, InProcessWorker, RunningCell, cell_config, running_cell,
+from tests.cell_fixtures import (SMALL_CAMERA, START_TIMEOUT_S, InProcessWorker, RunningCell, cell_config, running_cell,
                                  wait_until)
 
 HEARTBEAT_S = 1.0
@@ -30,7 +30,8 @@ HEARTBEAT_S = 1.0
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     # A snapshot may take seconds on a loaded machine: this file is about the reconstruction pool.
-    config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover", camera={"timeout_s": 15.0},
+    config = cell_config(tmp_path_factory.mktemp("scale-failover"), cell_id="failover",
+                         camera={**SMALL_CAMERA, "timeout_s": 15.0},
                          timeouts={"heartbeat_s": HEARTBEAT_S, "reconstruct_s": 20.0, "outage_s": 5.0},
                          reconstruct={"max_attempts": 3})
     # The victim alone at first: the first test's job can go nowhere else. The others join there.
