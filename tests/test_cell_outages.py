@@ -53,15 +53,11 @@ def test_a_robot_worker_away_for_a_while_costs_no_job(cell):
 
 
 def test_a_camera_restarted_costs_no_job(cell):
-    """The simulated camera (an HTTP server) is away until a job has found it so: the camera worker,
-    still up, answers that it cannot connect, and the daemon tries again until the camera is back."""
+    """The simulated camera (an HTTP server) is away for 3 s: the camera worker, still up, answers
+    that it cannot connect, and the daemon tries again until the camera is back."""
     ids = [cell.submit(label=f"camera away {k}").job_id for k in range(3)]
     cell.loop.run(cell.processes.stop_child("sim-camera"))
-
-    def camera_missed() -> bool:
-        return any("then trying again" in e.message for job_id in ids for e in cell.events(job_id))
-
-    wait_until(camera_missed, timeout=JOB_TIMEOUT_S, interval=0.05, what="a job to find the camera away")
+    time.sleep(3.0)
     cell.loop.run(cell.processes.start_child("sim-camera"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]
     assert [f.state for f in finals] == [JobState.SUCCEEDED] * 3, [f.error for f in finals]
