@@ -50,7 +50,9 @@ that explains the silhouettes as well.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -136,10 +138,16 @@ class _Rasters:
 
     def __init__(self, cameras, silhouettes, boxes, unsure=None) -> None:
         self.cameras, self.silhouettes, self.boxes = list(cameras), list(silhouettes), list(boxes)
-        # Per view, the pixels whose side the segmentation cannot confirm (None: every pixel is sure).
-        self.unsure = [None] * len(self.cameras) if unsure is None else list(unsure)
+        self._unsure = unsure
         self._parts: tuple[Superquadric, ...] = ()
         self._drawn: list = []
+
+    @cached_property
+    def unsure(self) -> list:
+        """Per view, the pixels whose side the segmentation cannot confirm (None: every pixel is sure),
+        found once a part is to pay, if ``unsure`` came as the function that finds them."""
+        unsure = self._unsure() if callable(self._unsure) else self._unsure
+        return [None] * len(self.cameras) if unsure is None else list(unsure)
 
     def drawn(self, parts) -> list:
         """Per view, ``hull_covers`` of the parts' projections."""
@@ -271,7 +279,7 @@ def _volume(parts) -> float:
 
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
               support_plane=None, max_parts: int = MAX_PARTS, single_evaluations: int | None = None,
-              unsure=None) -> PartsFit:
+              unsure: Sequence | Callable[[], Sequence] | None = None) -> PartsFit:
     """The union of superquadrics that explains the silhouettes, from the one-superquadric fit.
 
     Parameters
@@ -296,10 +304,11 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         The evaluations of the cost the one superquadric took: proposals left behind by a round go
         on only while the search has taken fewer than ``_BUDGET`` times as many (each part of a
         union counted); without it, while they leave the silhouettes unexplained.
-    unsure : sequence of ((H, W) ndarray of bool or None), optional
+    unsure : sequence of ((H, W) ndarray of bool or None), or a function returning one, optional
         Per view, the pixels whose side the segmentation cannot confirm
         (:func:`core_cy.auto_segment.unsure_pixels`); None for a view whose silhouette is sure (a
-        mask given). A part must pay with them set aside as well as with them as they are.
+        mask given). A part must pay with them set aside as well as with them as they are. A
+        function is called only if a part could pay (most objects are one part, decided before).
 
     Returns
     -------

@@ -179,6 +179,16 @@ def decode_image(data: bytes, *, grayscale: bool = False, view: int | None = Non
     return image
 
 
+def _unsure(view: View, image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+    """The pixels of auto's ``silhouette`` of ``view`` that its colours cannot confirm
+    (:func:`core_cy.auto_segment.unsure_pixels`), on the ideal pinhole camera's grid as the silhouettes
+    the fit sees."""
+    doubtful = unsure_pixels(image, silhouette)
+    if view.camera.dist is None:
+        return doubtful
+    return undistort_mask(np.where(doubtful, 255, 0).astype(np.uint8), view.camera) > 0
+
+
 def _decoded(index: int, view: View) -> tuple[np.ndarray, bool]:
     """The view's mask if it has one (True), else its image (False), as an array."""
     is_mask = view.mask is not None
@@ -238,9 +248,6 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         last = now
 
     silhouettes, boxes, edges = [], [], []
-    # Per view, the pixels of auto's silhouette that its colours cannot confirm (None for a mask given):
-    # a part must pay on the rest too.
-    unsure: list[np.ndarray | None] = []
     evaluations: dict[str, int] = {}
     decoded = [_decoded(index, view) for index, view in enumerate(views)]
     found: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -264,17 +271,12 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             silhouette, outline = found[index]
         else:
             silhouette, outline = segment_with_outline(data, segmentation, view=index)
-        doubtful = (unsure_pixels(data, silhouette)
-                    if index in found and options.silhouette_fit and options.max_parts > 1 else None)
         if view.camera.dist is None:
             silhouettes.append(silhouette)
             boxes.append(cv2.boundingRect(outline))
         else:
             silhouettes.append(undistort_mask(silhouette, view.camera))
             boxes.append(cv2.boundingRect(silhouettes[-1]))
-            if doubtful is not None:
-                doubtful = undistort_mask(np.where(doubtful, 255, 0).astype(np.uint8), view.camera) > 0
-        unsure.append(doubtful)
         lap("segment")
         if options.silhouette_fit:
             edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
@@ -344,7 +346,11 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
                           support_plane=plane, max_parts=options.max_parts,
-                          single_evaluations=evaluations["fit"], unsure=unsure)
+                          single_evaluations=evaluations["fit"],
+                          # The pixels of auto's silhouettes that their colours cannot confirm, found only if
+                          # a part could pay: it must pay on the rest too.
+                          unsure=lambda: [_unsure(view, decoded[index][0], found[index][0]) if index in found
+                                          else None for index, view in enumerate(views)])
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
