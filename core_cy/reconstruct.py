@@ -280,7 +280,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         lap("segment")
         if options.silhouette_fit:
             edges.append(edge_samples(outline, silhouette, None if is_mask else data, count=options.edge_samples,
-                                      camera=view.camera, on_edge=segmentation.method == "auto"))
+                                      camera=view.camera, on_edge=index in found))
             lap("edges")
     cameras = [view.camera for view in views]
     centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
