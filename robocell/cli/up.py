@@ -7,9 +7,10 @@ camera there.
 
 The children share one configuration, written as JSON into the run directory
 (every ``--config`` option reads TOML or JSON). Their logs go to
-``<run dir>/logs/<name>.log``. Stopping sends SIGTERM in reverse start
-order, waits, and kills what is left. Each child leads a process group of
-its own; once it has stopped, whatever is left in its group is killed too.
+``<run dir>/logs/<name>.log``. Stopping sends SIGTERM to the daemon first,
+then to every worker at once, then to the router; it waits for each, and
+kills what is left. Each child leads a process group of its own; once it
+has stopped, whatever is left in its group is killed too.
 """
 
 from __future__ import annotations
@@ -288,7 +289,7 @@ class CellProcesses:
         return next(c for c in self.children if c.name == name)
 
     async def stop(self) -> None:
-        """Stop every child, in reverse start order.
+        """Stop every child: the daemon, then the workers, then the router.
 
         Once begun, the stop goes on to its end even if the caller is cancelled meanwhile (a
         second Ctrl-C, say): every wait in it is time-limited, and a stop cut short would leave
@@ -307,8 +308,14 @@ class CellProcesses:
             raise asyncio.CancelledError
 
     async def _stop_all(self) -> None:
-        for child in reversed(self.children):
-            await self._stop(child, signal.SIGTERM)
+        # The daemon first: it commands the robot no further, and ends its jobs while the workers still
+        # answer. The workers need nothing of each other to stop, and each takes a moment to end its
+        # Zenoh session: together. The router last, so that every session closes cleanly.
+        daemons = [child for child in self.children if child.name == "daemon"]
+        routers = [child for child in self.children if child.name == "router"]
+        workers = [child for child in self.children if child not in daemons and child not in routers]
+        for group in (daemons, workers, routers):
+            await asyncio.gather(*(self._stop(child, signal.SIGTERM) for child in group))
 
     def kill_remaining(self) -> list[str]:
         """Kill, at once, every child (and its process group) still running: the last resort of a
