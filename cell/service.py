@@ -6,7 +6,6 @@ import asyncio
 import logging
 
 from robocell.wire.config import CellConfig
-from .daemon import CellDaemon
 from robocell.wire.process import open_transport, run_until_stopped
 from robocell.wire.transport import Transport
 
@@ -44,6 +43,10 @@ def _roles_summary(config: CellConfig) -> str:
 def run_daemon(config: CellConfig, *, view: str | None = None) -> int:
     """The cell daemon, with its job store in the run directory; ``view``: a Rerun viewer's gRPC URL
     every job is streamed to as it happens."""
+    # Here, not at the top: a router needs none of the daemon (its steps, the core it checks answers
+    # with), and every cell start waits for the router.
+    from .daemon import CellDaemon
+
     async def run(stop: asyncio.Event) -> None:
         transport = await open_transport(config, role="daemon")
         try:

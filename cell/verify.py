@@ -78,7 +78,7 @@ from robocell.core_cy.gripper import Gripper
 from robocell.core_cy.model_check import grasp_problem, model_iou
 from robocell.core_cy.segment import Segmentation, segment
 from robocell.core_cy.superquadric import Superquadric as CoreSuperquadric
-from robocell.wire.bundle import core_segmentation
+from robocell.wire.segmentation import core_segmentation
 from robocell.wire.config import CellConfig
 from robocell.wire.messages import Grasp, Reconstruction, ReconstructRequest, Superquadric
 

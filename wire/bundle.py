@@ -19,20 +19,21 @@ import stat
 from pathlib import Path, PurePosixPath
 
 import numpy as np
-from typing import Annotated, Literal, Union
+from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from robocell.core_cy.camera import Camera
 from robocell.core_cy.errors import CoreError
 from robocell.core_cy.images import MAX_IMAGE_PIXELS, check_calibrated_size, checked_size
 from robocell.core_cy.reconstruct import View
-from robocell.core_cy.segment import AUTO, Segmentation
+from robocell.core_cy.segment import Segmentation
 
 from .errors import BundleError
 from .messages import field_errors
+from .segmentation import SegmentationSpec, StrictSpec, core_segmentation
 
-__all__ = ["ScanJson", "ViewSpec", "CandidateSpec", "MAX_CANDIDATES", "SegmentationSpec", "Bundle", "load_bundle", "core_segmentation",
+__all__ = ["ScanJson", "ViewSpec", "CandidateSpec", "MAX_CANDIDATES", "Bundle", "load_bundle",
            "MAX_SCAN_JSON_BYTES", "MAX_VIEWS", "MAX_BUNDLE_BYTES", "MAX_BUNDLE_PIXELS", "MAX_IMAGE_PIXELS"]
 
 #: scan.json is read only up to this size: 64 views at full precision take about 100 kB.
@@ -49,31 +50,9 @@ MAX_BUNDLE_PIXELS = 256_000_000
 
 Row3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Row4 = Annotated[list[float], Field(min_length=4, max_length=4)]
-HSV = Annotated[list[Annotated[int, Field(ge=0, le=255)]], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    # A misspelt key would otherwise be ignored and silently change the result.
-    model_config = ConfigDict(extra="forbid")
-
-
-class AutoSegmentation(_Strict):
-    method: Literal["auto"]
-
-
-class HsvSegmentation(_Strict):
-    method: Literal["hsv"]
-    lower: HSV
-    upper: HSV
-
-
-class ThresholdSegmentation(_Strict):
-    method: Literal["threshold"]
-    value: Annotated[int, Field(ge=0, le=255)]
-    invert: bool = False
-
-
-class ViewSpec(_Strict):
+class ViewSpec(StrictSpec):
     image: str | None = None
     mask: str | None = None
     K: Annotated[list[Row3], Field(min_length=3, max_length=3)]
@@ -89,36 +68,7 @@ class ViewSpec(_Strict):
         return self
 
 
-SegmentationSpec = Annotated[Union[AutoSegmentation, HsvSegmentation, ThresholdSegmentation],
-                             Field(discriminator="method")]
-_SEGMENTATION_SPEC = TypeAdapter(SegmentationSpec | None)
-
-
-def core_segmentation(spec: dict | AutoSegmentation | HsvSegmentation | ThresholdSegmentation | None
-                      ) -> Segmentation:
-    """The core's Segmentation for a scan.json ``segmentation`` (None: ``auto``, the default).
-
-    Raises
-    ------
-    ValueError
-        If a dict does not follow the scan.json format (the message names the field).
-    CoreError
-        If a bound is out of its range.
-    """
-    if isinstance(spec, dict):
-        try:
-            spec = _SEGMENTATION_SPEC.validate_python(spec)
-        except ValidationError as exc:
-            raise ValueError(f"segmentation: {field_errors(exc, whole='segmentation')}") from None
-    if spec is None or isinstance(spec, AutoSegmentation):
-        return AUTO
-    if isinstance(spec, HsvSegmentation):
-        (h0, s0, v0), (h1, s1, v1) = spec.lower, spec.upper
-        return Segmentation("hsv", lower=(h0, s0, v0), upper=(h1, s1, v1))
-    return Segmentation("threshold", value=spec.value, invert=spec.invert)
-
-
-class CandidateSpec(_Strict):
+class CandidateSpec(StrictSpec):
     """A pose the next view could be taken from (``robocell reconstruct --next-view``)."""
 
     K: Annotated[list[Row3], Field(min_length=3, max_length=3)]
@@ -126,7 +76,7 @@ class CandidateSpec(_Strict):
     T_world_cam: Annotated[list[Row4], Field(min_length=4, max_length=4)]
 
 
-class ScanJson(_Strict):
+class ScanJson(StrictSpec):
     """The content of scan.json."""
 
     views: Annotated[list[ViewSpec], Field(max_length=MAX_VIEWS)]

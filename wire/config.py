@@ -156,7 +156,7 @@ class ScanConfig(Section):
     @field_validator("segmentation")
     @classmethod
     def _known_segmentation(cls, value: dict | None) -> dict | None:
-        from .bundle import core_segmentation
+        from .segmentation import core_segmentation
 
         core_segmentation(value)  # a ValueError naming the field
         return value

@@ -235,7 +235,7 @@ class ScanRequest(ClientRequest):
     @model_validator(mode="after")
     def _one_kind_of_views(self) -> "ScanRequest":
         if self.segmentation is not None:
-            from .bundle import core_segmentation
+            from .segmentation import core_segmentation
 
             core_segmentation(self.segmentation)  # a ValueError naming the field
         if (self.flange_poses is None) == (self.target is None):

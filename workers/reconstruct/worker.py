@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from robocell.wire import keys
-from robocell.wire.bundle import core_segmentation
+from robocell.wire.segmentation import core_segmentation
 from robocell.wire.config import CellConfig
 from robocell.wire.errors import TransportError
 from robocell.wire.messages import (POINTS_ENCODING, Blob, Grasp, NextViewAnswer, Reconstruction, ReconstructReply,
