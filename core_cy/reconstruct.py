@@ -14,7 +14,7 @@ import numpy as np
 
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
-from .edges import edge_samples
+from .edges import edge_samples, samples_near
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
@@ -312,7 +312,14 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                       + [upright for upright, tilt in rested if tilt >= _RESTING_TILT]
                       + [upright_box(points, plane[:3])])
         lap("start")
-        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane)
+        # The pixels of auto's silhouettes that their colours cannot confirm (a mask's are all sure), and the
+        # edge samples on them: a stretch of one view's outline there may be a shadow taken in or a dark
+        # face left out, and the other views decide.
+        unsure = [_unsure(view, decoded[index][0], found[index][0]) if index in found else None
+                  for index, view in enumerate(views)]
+        doubtful = [None if pixels is None else samples_near(samples, pixels)
+                    for samples, pixels in zip(edges, unsure)]
+        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
         lap("fit")
@@ -328,7 +335,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             if agreement:
                 _, agreeing = max(agreement, key=lambda pair: pair[0])
                 restart = fit_to_silhouettes(agreeing, cameras, edges, support_plane=plane,
-                                             max_iterations=_RESTART_ITERATIONS)
+                                             max_iterations=_RESTART_ITERATIONS, doubtful=doubtful)
                 evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
@@ -346,11 +353,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
                           support_plane=plane, max_parts=options.max_parts,
-                          single_evaluations=evaluations["fit"],
-                          # The pixels of auto's silhouettes that their colours cannot confirm, found only if
-                          # a part could pay: it must pay on the rest too.
-                          unsure=lambda: [_unsure(view, decoded[index][0], found[index][0]) if index in found
-                                          else None for index, view in enumerate(views)])
+                          # A part must pay on the pixels auto is sure of too.
+                          single_evaluations=evaluations["fit"], unsure=unsure)
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)
