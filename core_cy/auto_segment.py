@@ -875,7 +875,7 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     return [_refined(view, mask) for view, mask in zip(views, masks)]
 
 
-def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+def unsure_pixels(image: np.ndarray, silhouette: np.ndarray, asked: np.ndarray | None = None) -> np.ndarray:
     """(H, W) bool: the pixels about ``silhouette`` whose side its colours cannot confirm (issue 21).
 
     They are those clearly darker than the table (:data:`_SHADE_CLEAR`): inside the silhouette, those
@@ -892,6 +892,9 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
         The view's BGR photograph, on the silhouette's pixel grid.
     silhouette : (H, W) ndarray of uint8
         Nonzero on the object, as :func:`auto_silhouettes` draws it.
+    asked : (H, W) ndarray of bool, optional
+        Only these pixels are asked about (the others come back sure): each is judged as it would be
+        among all.
 
     Raises
     ------
@@ -922,7 +925,7 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
     table_colour = np.median(table, axis=0).astype(np.float64)
     brightness = table.sum(axis=1, dtype=np.float64)
     spread = np.median(np.abs(brightness - np.median(brightness)))
-    rows, columns = np.nonzero(near)
+    rows, columns = np.nonzero(near if asked is None else near & asked[y0:y1, x0:x1])
     colours = window[rows, columns].astype(np.float64)
     darker = colours.sum(axis=1) < np.median(brightness) - _SHADE_CLEAR * spread
     # Inside, darker than the deepest shadow the table takes (under the object's foot): no colour is left

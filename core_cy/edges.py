@@ -20,7 +20,7 @@ from ._edges_cy import edge_crossings
 from .camera import Camera
 from .errors import SilhouetteError
 
-__all__ = ["edge_samples", "samples_near", "silhouette_outline"]
+__all__ = ["about_samples", "edge_samples", "samples_near", "silhouette_outline"]
 
 # Half-length of the profile across the edge, px: the segmented outline lies within a pixel or two of
 # the edge, and the colours at the profile's ends (its outer pixel) must be the object's and the background's.
@@ -146,6 +146,15 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
         points = np.asarray(cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K),
                             dtype=np.float64).reshape(-1, 2)
     return points
+
+
+def about_samples(samples: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: the pixels :func:`samples_near` looks at to judge each of ``samples``."""
+    about = np.zeros(shape, np.uint8)
+    radius = int(np.ceil(_NEAR_PX)) + _BLUR_PX  # the opening looks a blur's width farther
+    for column, row in np.round(np.asarray(samples, dtype=np.float64).reshape(-1, 2)).astype(np.intp):
+        cv2.circle(about, (int(column), int(row)), radius, 1, -1)
+    return about > 0
 
 
 def samples_near(samples: np.ndarray, pixels: np.ndarray, reach: float = _NEAR_PX) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
-from .edges import edge_samples, samples_near
+from .edges import about_samples, edge_samples, samples_near
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
@@ -179,13 +179,14 @@ def decode_image(data: bytes, *, grayscale: bool = False, view: int | None = Non
     return image
 
 
-def _unsure(view: View, image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+def _unsure(view: View, image: np.ndarray, silhouette: np.ndarray, samples: np.ndarray | None = None) -> np.ndarray:
     """The pixels of auto's ``silhouette`` of ``view`` that its colours cannot confirm
     (:func:`core_cy.auto_segment.unsure_pixels`), on the ideal pinhole camera's grid as the silhouettes
-    the fit sees."""
-    doubtful = unsure_pixels(image, silhouette)
+    the fit sees; with ``samples`` (edge samples on that grid), only those that judge them need be
+    asked about (without lens distortion, where the grids are one)."""
     if view.camera.dist is None:
-        return doubtful
+        return unsure_pixels(image, silhouette, None if samples is None else about_samples(samples, silhouette.shape))
+    doubtful = unsure_pixels(image, silhouette)
     return undistort_mask(np.where(doubtful, 255, 0).astype(np.uint8), view.camera) > 0
 
 
@@ -315,10 +316,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         # The pixels of auto's silhouettes that their colours cannot confirm (a mask's are all sure), and the
         # edge samples on them: a stretch of one view's outline there may be a shadow taken in or a dark
         # face left out, and the other views decide.
-        unsure = [_unsure(view, decoded[index][0], found[index][0]) if index in found else None
-                  for index, view in enumerate(views)]
-        doubtful = [None if pixels is None else samples_near(samples, pixels)
-                    for samples, pixels in zip(edges, unsure)]
+        doubtful = [samples_near(edges[index], _unsure(view, decoded[index][0], found[index][0], edges[index]))
+                    if index in found else None for index, view in enumerate(views)]
         fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
@@ -353,8 +352,11 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
                           support_plane=plane, max_parts=options.max_parts,
-                          # A part must pay on the pixels auto is sure of too.
-                          single_evaluations=evaluations["fit"], unsure=unsure)
+                          single_evaluations=evaluations["fit"],
+                          # The pixels of auto's silhouettes that their colours cannot confirm, found only if
+                          # a part could pay: it must pay on the rest too.
+                          unsure=lambda: [_unsure(view, decoded[index][0], found[index][0]) if index in found
+                                          else None for index, view in enumerate(views)])
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     residual = radial_residual(superquadric, points)

@@ -505,6 +505,10 @@ def test_a_shadow_darker_than_the_table_s_deepest_taken_in_is_unsure():
     unsure = unsure_pixels(image, silhouette)
     assert unsure[140:150, 60:140].all()
     assert not unsure[60:140, 60:140].any()
+    # Asked about some pixels only (those about the fit's edge samples), each is judged as among all.
+    asked = np.zeros((200, 300), bool)
+    asked[130:160, 50:100] = True
+    np.testing.assert_array_equal(unsure_pixels(image, silhouette, asked), unsure & asked)
 
 
 def test_a_top_of_the_table_s_colour_and_light_is_found_with_the_empty_workspace_too(tmp_path):
