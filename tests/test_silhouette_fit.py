@@ -302,7 +302,9 @@ def test_residuals_are_distances_to_the_outline_in_pixels():
     np.testing.assert_allclose(np.abs(residuals), np.abs(offsets), rtol=0.01)
 
 
-def test_normal_equations_match_central_differences():
+@pytest.mark.parametrize("doubting", [False, True])
+def test_normal_equations_match_central_differences(doubting):
+    """Every third sample doubtful, or none: the fading loss's gradient is J^T W r too."""
     truth, cameras, edges = _ideal_scan("rounded-box", 3)
     views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
     plane = np.array([0.0, 0.0, 1.0, 0.0])
@@ -311,14 +313,18 @@ def test_normal_equations_match_central_differences():
     JtJ, Jtr = np.empty((11, 11)), np.empty(11)
     problem.evaluate(x, JtJ, Jtr)
     problem.keep(True)
+    doubtful = (np.arange(views.count) % 3 == 0).astype(np.uint8) if doubting else None
     # With the planes held and no turning about the rays, the cost is smooth: its gradient is J^T W r.
     args = (problem.R0, problem.t0, problem.scale, problem.planes, 1.0, plane, 500.0, 0.0)
-    normal_equations(x, *args, JtJ, Jtr, True)
+    normal_equations(x, *args, JtJ, Jtr, True, None, doubtful)
     numeric = np.empty(11)
     for k in range(11):
         step = np.zeros(11)
         step[k] = 1e-6
-        numeric[k] = (normal_equations(x + step, *args, JtJ.copy(), Jtr.copy(), False)
-                      - normal_equations(x - step, *args, JtJ.copy(), Jtr.copy(), False)) / 2e-6
+        numeric[k] = (normal_equations(x + step, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)
+                      - normal_equations(x - step, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)) / 2e-6
     np.testing.assert_allclose(Jtr, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
     assert np.all(np.linalg.eigvalsh(JtJ) > -1e-9)  # J^T W J is positive semi-definite
+    if doubting:  # the doubtful samples' residuals of more than a pixel cost less than the others' would
+        assert (normal_equations(x, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)
+                < normal_equations(x, *args, JtJ.copy(), Jtr.copy(), False))
