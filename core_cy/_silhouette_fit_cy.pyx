@@ -712,7 +712,7 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                      const double[:, :, ::1] planes not None, double loss_scale,
                      const double[::1] support_plane not None, double plane_weight, double tilt,
                      double[:, ::1] JtJ not None, double[::1] Jtr not None, bint jacobian=True,
-                     Py_ssize_t[::1] owner=None):
+                     Py_ssize_t[::1] owner=None, const unsigned char[::1] doubtful=None):
     """Robust cost of the samples' residuals against a union of P parts and, with ``jacobian``,
     the Gauss-Newton normal equations of its 11 P parameters.
 
@@ -728,7 +728,11 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
     parts' (the part that reaches farthest past it answers for it, the first of those alike;
     ``owner[i]``, when given, gets which: the part tried first, the one that answered last
     time, is read from it and changes nothing but the time). The loss is ``c^2 (sqrt(1 + (r/c)^2) - 1)`` (c = ``loss_scale``, pixels):
-    quadratic for small residuals, linear for large ones. With ``plane_weight > 0`` each
+    quadratic for small residuals, linear for large ones. A sample marked in ``doubtful`` (one per
+    sample, when given) lies where the segmentation cannot confirm its silhouette's edge: its loss is
+    ``c^2 / 2 log(1 + (r/c)^2)``, alike for small residuals, but its pull fading as they grow past c,
+    so that a stretch of one view's outline far from what the other samples say (a shadow taken in,
+    a dark face left out) does not drag the model to it. With ``plane_weight > 0`` each
     part's reach below ``support_plane`` (n, d; unit n; the object where n . x + d >= 0),
     times ``plane_weight``, is one more residual under the same loss: the lowest part stands
     on the plane, touching it, and no other part reaches below it. Fills ``JtJ`` (11 P, 11 P)
@@ -762,6 +766,8 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
         raise ValueError("R0 must be (P, 3, 3), t0 (P, 3), scale (P,), planes (P, N, 9) and support_plane (4,)")
     if owner is not None and owner.shape[0] != n:
         raise ValueError("owner must have one entry per sample")
+    if doubtful is not None and doubtful.shape[0] != n:
+        raise ValueError("doubtful must have one entry per sample")
     for p in range(P):
         _rotation(R0[p], x[11 * p + 8], x[11 * p + 9], x[11 * p + 10], R[p], dR[p])
         for k in range(3):
@@ -842,8 +848,12 @@ def normal_equations(const double[::1] x not None, const double[:, :, ::1] R0 no
                     _support_derivatives(a[p], &x[base + 3], &exponents[p], &kept, dh_da, dh_de, dh_dv)
             else:
                 r = weight * _reach(a[p], &x[base + 3], t[p], R[p], m, offset, v, dh_da, dh_de, dh_dv)
-            root = sqrt(1.0 + r * r / c2)
-            cost += c2 * (root - 1.0)
+            if doubtful is not None and i < n and doubtful[i]:
+                root = 1.0 + r * r / c2  # the IRLS weight's inverse, as for the others
+                cost += 0.5 * c2 * log(root)
+            else:
+                root = sqrt(1.0 + r * r / c2)
+                cost += c2 * (root - 1.0)
             if not jacobian:
                 continue
             w = 1.0 / root

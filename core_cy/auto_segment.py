@@ -875,12 +875,13 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
     return [_refined(view, mask) for view, mask in zip(views, masks)]
 
 
-def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+def unsure_pixels(image: np.ndarray, silhouette: np.ndarray, asked: np.ndarray | None = None) -> np.ndarray:
     """(H, W) bool: the pixels about ``silhouette`` whose side its colours cannot confirm (issue 21).
 
     They are those clearly darker than the table (:data:`_SHADE_CLEAR`): inside the silhouette, those
     of the table's colour too (a shadow dims the table's light, not its colour: within
-    :data:`_TABLE_FAR` of it, or of it darkened), where a shadow may have been taken in; outside it, any
+    :data:`_TABLE_FAR` of it, or of it darkened), or darker than the deepest shadow the table takes
+    (:data:`_DEEPEST_SHADOW` of its brightness), where a shadow may have been taken in; outside it, any
     such, where a face of the object turned from the light may have been left out (in the dark, a face's
     colour tells it from a shadow's little). The table is the ring around the silhouette
     (:data:`_TABLE_RING`): its median colour, and its brightness's median and spread.
@@ -891,6 +892,9 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
         The view's BGR photograph, on the silhouette's pixel grid.
     silhouette : (H, W) ndarray of uint8
         Nonzero on the object, as :func:`auto_silhouettes` draws it.
+    asked : (H, W) ndarray of bool, optional
+        Only these pixels are asked about (the others come back sure): each is judged as it would be
+        among all.
 
     Raises
     ------
@@ -921,11 +925,14 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
     table_colour = np.median(table, axis=0).astype(np.float64)
     brightness = table.sum(axis=1, dtype=np.float64)
     spread = np.median(np.abs(brightness - np.median(brightness)))
-    rows, columns = np.nonzero(near)
+    rows, columns = np.nonzero(near if asked is None else near & asked[y0:y1, x0:x1])
     colours = window[rows, columns].astype(np.float64)
     darker = colours.sum(axis=1) < np.median(brightness) - _SHADE_CLEAR * spread
+    # Inside, darker than the deepest shadow the table takes (under the object's foot): no colour is left
+    # there to tell a shadow from a face turned from the light.
     doubtful = darker & ((inside[y0:y1, x0:x1][rows, columns] == 0)
-                         | (_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR))
+                         | (_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR)
+                         | (colours.sum(axis=1) < _DEEPEST_SHADOW * np.median(brightness)))
     unsure[rows[doubtful] + y0, columns[doubtful] + x0] = True
     return unsure
 

@@ -20,7 +20,7 @@ from ._edges_cy import edge_crossings
 from .camera import Camera
 from .errors import SilhouetteError
 
-__all__ = ["edge_samples", "silhouette_outline"]
+__all__ = ["about_samples", "edge_samples", "samples_near", "silhouette_outline"]
 
 # Half-length of the profile across the edge, px: the segmented outline lies within a pixel or two of
 # the edge, and the colours at the profile's ends (its outer pixel) must be the object's and the background's.
@@ -38,6 +38,12 @@ _MASK_BLUR_PX = 1.2
 _MASK_MARGIN = 8
 # An image crossing this far (px) from a silhouette's edge placed on the image's step is another step.
 _ON_EDGE_PX = 0.5
+# A sample lies on the pixels whose centres lie this near (px): those either side of the edge it marks,
+# the edge placed to within a pixel or two (_REACH_PX's profile).
+_NEAR_PX = 2.0
+# A run of pixels narrower than this (px) along an outline is its blur, the object's colour mixed with the
+# background's (a dark object's rim on a light table is darker than the table), no stretch of the outline.
+_BLUR_PX = 3
 
 
 def silhouette_outline(silhouette: np.ndarray) -> np.ndarray:
@@ -140,3 +146,39 @@ def edge_samples(outline: np.ndarray, silhouette: np.ndarray, image: np.ndarray 
         points = np.asarray(cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K),
                             dtype=np.float64).reshape(-1, 2)
     return points
+
+
+def about_samples(samples: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: the pixels :func:`samples_near` looks at to judge each of ``samples``."""
+    about = np.zeros(shape, np.uint8)
+    radius = int(np.ceil(_NEAR_PX)) + _BLUR_PX  # the opening looks a blur's width farther
+    for column, row in np.round(np.asarray(samples, dtype=np.float64).reshape(-1, 2)).astype(np.intp):
+        cv2.circle(about, (int(column), int(row)), radius, 1, -1)
+    return about > 0
+
+
+def samples_near(samples: np.ndarray, pixels: np.ndarray, reach: float = _NEAR_PX) -> np.ndarray:
+    """(N,) bool: whether ``pixels`` ((H, W) bool) reach within ``reach`` (px) of each sample ((N, 2)
+    column, row, as :func:`edge_samples` gives them), where they are more than an edge's blur wide
+    (:data:`_BLUR_PX`): a thin run along the outline is the edge itself.
+
+    >>> pixels = np.zeros((40, 40), bool)
+    >>> pixels[10:20, 10:20] = True  # a patch
+    >>> pixels[30, 5:35] = True  # a one-pixel line
+    >>> samples_near(np.array([[21.0, 15.0], [25.0, 15.0], [20.0, 30.5]]), pixels).tolist()
+    [True, False, False]
+    """
+    samples = np.asarray(samples, dtype=np.float64).reshape(-1, 2)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (_BLUR_PX, _BLUR_PX))
+    pixels = cv2.morphologyEx(pixels.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
+    span = int(np.ceil(reach)) + 1
+    dy, dx = np.mgrid[-span:span + 1, -span:span + 1]
+    near = np.zeros(len(samples), bool)
+    height, width = pixels.shape
+    base = np.round(samples).astype(np.intp)
+    for ox, oy in zip(dx.ravel(), dy.ravel()):
+        column, row = base[:, 0] + ox, base[:, 1] + oy
+        inside = (column >= 0) & (row >= 0) & (column < width) & (row < height)
+        close = inside & (np.hypot(column - samples[:, 0], row - samples[:, 1]) <= reach)
+        near[close] |= pixels[row[close], column[close]]
+    return near

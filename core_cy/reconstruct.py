@@ -14,7 +14,7 @@ import numpy as np
 
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
-from .edges import edge_samples
+from .edges import about_samples, edge_samples, samples_near
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
@@ -179,13 +179,14 @@ def decode_image(data: bytes, *, grayscale: bool = False, view: int | None = Non
     return image
 
 
-def _unsure(view: View, image: np.ndarray, silhouette: np.ndarray) -> np.ndarray:
+def _unsure(view: View, image: np.ndarray, silhouette: np.ndarray, samples: np.ndarray | None = None) -> np.ndarray:
     """The pixels of auto's ``silhouette`` of ``view`` that its colours cannot confirm
     (:func:`core_cy.auto_segment.unsure_pixels`), on the ideal pinhole camera's grid as the silhouettes
-    the fit sees."""
-    doubtful = unsure_pixels(image, silhouette)
+    the fit sees; with ``samples`` (edge samples on that grid), only those that judge them need be
+    asked about (without lens distortion, where the grids are one)."""
     if view.camera.dist is None:
-        return doubtful
+        return unsure_pixels(image, silhouette, None if samples is None else about_samples(samples, silhouette.shape))
+    doubtful = unsure_pixels(image, silhouette)
     return undistort_mask(np.where(doubtful, 255, 0).astype(np.uint8), view.camera) > 0
 
 
@@ -312,7 +313,12 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                       + [upright for upright, tilt in rested if tilt >= _RESTING_TILT]
                       + [upright_box(points, plane[:3])])
         lap("start")
-        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane)
+        # The pixels of auto's silhouettes that their colours cannot confirm (a mask's are all sure), and the
+        # edge samples on them: a stretch of one view's outline there may be a shadow taken in or a dark
+        # face left out, and the other views decide.
+        doubtful = [samples_near(edges[index], _unsure(view, decoded[index][0], found[index][0], edges[index]))
+                    if index in found else None for index, view in enumerate(views)]
+        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
         lap("fit")
@@ -328,7 +334,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             if agreement:
                 _, agreeing = max(agreement, key=lambda pair: pair[0])
                 restart = fit_to_silhouettes(agreeing, cameras, edges, support_plane=plane,
-                                             max_iterations=_RESTART_ITERATIONS)
+                                             max_iterations=_RESTART_ITERATIONS, doubtful=doubtful)
                 evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):

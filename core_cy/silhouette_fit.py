@@ -16,7 +16,11 @@ closed form.
 Every sample of every view is one residual under the same robust loss, so a
 view added is evidence added, with nothing to retune; the support plane, when
 given, is one more tangent plane (the object stands on it). Levenberg-Marquardt
-from a start (the point fit) minimises the sum.
+from a start (the point fit) minimises the sum. A sample where the segmentation
+cannot confirm the edge (``auto``'s unsure pixels: a shadow taken in, a dark face
+left out) counts alike while near the model's outline, but its pull fades as it
+lies farther: one view's doubtful stretch of outline cannot drag the model from
+what the other views say.
 """
 
 from __future__ import annotations
@@ -110,11 +114,14 @@ class _Views:
     Rs: np.ndarray  # (V, 3, 3) camera to world
     pixels_per_unit: np.ndarray  # (V,) 1 / the object's depth
     rays: np.ndarray  # (N, 3) each sample's ray, a unit direction in the world
+    doubtful: np.ndarray | None  # (N,) uint8, 1 where the segmentation cannot confirm the edge; None: no such sample
 
     @classmethod
-    def pack(cls, cameras, edges, reference: np.ndarray) -> _Views:
+    def pack(cls, cameras, edges, reference: np.ndarray, doubtful=None) -> _Views:
         projections, centres, packed, samples, rows, scales, row = [], [], [], [], [], [], 0
-        for camera, view_samples in zip(cameras, edges):
+        doubts = []
+        doubtful = [None] * len(edges) if doubtful is None else list(doubtful)
+        for camera, view_samples, view_doubts in zip(cameras, edges, doubtful):
             view_samples = np.ascontiguousarray(view_samples, dtype=np.float64).reshape(-1, 2)
             (_, depth) = camera.project(reference[None])
             if depth[0] <= 0:
@@ -127,6 +134,8 @@ class _Views:
             packed.append((camera.K, np.ascontiguousarray(camera.T_world_cam[:3, :3]),
                            np.ascontiguousarray(camera.center), 1.0 / depth[0]))
             samples.append(view_samples)
+            doubts.append(np.zeros(len(view_samples), np.uint8) if view_doubts is None
+                          else np.asarray(view_doubts, dtype=bool).astype(np.uint8))
             rows.append(slice(row, row + len(view_samples)))
             row += len(view_samples)
         all_samples = np.ascontiguousarray(np.concatenate(samples) if samples else np.empty((0, 2)))
@@ -136,7 +145,8 @@ class _Views:
         return cls(np.ascontiguousarray(projections).reshape(-1, 3, 4), np.ascontiguousarray(centres).reshape(-1, 3),
                    packed, samples, rows, row, float(np.mean(scales)), all_samples, starts, Ks, Rs,
                    np.array([scale for _, _, _, scale in packed], dtype=np.float64),
-                   sample_rays(all_samples, starts, Ks, Rs))
+                   sample_rays(all_samples, starts, Ks, Rs),
+                   np.concatenate(doubts) if any(doubt.any() for doubt in doubts) else None)
 
 
 class _Problem:
@@ -190,7 +200,7 @@ class _Problem:
                            self.grid, self.uv, self.counts, planes):
             return np.inf  # a part reaches behind a camera, or its outline in a view is no polygon
         return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
-                                self.plane_weight, _TILT, JtJ, Jtr, True, self.owner)
+                                self.plane_weight, _TILT, JtJ, Jtr, True, self.owner, views.doubtful)
 
     def keep(self, accepted: bool) -> None:
         if accepted:
@@ -212,10 +222,10 @@ def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
 class _Fitter:
     """The views packed once, and the settings every start shares: descents from starts."""
 
-    def __init__(self, cameras, edges, reference, support_plane, loss_scale: float):
+    def __init__(self, cameras, edges, reference, support_plane, loss_scale: float, doubtful=None):
         if len(cameras) != len(edges):
             raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
-        self.views = views = _Views.pack(cameras, edges, reference)
+        self.views = views = _Views.pack(cameras, edges, reference, doubtful)
         if views.count < 11:
             raise FitError(f"need at least 11 edge samples (one per parameter), got {views.count}")
         if support_plane is None:
@@ -293,7 +303,7 @@ def _first_part(start) -> Superquadric:
 
 
 def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
-                       max_iterations: int = 40) -> SilhouetteFit:
+                       max_iterations: int = 40, doubtful=None) -> SilhouetteFit:
     """Refine a model until its outline in every view runs through that view's edge samples.
 
     The model is one superquadric, or a union of parts: the union's outline is the
@@ -319,6 +329,11 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         ones linearly: the edge's noise, not a property of the views.
     max_iterations : int
         Levenberg-Marquardt steps at most, after the choice among the starts.
+    doubtful : sequence of ((N_i,) array_like of bool or None), optional
+        Per view, the samples whose edge the segmentation cannot confirm (``auto``'s, on its
+        unsure pixels: :func:`core_cy.auto_segment.unsure_pixels`): their pull fades as they lie
+        farther from the model's outline, so that a stretch of one view's outline that the
+        others contradict (a shadow taken in, a dark face left out) cannot drag the model.
 
     Returns
     -------
@@ -332,7 +347,8 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     starts = [starts] if isinstance(starts, Superquadric) else list(starts)
     if not starts:
         raise FitError("need at least one start")
-    fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale)
+    fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale,
+                     doubtful)
     best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
     descents = fitter.descents
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body

@@ -488,6 +488,29 @@ def test_unsure_pixels_are_the_table_s_shade_about_the_silhouette():
         unsure_pixels(image[:, :, 0], silhouette)
 
 
+def test_a_shadow_darker_than_the_table_s_deepest_taken_in_is_unsure():
+    """Under a lying can's side the table gets almost no light: a band there darker than any shadow the
+    table's colour is kept in (nearly black) that the silhouette took in is unsure, as a dark face would be
+    (no colour is left to tell them apart); a dark face with colour of its own inside stays sure."""
+    from robocell.core_cy.auto_segment import unsure_pixels
+
+    table = np.array([150, 140, 120], np.float64)
+    grain = np.random.default_rng(0).normal(1.0, 0.04, (200, 300, 1))
+    image = np.clip(np.round(table * grain), 0, 255).astype(np.uint8)
+    image[60:130, 60:140] = (30, 40, 200)  # the object
+    image[130:140, 60:140] = (70, 20, 10)  # its dark face
+    image[140:150, 60:140] = (6, 8, 10)  # the shadow under it, nearly black, taken in
+    silhouette = np.zeros((200, 300), np.uint8)
+    silhouette[60:150, 60:140] = 255
+    unsure = unsure_pixels(image, silhouette)
+    assert unsure[140:150, 60:140].all()
+    assert not unsure[60:140, 60:140].any()
+    # Asked about some pixels only (those about the fit's edge samples), each is judged as among all.
+    asked = np.zeros((200, 300), bool)
+    asked[130:160, 50:100] = True
+    np.testing.assert_array_equal(unsure_pixels(image, silhouette, asked), unsure & asked)
+
+
 def test_a_top_of_the_table_s_colour_and_light_is_found_with_the_empty_workspace_too(tmp_path):
     """A tall white-and-blue box on white laminate, with the empty workspace: from one view the box's white
     top changed hardly at all against the empty laminate, and the view left it out (0.88 before; 0.97 from

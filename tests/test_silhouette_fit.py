@@ -13,7 +13,7 @@ from robocell.workers.sim.scans import default_K, plan_views
 from robocell.core_cy._silhouette_fit_cy import (normal_equations, outline_points, part_planes, sample_rays,
                                                  tangent_planes)
 from robocell.core_cy.camera import Camera
-from robocell.core_cy.edges import edge_samples
+from robocell.core_cy.edges import edge_samples, samples_near, silhouette_outline
 from robocell.core_cy.errors import FitError
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.segment import mask_with_outline
@@ -144,6 +144,39 @@ def test_a_cylinder_started_on_its_side_is_turned_upright():
     assert volumetric_iou(fit.superquadric, truth) > 0.98
 
 
+def test_a_dark_band_one_view_left_out_on_unsure_pixels_does_not_pull_the_fit():
+    """A standing cylinder (a tin) whose first view's silhouette leaves out a dark band on one side (the
+    middle third of its height, nearly to its axis), as auto's can where the band is as dark as the shade
+    beside it: those pixels are unsure, and the samples on them are doubtful. Pulled by that stretch, the
+    fit ends about 0.975 off the truth (the band drawn in by a few tenths of a millimetre, the tin leaning);
+    with the samples doubtful, the two other views and the rest of the first decide, as they would
+    without the band."""
+    obj = _object("cylinder")
+    truth = Superquadric(obj.size, obj.shape, obj.T_world_object)
+    K = default_K()
+    cameras, edges, doubtful = [], [], []
+    for index, pose in enumerate(plan_views(obj.T_world_object[:3, 3], 3, distance=(0.5, 0.5),
+                                            elevation_deg=(45.0, 45.0), azimuth_start_deg=10.0)):
+        _, mask = render(obj, pose, K, noise_sigma=0.0)
+        silhouette, outline = mask_with_outline(mask, view=index)
+        unsure = np.zeros(silhouette.shape, bool)
+        if index == 0:
+            rows, columns = np.nonzero(silhouette)
+            top, height = rows.min(), rows.max() - rows.min()
+            left, width = columns.min(), columns.max() - columns.min()
+            unsure[int(top + height / 3):int(top + 2 * height / 3), :int(left + 0.45 * width)] = True
+            unsure &= silhouette > 0
+            silhouette = np.where(unsure, 0, silhouette).astype(np.uint8)
+            outline = silhouette_outline(silhouette)
+        cameras.append(Camera(K=K, T_world_cam=pose, view=index))
+        edges.append(edge_samples(outline, silhouette, count=48))
+        doubtful.append(samples_near(edges[-1], unsure))
+    assert 8 <= doubtful[0].sum() <= 20 and not doubtful[1].any() and not doubtful[2].any()
+    fit = fit_to_silhouettes(_perturbed(truth, seed=1), cameras, edges, support_plane=[0, 0, 1, 0],
+                             doubtful=doubtful)
+    assert volumetric_iou(fit.superquadric, truth) > 0.99
+
+
 def test_bad_input_is_refused():
     truth, cameras, edges = _ideal_scan("box", 3)
     with pytest.raises(FitError, match="2 sets of edge samples"):
@@ -269,7 +302,9 @@ def test_residuals_are_distances_to_the_outline_in_pixels():
     np.testing.assert_allclose(np.abs(residuals), np.abs(offsets), rtol=0.01)
 
 
-def test_normal_equations_match_central_differences():
+@pytest.mark.parametrize("doubting", [False, True])
+def test_normal_equations_match_central_differences(doubting):
+    """Every third sample doubtful, or none: the fading loss's gradient is J^T W r too."""
     truth, cameras, edges = _ideal_scan("rounded-box", 3)
     views = _Views.pack(cameras, edges, truth.T_world_object[:3, 3])
     plane = np.array([0.0, 0.0, 1.0, 0.0])
@@ -278,14 +313,18 @@ def test_normal_equations_match_central_differences():
     JtJ, Jtr = np.empty((11, 11)), np.empty(11)
     problem.evaluate(x, JtJ, Jtr)
     problem.keep(True)
+    doubtful = (np.arange(views.count) % 3 == 0).astype(np.uint8) if doubting else None
     # With the planes held and no turning about the rays, the cost is smooth: its gradient is J^T W r.
     args = (problem.R0, problem.t0, problem.scale, problem.planes, 1.0, plane, 500.0, 0.0)
-    normal_equations(x, *args, JtJ, Jtr, True)
+    normal_equations(x, *args, JtJ, Jtr, True, None, doubtful)
     numeric = np.empty(11)
     for k in range(11):
         step = np.zeros(11)
         step[k] = 1e-6
-        numeric[k] = (normal_equations(x + step, *args, JtJ.copy(), Jtr.copy(), False)
-                      - normal_equations(x - step, *args, JtJ.copy(), Jtr.copy(), False)) / 2e-6
+        numeric[k] = (normal_equations(x + step, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)
+                      - normal_equations(x - step, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)) / 2e-6
     np.testing.assert_allclose(Jtr, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
     assert np.all(np.linalg.eigvalsh(JtJ) > -1e-9)  # J^T W J is positive semi-definite
+    if doubting:  # the doubtful samples' residuals of more than a pixel cost less than the others' would
+        assert (normal_equations(x, *args, JtJ.copy(), Jtr.copy(), False, None, doubtful)
+                < normal_equations(x, *args, JtJ.copy(), Jtr.copy(), False))
