@@ -1937,7 +1937,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # no holes, so what the evidence encloses is the object's too.
         region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
     try:
-        cut = _graph_cut(view, region, score)
+        # Only this cut, of the view's own evidence, asks the shadow hidden from the other views: a view cut
+        # again within their hull, or into its bays, is to drop or add only what the hull says, and a face
+        # of the table's colour that this cut kept there is not to be asked again.
+        cut = _graph_cut(view, region, score, hidden_shadows=True)
     except SilhouetteError:
         cut = np.zeros_like(region)  # the colour models gave it all to the table: the evidence decides below
     standing_out = cv2.bitwise_and(region, differs)
@@ -2046,9 +2049,11 @@ _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
 def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None,
-               iterations: int | None = None) -> np.ndarray:
+               iterations: int | None = None, hidden_shadows: bool = False) -> np.ndarray:
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
-    evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
+    evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table.
+    ``hidden_shadows``: the pixels hidden from the other views that look like the shadow they confirm
+    (:func:`_hidden_shadow`) are seeded as table, not as object."""
     cw, ch = view.coarse_size
     x, y, w, h = cv2.boundingRect(region)
     margin = max(8, int(_CUT_MARGIN * max(w, h)))
@@ -2068,7 +2073,12 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
-        mask[low & _shadow_like(view.coarse[crop], low) & ~sure] = cv2.GC_BGD
+        shadow = low & _shadow_like(view.coarse[crop], low)
+        mask[shadow & ~sure] = cv2.GC_BGD
+        if hidden_shadows:
+            image = view.coarse[crop]
+            mask[_hidden_shadow(_table_darkened(image, low), image.sum(axis=2), shadow, score[crop] == _HIDDEN)] = \
+                cv2.GC_PR_BGD
     # The box's rim is outside the object (it was grown around it), unless it is the image's own edge.
     rim = np.zeros(mask.shape, bool)
     rim[[0, -1], :] = True
@@ -2105,8 +2115,51 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     chroma = pixels / brightness[:, None]
     table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
     table_brightness = median(brightness)
-    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
+    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < _SHADOW_DIMMER * table_brightness)
     return found
+
+
+def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """The ``hidden`` pixels (no other view sees their table point) that ``looks`` says look like a shadow
+    on the table, and whose ``brightness`` is no more than that of the ``shadow`` the other views confirm.
+
+    The strip of table under a lying can, and the part of a can's shadow behind it, are hidden from the
+    other views by the object itself, so nothing but their look tells them from the object; seeded as
+    object, the graph cut keeps them wherever the object's colour model holds a dark colour, as it does
+    for a dark can, or for any object's own shaded side. A face of the table's colour, or a white box's on
+    white laminate, turned from the lamp looks like the table in shadow too, but the lamp's light reaches
+    it in part, or more of the sky's: it is brighter than the shadow on the table beside it."""
+    # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for a
+    # shadow pixel by pixel, but not over a few pixels together.
+    shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+    if not np.any(shadow):
+        return np.zeros(hidden.shape, bool)
+    return hidden & looks & (brightness <= np.quantile(brightness[shadow], _SHADOW_BRIGHTEST))
+
+
+def _table_darkened(image: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels of the colour of the ``table`` pixels' median darkened, and darker than it.
+    A deep shadow's colour is a few grey levels, mostly noise: the colour is compared in grey levels (the
+    table's colour brought to the pixel's brightness), within a share of the brightness or
+    :data:`_SHADOW_TINT_FLOOR`, whichever is more."""
+    if not np.any(table):
+        return np.zeros(table.shape, bool)
+    table_colour = np.array([median(np.ascontiguousarray(image[..., k][table])) for k in range(3)], np.float32)
+    brightness = image.sum(axis=2)
+    darkened = table_colour * (brightness / max(float(table_colour.sum()), 1.0))[..., None]
+    tint = np.abs(image - darkened).sum(axis=2)
+    return ((tint < np.maximum(_SHADOW_TINT * brightness, _SHADOW_TINT_FLOOR))
+            & (brightness < _SHADOW_DIMMER * float(table_colour.sum())))
+
+
+#: A shadow's colour lies within this share of its brightness (summed over the channels) of the table's
+#: colour darkened alike, or within :data:`_SHADOW_TINT_FLOOR` grey levels: the sensor's noise and JPEG's.
+_SHADOW_TINT = 0.04
+_SHADOW_TINT_FLOOR = 6.0
+#: The confirmed shadow's brightness is taken at this quantile of its pixels: its soft edge is brighter.
+_SHADOW_BRIGHTEST = 0.9
+#: A shadow is darker than the table by this factor at least.
+_SHADOW_DIMMER = 0.92
 
 
 def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
