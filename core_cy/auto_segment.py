@@ -2053,8 +2053,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
     evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table.
     ``hidden_shadows``: the pixels hidden from the other views that look like the shadow they confirm
-    (:func:`_hidden_shadow`) are seeded as table, not as object, and those darker than the table but of
-    another colour than its shadow as object for sure."""
+    (:func:`_hidden_shadow`) are seeded as table, not as object (without a background), and those darker
+    than the table but of another colour than its shadow as object for sure."""
     cw, ch = view.coarse_size
     x, y, w, h = cv2.boundingRect(region)
     margin = max(8, int(_CUT_MARGIN * max(w, h)))
@@ -2071,6 +2071,18 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
         # stands out: a face there that changed alike in another view (a dark face beside the shadow seen
         # through it) is left to the colour models.
         mask[low & ~sure & ~inside] = cv2.GC_BGD
+        if hidden_shadows:
+            # A hidden pixel darker than the empty workspace, but far from its colour darkened, is the object's
+            # own side in shade (as without it, below), where the table's shadow is seen to keep its colour.
+            image, empty = view.coarse[crop], view.background[crop]
+            hidden = score[crop] == _HIDDEN
+            darker = image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2)
+            asked = darker & (hidden | low)
+            off = np.full(darker.shape, np.inf, np.float32)
+            off[asked] = _off_colour(image[asked], empty[asked])
+            dark_table = low & darker
+            if np.count_nonzero(dark_table & (off < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table):
+                mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
@@ -2167,7 +2179,7 @@ def _off_colour(pixels: np.ndarray, colour: np.ndarray) -> np.ndarray:
     colour is a few grey levels, mostly noise: the colour is compared in grey levels, within a share of
     the brightness or :data:`_SHADOW_TINT_FLOOR`, whichever is more."""
     brightness = pixels.sum(axis=1)
-    scaled = colour * (brightness / max(float(colour.sum()), 1.0))[:, None]
+    scaled = colour * (brightness / np.maximum(colour.sum(axis=-1), 1.0))[:, None]
     return np.abs(pixels - scaled).sum(axis=1) / np.maximum(_SHADOW_TINT * brightness, _SHADOW_TINT_FLOOR)
 
 
@@ -2446,7 +2458,7 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
             raise SilhouetteError(_NOTHING, view=view.index)
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
         region = _holes_filled(_joined_within_outline(near))
-        cut = _graph_cut(view, region, score, iterations=iterations)
+        cut = _graph_cut(view, region, score, iterations=iterations, hidden_shadows=True)
         if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))

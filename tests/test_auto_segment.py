@@ -432,6 +432,13 @@ def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_from_the_images_a
     assert min(ious) > 0.9, ious
 
 
+def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_with_the_empty_workspace(tmp_path):
+    """The same with the empty workspace: a blue tin's lower band on a dark rubber mat, darker than the
+    empty mat at its pixels but dark blue, far from the mat's colour darkened (0.92 before)."""
+    ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-tin-tin", backgrounds=True)
+    assert min(ious) > 0.94, ious
+
+
 def test_a_shadow_of_another_colour_than_the_table_is_not_taken_for_a_dark_face():
     """A blue box on a green grid mat whose shadow is not the mat's colour darkened (the ambient light's
     colour is not the lamp's): a dark pixel hidden from the other views and of another colour than the
