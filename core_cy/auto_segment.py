@@ -1944,7 +1944,10 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # no holes, so what the evidence encloses is the object's too.
         region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
     try:
-        cut = _graph_cut(view, region, score)
+        # Only this cut, of the view's own evidence, asks the shadow hidden from the other views: a view cut
+        # again within their hull, or into its bays, is to drop or add only what the hull says, and a face
+        # of the table's colour that this cut kept there is not to be asked again.
+        cut = _graph_cut(view, region, score, hidden_shadows=True)
     except SilhouetteError:
         cut = np.zeros_like(region)  # the colour models gave it all to the table: the evidence decides below
     standing_out = cv2.bitwise_and(region, differs)
@@ -2053,9 +2056,12 @@ _SMALL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
 def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.ndarray | None = None,
-               iterations: int | None = None) -> np.ndarray:
+               iterations: int | None = None, hidden_shadows: bool = False) -> np.ndarray:
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
-    evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table."""
+    evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table.
+    ``hidden_shadows``: the pixels hidden from the other views that look like the shadow they confirm
+    (:func:`_hidden_shadow`) are seeded as table, not as object (without a background), and those darker
+    than the table but of another colour than its shadow as object for sure."""
     cw, ch = view.coarse_size
     x, y, w, h = cv2.boundingRect(region)
     margin = max(8, int(_CUT_MARGIN * max(w, h)))
@@ -2072,10 +2078,49 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
         # stands out: a face there that changed alike in another view (a dark face beside the shadow seen
         # through it) is left to the colour models.
         mask[low & ~sure & ~inside] = cv2.GC_BGD
+        if hidden_shadows:
+            # A hidden pixel darker than the empty workspace, but far from its colour darkened, is the object's
+            # own side in shade (as without it, below), where the table's shadow is seen to keep its colour.
+            image, empty = view.coarse[crop], view.background[crop]
+            hidden = score[crop] == _HIDDEN
+            darker = image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2)
+            asked = darker & (hidden | low)
+            off = np.full(darker.shape, np.inf, np.float32)
+            off[asked] = _off_colour(image[asked], empty[asked])
+            dark_table = low & darker
+            if np.count_nonzero(dark_table & (off < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table):
+                mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
-        mask[low & _shadow_like(view.coarse[crop], low) & ~sure] = cv2.GC_BGD
+        shadow = low & _shadow_like(view.coarse[crop], low)
+        mask[shadow & ~sure] = cv2.GC_BGD
+        if hidden_shadows:
+            image = view.coarse[crop]
+            hidden = score[crop] == _HIDDEN
+            # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for
+            # a shadow pixel by pixel, but not over a few pixels together.
+            shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+            if np.any(shadow):
+                table_colour = _median_colour(image, low)
+                brightness = image.sum(axis=2)
+                darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
+                # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
+                asked = darker & (hidden | low)
+                off_table = np.full(darker.shape, np.inf, np.float32)
+                off_table[asked] = _off_colour(image[asked], table_colour)
+                mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
+                # The converse: a hidden pixel darker than the table, but far from the colour of the table and
+                # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
+                # band, an ellipsoid's underside), whose dark colour the table's model, holding the shadow,
+                # would take. Only where the table's shadow is seen to keep the table's colour: where most of
+                # the dark table that the other views confirm is of another colour (a coloured lamp, a bluish
+                # sky), a shadow's colour is not known, and a dark pixel of any colour may be one.
+                dark_table = low & darker
+                if np.count_nonzero(dark_table & (off_table < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table):
+                    faces = hidden & sure & darker & (off_table > _NO_SHADOW)
+                    faces[faces] = _off_colour(image[faces], _median_colour(image, shadow)) > _NO_SHADOW
+                    mask[faces] = cv2.GC_FGD
     # The box's rim is outside the object (it was grown around it), unless it is the image's own edge.
     rim = np.zeros(mask.shape, bool)
     rim[[0, -1], :] = True
@@ -2112,8 +2157,54 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     chroma = pixels / brightness[:, None]
     table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
     table_brightness = median(brightness)
-    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < 0.92 * table_brightness)
+    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < _SHADOW_DIMMER * table_brightness)
     return found
+
+
+def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """The ``hidden`` pixels (no other view sees their table point) that ``looks`` says look like a shadow
+    on the table, and whose ``brightness`` is no more than that of the ``shadow`` the other views confirm
+    (a region, not empty).
+
+    The strip of table under a lying can, and the part of a can's shadow behind it, are hidden from the
+    other views by the object itself, so nothing but their look tells them from the object; seeded as
+    object, the graph cut keeps them wherever the object's colour model holds a dark colour, as it does
+    for a dark can, or for any object's own shaded side. A face of the table's colour, or a white box's on
+    white laminate, turned from the lamp looks like the table in shadow too, but the lamp's light reaches
+    it in part, or more of the sky's: it is brighter than the shadow on the table beside it."""
+    return hidden & looks & (brightness <= np.quantile(brightness[shadow], _SHADOW_BRIGHTEST))
+
+
+def _median_colour(image: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """(3,) float32 the median of each channel of ``image`` over ``where`` (not empty)."""
+    return np.array([median(np.ascontiguousarray(image[..., k][where])) for k in range(3)], np.float32)
+
+
+def _off_colour(pixels: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """(N,) how far each of the (N, 3) ``pixels``' colour lies from ``colour`` brought to the pixel's
+    brightness, in units of what a shadow's may (under 1: ``colour`` darkened or lit). A deep shadow's
+    colour is a few grey levels, mostly noise: the colour is compared in grey levels, within a share of
+    the brightness or :data:`_SHADOW_TINT_FLOOR`, whichever is more."""
+    brightness = pixels.sum(axis=1)
+    scaled = colour * (brightness / np.maximum(colour.sum(axis=-1), 1.0))[:, None]
+    return np.abs(pixels - scaled).sum(axis=1) / np.maximum(_SHADOW_TINT * brightness, _SHADOW_TINT_FLOOR)
+
+
+#: A shadow's colour lies within this share of its brightness (summed over the channels) of the table's
+#: colour darkened alike, or within :data:`_SHADOW_TINT_FLOOR` grey levels: the sensor's noise and JPEG's.
+_SHADOW_TINT = 0.04
+_SHADOW_TINT_FLOOR = 6.0
+#: The confirmed shadow's brightness is taken at this quantile of its pixels: its soft edge is brighter.
+_SHADOW_BRIGHTEST = 0.9
+#: A shadow is darker than the table by this factor at least.
+_SHADOW_DIMMER = 0.92
+#: A pixel whose colour lies this many times what a shadow's may from the table's colour and its shadow's
+#: is no shadow: the lamp's tint gone from a shadow and JPEG's colour blocks stay well within it. (A coloured object's glow
+#: on the table beside it is of another colour too, but no darker than the table: no shadow's darkness.)
+_NO_SHADOW = 4.0
+#: The table's shadow is taken to keep the table's colour where this share of the dark table that the
+#: other views confirm does.
+_SHADOW_KNOWN = 0.5
 
 
 def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
@@ -2374,7 +2465,7 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
             raise SilhouetteError(_NOTHING, view=view.index)
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
         region = _holes_filled(_joined_within_outline(near))
-        cut = _graph_cut(view, region, score, iterations=iterations)
+        cut = _graph_cut(view, region, score, iterations=iterations, hidden_shadows=True)
         if cv2.countNonZero(cv2.bitwise_and(cut, near)) < _KEPT_BY_CUT * cv2.countNonZero(near):
             cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
         cuts.append((cut, score))
