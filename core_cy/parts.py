@@ -39,7 +39,8 @@ better than the model before it, the few steps were a wrong guess (a start alrea
 minimum beats those still on their way down): the proposals left behind go on to their
 end, and of those that pay, the one that ends lowest is taken. The union is kept
 if it gains ``PART_GAIN`` of IoU over the model before it in two views (or carves),
-with more parts, or with no more and a lower edge cost (a better minimum); a union whose
+with more parts and losing less than that in every view (what one view pays for at another's
+cost moves an error between views), or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
 parts. Last, each part standing a little tilted is tried resting on a face
@@ -445,7 +446,11 @@ def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fi
         explains_more = float(np.max(carved)) >= _CARVED_GAIN
     if explains_more and len(candidate) <= len(current):
         explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
-    if explains_more:
+    # What more parts explain the more in some views they must not explain as much the less in another,
+    # on either reading of the silhouettes (``gains``, the less of the two): that moves an error from one
+    # view to another (a view's wrong silhouette, a shadow taken in or a face left out, followed at the
+    # others' cost), and which view is wrong no part can say.
+    if explains_more and (len(candidate) <= len(current) or float(np.min(gains)) > -PART_GAIN):
         return "kept"
     if may_trial and len(candidate) > len(base) and gained >= 1:
         return "trial"  # it explains more in one view at least: not just a part cut in two
