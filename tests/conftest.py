@@ -24,3 +24,13 @@ def sphere_bundle_template(tmp_path_factory):
 @pytest.fixture
 def sphere_bundle(sphere_bundle_template, tmp_path):
     return shutil.copytree(sphere_bundle_template, tmp_path / "sphere")
+
+
+@pytest.fixture(scope="session")
+def printed_box_cell(tmp_path_factory):
+    """One simulated cell with a printed box for tests/test_cell_pick.py and tests/test_cell_backgrounds.py:
+    a cell's start is seconds of six processes' imports."""
+    from tests.cell_fixtures import printed_box_cell as started
+
+    with started(tmp_path_factory.mktemp("printed-box")) as cell:
+        yield cell
