@@ -34,3 +34,12 @@ def printed_box_cell(tmp_path_factory):
 
     with started(tmp_path_factory.mktemp("printed-box")) as cell:
         yield cell
+
+
+@pytest.fixture(scope="session")
+def red_box_cell(tmp_path_factory):
+    """One simulated cell of the default scene (a red box) for tests/test_api.py and tests/test_cell_scan.py."""
+    from tests.cell_fixtures import cell_config, running_cell
+
+    with running_cell(cell_config(tmp_path_factory.mktemp("red-box"), cell_id="red")) as cell:
+        yield cell
