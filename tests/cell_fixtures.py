@@ -28,7 +28,8 @@ from robocell.wire import keys
 from robocell.wire.client import CellClient
 from robocell.wire.config import CellConfig
 from robocell.cli.demo import free_port, local_config
-from robocell.wire.messages import CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, RobotState, ScanRequest
+from robocell.wire.messages import (CellStatus, JobEvent, JobState, JobStatus, ReconstructorStatus, ReconstructReply,
+                                    ReconstructRequest, RobotState, ScanRequest)
 from robocell.workers.sim.scene import scene_from_config, target_from_config
 from robocell.cell.store import JobStore
 from robocell.wire.transport import RequestError, Transport, session_config
@@ -39,7 +40,7 @@ from robocell.workers.sim.axis_process import robot_camera_pose
 
 __all__ = ["free_port", "cell_config", "SMALL_CAMERA", "LoopThread", "RunningCell", "running_cell",
            "InProcessSimCamera", "GatedReconstructor", "wait_until", "accepts", "wait_for_footer", "look_away_poses",
-           "add_worker", "InProcessWorker"]
+           "add_worker", "InProcessWorker", "RecordingWorker", "printed_box_cell"]
 
 # Generous bounds: they only matter when something is broken, and then the test fails instead of hanging.
 START_TIMEOUT_S = 60.0
@@ -427,3 +428,36 @@ class InProcessWorker:
             self.loop.run(self._worker.close(), timeout=20.0)
         finally:
             self.loop.run(self._transport.close(), timeout=20.0)
+
+
+class RecordingWorker:
+    """The real reconstruction, which keeps each request, its payload and its reply."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[ReconstructRequest, bytes, ReconstructReply, bytes]] = []
+
+    async def run(self, request_json: str, payload: bytes) -> tuple[str, bytes]:
+        reply_json, reply_payload = await asyncio.to_thread(reconstruct_request, request_json, payload, "recorder")
+        self.seen.append((ReconstructRequest.model_validate_json(request_json), payload,
+                          ReconstructReply.model_validate_json(reply_json), reply_payload))
+        return reply_json, reply_payload
+
+
+@contextlib.contextmanager
+def printed_box_cell(root: Path) -> Iterator[RunningCell]:
+    """A cell whose table holds a printed box, served by a :class:`RecordingWorker` in the test
+    process (``cell.recorder``): the cell of the tests of picks and of backgrounds, started once
+    for both (tests/conftest.py)."""
+    config = cell_config(root, cell_id="printed",
+                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20,
+                              "look": "printed"})
+    with running_cell(config, reconstructors=0) as running:
+        recorder = RecordingWorker()
+        worker = InProcessWorker(running.loop, running.router, "recorder", recorder.run)
+        running.recorder = recorder  # type: ignore[attr-defined]
+        try:
+            wait_until(lambda: [r.worker for r in running.status().reconstructors] == ["recorder"], timeout=20,
+                       what="the in-process worker in the pool")
+            yield running
+        finally:
+            worker.close()

@@ -8,7 +8,9 @@ import os
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
+import contextlib  # noqa: E402
 import shutil  # noqa: E402
+from collections.abc import Callable, Iterator  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -24,3 +26,55 @@ def sphere_bundle_template(tmp_path_factory):
 @pytest.fixture
 def sphere_bundle(sphere_bundle_template, tmp_path):
     return shutil.copytree(sphere_bundle_template, tmp_path / "sphere")
+
+
+# --- cells that several test modules share ---------------------------------------------------------
+# A cell's start is seconds of six processes' imports, and an idle cell still takes the CPU of its
+# heartbeats: a shared cell starts for the first module that uses it and stops after the last.
+
+_shared_cells: dict[str, tuple[contextlib.ExitStack, object]] = {}
+_modules_to_come: dict[str, set[str]] = {}   # shared cell -> modules that use it and have not ended
+
+
+@pytest.hookimpl(trylast=True)  # after -k and -m have deselected
+def pytest_collection_modifyitems(items):
+    for item in items:
+        for name in ("printed_box_cell", "red_box_cell"):
+            if name in getattr(item, "fixturenames", ()):
+                _modules_to_come.setdefault(name, set()).add(item.module.__name__)
+
+
+def pytest_sessionfinish(session):
+    for stack, _ in _shared_cells.values():  # left by a run that stopped early, or by xdist's share
+        stack.close()
+    _shared_cells.clear()
+
+
+def _shared_cell(name: str, module: str, start: Callable[[], contextlib.AbstractContextManager]) -> Iterator:
+    if name not in _shared_cells:
+        stack = contextlib.ExitStack()
+        _shared_cells[name] = stack, stack.enter_context(start())
+    yield _shared_cells[name][1]
+    to_come = _modules_to_come.get(name, set())
+    to_come.discard(module)
+    if not to_come:
+        stack, _ = _shared_cells.pop(name)
+        stack.close()
+
+
+@pytest.fixture(scope="module")
+def printed_box_cell(request, tmp_path_factory):
+    """A simulated cell with a printed box, for tests/test_cell_pick.py and tests/test_cell_backgrounds.py."""
+    from tests.cell_fixtures import printed_box_cell as started
+
+    yield from _shared_cell("printed_box_cell", request.module.__name__,
+                            lambda: started(tmp_path_factory.mktemp("printed-box")))
+
+
+@pytest.fixture(scope="module")
+def red_box_cell(request, tmp_path_factory):
+    """A simulated cell of the default scene (a red box), for tests/test_api.py and tests/test_cell_scan.py."""
+    from tests.cell_fixtures import cell_config, running_cell
+
+    yield from _shared_cell("red_box_cell", request.module.__name__,
+                            lambda: running_cell(cell_config(tmp_path_factory.mktemp("red-box"), cell_id="red")))

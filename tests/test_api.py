@@ -3,7 +3,8 @@ and the commands that read a job (`job`, `export`) from it.
 
 The README's Python blocks marked ``<!-- test: ... -->`` each run in an interpreter of their
 own (so that one that leaves a Zenoh session open hangs at exit, and fails here), pointed at
-this module's cell instead of the default router and cell id.
+the test cell (tests/conftest.py red_box_cell, shared with tests/test_cell_scan.py) instead of
+the default router and cell id.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ import robocell
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.superquadric import Superquadric
 from robocell.cli.main import main
-from tests.cell_fixtures import cell_config, running_cell
 from robocell.workers.sim.scene import target_from_config, truth_from_config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -30,10 +30,9 @@ EXAMPLE_TIMEOUT_S = 120
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("api"))
-    with running_cell(config) as running:
-        yield running
+def cell(red_box_cell):
+    """The default scene's cell (tests/conftest.py), which tests/test_cell_scan.py uses too."""
+    return red_box_cell
 
 
 @pytest.fixture(scope="module")

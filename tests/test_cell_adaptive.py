@@ -4,7 +4,8 @@ daemon killed during a plan that grew carries that plan on.
 The reconstruction worker runs in the test process with the real core; the choice of the next view
 (``core_cy.next_view``) is a stand-in of this file whose verdict the test sets (sure after so many
 views), so that what is tested is the cell's side: it asks with poses the robot may take, takes the
-view chosen, stops when the model is sure, and stops at the cap.
+view chosen, stops when the model is sure, and stops at the cap. The last test lets the core's own
+choice through the same worker. One cell serves the module.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from __future__ import annotations
 import asyncio
 import threading
 import types
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
@@ -23,18 +25,22 @@ import robocell.workers.reconstruct.worker as worker_module
 from robocell.workers.reconstruct.worker import reconstruct_request
 from robocell.workers.sim.scene import target_from_config
 
-from tests.cell_fixtures import InProcessWorker, cell_config, running_cell, wait_until
+from tests.cell_fixtures import SMALL_CAMERA, InProcessWorker, cell_config, running_cell, wait_until
 
 
 @dataclass
 class StandIn:
     """``core_cy.next_view.choose_next_view`` as the test wants it: sure once the scan has
-    ``sure_at`` views; until then the candidate farthest from every view so far."""
+    ``sure_at`` views; until then the candidate farthest from every view so far. With ``sure_at``
+    None, the core's own choice (``core``)."""
 
-    sure_at: int = 3
-    asked: list[tuple[int, list[np.ndarray]]] | None = None   # (views so far, candidate camera poses)
+    core: Callable
+    sure_at: int | None = 3
+    asked: list[tuple[int, list[np.ndarray]]] = field(default_factory=list)  # (views so far, candidate camera poses)
 
     def choose_next_view(self, reconstruction, cameras, candidates, *, support_plane=None, workspace=None):
+        if self.sure_at is None:
+            return self.core(reconstruction, cameras, candidates, support_plane=support_plane, workspace=workspace)
         assert len(cameras) == len(reconstruction.silhouettes)
         poses = [np.asarray(c.T_world_cam) for c in candidates]
         self.asked.append((len(cameras), poses))
@@ -48,9 +54,12 @@ class StandIn:
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("adaptive"), cell_id="adaptive")
-    stand_in = StandIn(asked=[])
+    """An ellipsoid longest along x, on the simulated table (the core's own choice is tested on it);
+    the stand-in's verdicts do not depend on the object."""
+    config = cell_config(tmp_path_factory.mktemp("adaptive"), cell_id="adaptive", camera=SMALL_CAMERA,
+                         sim={"shape": "ellipsoid", "size": [0.07, 0.03, 0.025], "position": [0.6, 0.0], "yaw_deg": 0})
     before = worker_module.choose_next_view
+    stand_in = StandIn(core=before)
     worker_module.choose_next_view = stand_in.choose_next_view  # the worker runs in this process
     gate = threading.Event()
     gate.set()
@@ -123,7 +132,7 @@ def test_a_model_never_sure_ends_at_the_cap_with_its_uncertainty(rig):
 
 def test_a_planned_scan_does_not_ask_for_a_next_view(rig):
     cell, stand_in, _, _ = rig
-    stand_in.asked[:] = []
+    stand_in.sure_at, stand_in.asked[:] = 3, []
     result = cell.client.scan(ScanRequest(target=target_from_config(cell.config.sim)), timeout=60)
     assert len(result.T_base_cam) == 3 and result.uncertainty is None and stand_in.asked == []
 
@@ -153,22 +162,14 @@ def test_a_daemon_killed_during_a_grown_plan_carries_that_plan_on(rig):
     assert cell.tracebacks() == {}
 
 
-# --- with the core's own choice (core_cy.next_view), in the real reconstruction worker -----------
+# --- with the core's own choice (core_cy.next_view), in the same worker -------------------------
 
-@pytest.fixture(scope="module")
-def real_cell(tmp_path_factory):
-    """An ellipsoid longest along x, on the simulated table; the cell's own reconstruction worker."""
-    config = cell_config(tmp_path_factory.mktemp("adaptive-real"), cell_id="adaptive-real",
-                         sim={"shape": "ellipsoid", "size": [0.07, 0.03, 0.025], "position": [0.6, 0.0], "yaw_deg": 0})
-    with running_cell(config) as cell:
-        yield cell
-
-
-def test_with_the_core_an_adaptive_scan_takes_a_fourth_view_only_when_the_model_is_unsure(real_cell):
+def test_with_the_core_an_adaptive_scan_takes_a_fourth_view_only_when_the_model_is_unsure(rig):
     """Three nearly coincident low views from one side, along the object's length, leave its depth
     unseen (the fit recovers it from views spread over 20-40 degrees of elevation): the core is
     unsure and a fourth view is taken. Three views all around it leave nothing unseen: none is."""
-    cell = real_cell
+    cell, stand_in, _, _ = rig
+    stand_in.sure_at = None
     target = target_from_config(cell.config.sim)
     one_side = {"standoff": 0.4, "elevations_deg": [10.0, 11.0, 12.0], "azimuths_deg": [179.0, 180.0, 181.0]}
     unsure = cell.client.scan(ScanRequest(target=target, plan=one_side, views="adaptive", max_views=4), timeout=120)

@@ -10,7 +10,7 @@ each camera pose, and the true object's superquadric.
 
 from __future__ import annotations
 
-import asyncio
+import shutil
 
 import cv2
 import numpy as np
@@ -18,42 +18,19 @@ import pytest
 
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.superquadric import Superquadric
-from robocell.wire.messages import (JobState, ReconstructReply, ReconstructRequest, ScanRequest, ViewPlan)
-from robocell.workers.reconstruct.worker import reconstruct_request
+from robocell.wire.messages import JobState, ReconstructRequest, ScanRequest, ViewPlan
 from robocell.workers.sim.render import render
 from robocell.workers.sim.scene import scene_from_config, target_from_config, truth_from_config
-
-from tests.cell_fixtures import InProcessWorker, cell_config, running_cell
 
 JOB_TIMEOUT_S = 240.0
 
 
-class RecordingWorker:
-    """The real reconstruction, which keeps each request, its payload and its reply."""
-
-    def __init__(self) -> None:
-        self.seen: list[tuple[ReconstructRequest, bytes, ReconstructReply, bytes]] = []
-
-    async def run(self, request_json: str, payload: bytes) -> tuple[str, bytes]:
-        reply_json, reply_payload = await asyncio.to_thread(reconstruct_request, request_json, payload, "recorder")
-        self.seen.append((ReconstructRequest.model_validate_json(request_json), payload,
-                          ReconstructReply.model_validate_json(reply_json), reply_payload))
-        return reply_json, reply_payload
-
-
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("backgrounds"), cell_id="bg",
-                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20,
-                              "look": "printed"})
-    with running_cell(config, reconstructors=0) as running:
-        recorder = RecordingWorker()
-        worker = InProcessWorker(running.loop, running.router, "recorder", recorder.run)
-        running.recorder = recorder
-        try:
-            yield running
-        finally:
-            worker.close()
+def cell(printed_box_cell):
+    """The printed box's cell (tests/conftest.py), its backgrounds removed afterwards: the picks'
+    scans (tests/test_cell_pick.py) go without them."""
+    yield printed_box_cell
+    shutil.rmtree(printed_box_cell.config.run_dir / "backgrounds", ignore_errors=True)
 
 
 def _true_masks(config, T_base_cams) -> list[np.ndarray]:
@@ -87,10 +64,11 @@ def _split(request: ReconstructRequest, payload: bytes) -> list[tuple[bytes, byt
 def test_backgrounds_taken_before_the_object_serve_the_scan_from_the_same_poses(cell):
     config = cell.config
     target = target_from_config(config.sim)
+    reconstructed = len(cell.recorder.seen)
     taken = cell.client.wait(cell.client.submit(ScanRequest(target=target, kind="backgrounds")).job_id,
                              timeout=JOB_TIMEOUT_S)
     assert taken.state is JobState.SUCCEEDED, taken.error
-    assert taken.n_views == 3 and not cell.recorder.seen      # three pictures, no reconstruction
+    assert taken.n_views == 3 and len(cell.recorder.seen) == reconstructed   # three pictures, no reconstruction
     events = cell.events(taken.job_id)
     assert all(event.kind == "backgrounds" for event in events)
     assert "kept 3 backgrounds" in events[-1].message

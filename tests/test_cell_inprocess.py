@@ -28,11 +28,11 @@ from robocell.cell.daemon import CellDaemon
 from robocell.cell.reserve import MIN_FREE_BYTES, RESERVE_BYTES, RESERVE_NAME
 from robocell.cell.store import JobStore
 from robocell.wire import keys
-from robocell.wire.client import AsyncCellClient
+from robocell.wire.client import AsyncCellClient, JobFailed
 from robocell.wire.errors import CellError, RemoteError, StoreError
 from robocell.wire.fake_transport import MemoryNetwork
 from robocell.wire.messages import (POINTS_ENCODING, Blob, CaptureInfo, JobEvent, JobState, Lifecycle, MoveReply,
-                           MoveRequest, NextViewAnswer, Reconstruction, ReconstructReply, ReconstructRequest,
+                           MoveRequest, NextViewAnswer, PickRequest, Reconstruction, ReconstructReply, ReconstructRequest,
                            RobotState, ScanRequest, Superquadric)
 from robocell.wire.transport import Request, Response
 from robocell.workers.reconstruct.worker import ReconstructWorker
@@ -403,6 +403,30 @@ def test_a_fake_workers_oversized_model_is_refused_and_the_job_succeeds_on_the_r
         assert result.superquadric.size == pytest.approx(STAND_IN_SIZE)
         assert any(m.startswith("attempt 1 on fake: refused: ") for m in messages), messages
         assert len(workers.moves) == len(result.T_base_cam)  # to the views, and nowhere the fake's model led
+
+    _run(scenario())
+
+
+def test_an_object_no_grasp_holds_fails_the_pick_and_the_arm_stays_put(tmp_path):
+    """A model with no grasp (the planner finds none for a ball wider than the opening:
+    tests/test_grasp.py) fails the pick at its first step, before the arm moves for it."""
+    config = _config(tmp_path)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("w")  # its models carry no grasp
+        try:
+            async with daemon(network, config) as client:
+                request = ScanRequest(target=target_from_config(config.sim), pick=PickRequest())
+                with pytest.raises(JobFailed, match="choosing a grasp: no grasp holds this object") as failed:
+                    await client.scan(request, timeout=30)
+                assert failed.value.kind == "NoGrasp"
+                job_id = failed.value.status.job_id
+                assert (await client.status(job_id)).state is JobState.FAILED
+        finally:
+            await workers.close()
+        assert len(workers.moves) == 3  # the views; no move of the pick
 
     _run(scenario())
 

@@ -11,6 +11,7 @@ import time
 
 import pytest
 
+from robocell.cell.store import JobStore
 from robocell.wire.messages import JobState
 
 from tests.cell_fixtures import JOB_TIMEOUT_S, SMALL_CAMERA, cell_config, running_cell, wait_until
@@ -25,12 +26,19 @@ def cell(tmp_path_factory):
 
 
 def test_jobs_queued_across_a_router_restart_all_succeed(cell):
-    """The router is killed for 3 s while jobs wait and move: a step whose link drops waits for it
-    and repeats its query; none fails, none is stuck."""
+    """The router is killed while jobs wait and move, and stays away until the daemon has seen it
+    gone (a job notes it): a step whose link drops waits for it and repeats its query; none fails,
+    none is stuck."""
     ids = [cell.submit(label=f"across the outage {k}").job_id for k in range(4)]
     cell.wait_state(ids[0], {JobState.MOVING, JobState.CAPTURING})
     assert cell.loop.run(cell.processes.stop_child("router", kill=True)) == -9
-    time.sleep(3.0)
+
+    def link_down_noted() -> bool:  # read from the daemon's store: nothing reaches the daemon meanwhile
+        with JobStore(cell.config.run_dir / "jobs.sqlite") as store:
+            return any("the link to the Zenoh router is down" in e.message for job_id in ids
+                       for e in store.events(job_id))
+
+    wait_until(link_down_noted, timeout=JOB_TIMEOUT_S, interval=0.05, what="the daemon to see the router gone")
     began = time.monotonic()
     cell.loop.run(cell.processes.start_child("router"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]

@@ -1,7 +1,9 @@
 """A pick in the simulated cell, end to end: scan, plan grasps, approach, close, lift, place.
 
 The simulated robot's gripper judges each grasp against the scene's true object
-(``workers.sim.judge``, written apart from the planner), so "held" is the truth's verdict.
+(``workers.sim.judge``, written apart from the planner), so "held" is the truth's verdict. The cell
+is the one of tests/test_cell_backgrounds.py (tests/conftest.py). A pick
+that finds no grasp is tested on the daemon in the test's process (tests/test_cell_inprocess.py).
 """
 
 from __future__ import annotations
@@ -11,25 +13,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocell.wire.client import JobFailed
 from robocell.wire.errors import RemoteError
-from robocell.wire.messages import JobState, PickRequest, ScanRequest
+from robocell.wire.messages import PickRequest, ScanRequest
 from robocell.workers.sim.scene import target_from_config
 
 from robocell.cell.recording_files import recording_summary
 
-from tests.cell_fixtures import cell_config, running_cell, wait_for_footer
+from tests.cell_fixtures import wait_for_footer
 
 PLACE = [0.55, 0.25]
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("pick"), cell_id="pick",
-                         sim={"shape": "box", "size": [0.04, 0.025, 0.05], "position": [0.6, 0.0], "yaw_deg": 20,
-                              "look": "printed"})
-    with running_cell(config) as running:
-        yield running
+def cell(printed_box_cell):
+    """The printed box's cell (tests/conftest.py)."""
+    return printed_box_cell
 
 
 def moves_of(cell, job_id: str) -> int:
@@ -75,21 +73,3 @@ def test_a_place_outside_the_workspace_is_refused_at_submit(cell):
     far = [2.0, 0.0]
     with pytest.raises(RemoteError, match=r"pick.place: x = 2 m is outside the workspace's 0.1 to 1 m"):
         cell.client.submit(ScanRequest(target=target_from_config(cell.config.sim), pick=PickRequest(place=far)))
-
-
-@pytest.fixture(scope="module")
-def big(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("pick-big"), cell_id="bigball",
-                         sim={"shape": "ellipsoid", "size": [0.08, 0.08, 0.05], "position": [0.6, 0.0]})
-    with running_cell(config) as running:
-        yield running
-
-
-def test_an_object_no_grasp_holds_fails_the_pick_and_the_arm_stays_put(big):
-    request = ScanRequest(target=target_from_config(big.config.sim), pick=PickRequest())
-    with pytest.raises(JobFailed, match="choosing a grasp: no grasp holds this object") as failed:
-        big.client.scan(request, timeout=120)
-    assert failed.value.kind == "NoGrasp"
-    job_id = failed.value.status.job_id
-    assert moves_of(big, job_id) == 3  # the views; no move of the pick
-    assert big.client.status(job_id).state is JobState.FAILED

@@ -1,7 +1,7 @@
 """The whole cell, end to end: every part a real process, talking Zenoh on loopback.
 
-One cell serves the module (simulated robot moving instantly, simulated Axis
-camera, camera and reconstruction workers, daemon). Scans are scored against
+One cell serves the module, and tests/test_api.py (simulated robot moving instantly,
+simulated Axis camera, camera and reconstruction workers, daemon). Scans are scored against
 the simulated object's truth; the recording is read back with Rerun's reader;
 one client speaks nothing but plain ``zenoh`` and the documented keys.
 """
@@ -30,15 +30,13 @@ from robocell.wire.transport import Transport, session_config
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.superquadric import Superquadric
 
-from tests.cell_fixtures import (JOB_TIMEOUT_S, cell_config, look_away_poses, running_cell, wait_for_footer,
-                            wait_until)
+from tests.cell_fixtures import JOB_TIMEOUT_S, look_away_poses, wait_for_footer, wait_until
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    config = cell_config(tmp_path_factory.mktemp("cell-scan"), cell_id="scan")
-    with running_cell(config) as running:
-        yield running
+def cell(red_box_cell):
+    """The default scene's cell (tests/conftest.py), which tests/test_api.py uses too."""
+    return red_box_cell
 
 
 @pytest.fixture(scope="module")
