@@ -39,13 +39,11 @@ def test_jobs_queued_across_a_router_restart_all_succeed(cell):
                        for e in store.events(job_id))
 
     wait_until(link_down_noted, timeout=JOB_TIMEOUT_S, interval=0.05, what="the daemon to see the router gone")
-    began = time.monotonic()
     cell.loop.run(cell.processes.start_child("router"), timeout=60)
     finals = [cell.wait(job_id) for job_id in ids]
     assert [f.state for f in finals] == [JobState.SUCCEEDED] * 4, [f.error for f in finals]
     notes = [e.message for job_id in ids for e in cell.events(job_id)]
     assert any("the link to the Zenoh router is down" in m for m in notes), notes
-    assert time.monotonic() - began < 60
     assert cell.tracebacks() == {}
 
 

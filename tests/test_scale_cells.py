@@ -13,7 +13,6 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -125,11 +124,14 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
                 for k in range(n_jobs)]
     acknowledged: dict[str, str] = {}
     errors: list[BaseException] = []
+    killed = threading.Event()
 
     def submit_all() -> None:
         client = CellClient(north.router, "north", timeout=3.0)
         try:
-            for request in requests:
+            for k, request in enumerate(requests):
+                if k == 3:  # the rest of the burst goes through the crash, however fast the first came
+                    killed.wait(30.0)
                 acknowledged[request.request_id] = client.submit(request, retry_s=30.0).job_id
         except BaseException as exc:  # reported by the test below
             errors.append(exc)
@@ -142,11 +144,12 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
         wait_until(lambda: len(acknowledged) >= 3 or errors, timeout=20.0, what="three jobs submitted")
         assert north.loop.run(north.processes.stop_child("daemon", kill=True)) == -9
         killed_after = len(acknowledged)
+        killed.set()
         north.loop.run(north.processes.start_child("daemon"))
     finally:
         submitter.join(60.0)
     assert not errors and not submitter.is_alive(), errors
-    assert killed_after < n_jobs and set(acknowledged) == {r.request_id for r in requests}
+    assert killed_after == 3 and set(acknowledged) == {r.request_id for r in requests}
 
     finals = {request_id: north.wait(job_id) for request_id, job_id in acknowledged.items()}
     for final in finals.values():
@@ -167,7 +170,6 @@ def test_daemon_killed_mid_burst_loses_nothing(cells):
 def test_status_command_shows_workers_load_queue_jobs_and_failures(cells):
     north, _ = cells
     base = [sys.executable, "-m", "robocell", "--config", str(north.processes.config_path)]
-    began = time.monotonic()
     shown = subprocess.run([*base, "status"], capture_output=True, text=True, timeout=60)
     assert shown.returncode == 0, shown.stderr
     text = shown.stdout
@@ -185,4 +187,3 @@ def test_status_command_shows_workers_load_queue_jobs_and_failures(cells):
     some_job = north.client.list(limit=1)[0].job_id
     job = subprocess.run([*base, "job", some_job], capture_output=True, text=True, timeout=60)
     assert job.returncode == 0 and f'"job_id": "{some_job}"' in job.stdout
-    assert time.monotonic() - began < 60
