@@ -135,13 +135,15 @@ def unexplained_shares(parts, cameras, silhouettes, boxes, band: float = _EDGE_B
 class _Rasters:
     """The views' silhouettes, and each view's pixels of the silhouette and of each part's projection
     (:func:`core_cy.quality.hull_covers`) for the union last drawn: a round's IoUs, the share it
-    leaves unexplained and the next round's additions all look at the union it kept, drawn once."""
+    leaves unexplained and the next round's additions all look at the union it kept, drawn once,
+    and counted once (its tallies: its IoUs and what each part pays are read off the same counts)."""
 
     def __init__(self, cameras, silhouettes, boxes, unsure=None) -> None:
         self.cameras, self.silhouettes, self.boxes = list(cameras), list(silhouettes), list(boxes)
         self._unsure = unsure
         self._parts: tuple[Superquadric, ...] = ()
         self._drawn: list = []
+        self._tallied: dict[bool, np.ndarray] = {}  # the union last drawn's tallies, by ``each``
 
     @cached_property
     def unsure(self) -> list:
@@ -159,6 +161,7 @@ class _Rasters:
                                        silhouette, box)
                            for camera, silhouette, box in zip(self.cameras, self.silhouettes, self.boxes)]
             self._parts = parts
+            self._tallied = {}
         return self._drawn
 
     def ious(self, parts) -> tuple[list[float], np.ndarray]:
@@ -190,10 +193,16 @@ class _Rasters:
 
     def _tallies(self, parts, each: bool) -> np.ndarray:
         """(V, 1 + P, 5) per view, for the union and (``each``) for it without each part, else (V, 1, 5):
-        the silhouette's pixels, those covered, the empty ones covered, and those two on unsure pixels."""
+        the silhouette's pixels, those covered, the empty ones covered, and those two on unsure pixels
+        (read-only: kept with the drawing)."""
         parts = tuple(parts)
+        drawing = self.drawn(parts)
+        if each in self._tallied:
+            return self._tallied[each]
+        if True in self._tallied:  # the union's own row is the first of every part's
+            return self._tallied[True][:, :1]
         tallies = np.zeros((len(self.cameras), 1 + len(parts) if each else 1, 5))
-        for v, ((object_pixels, covers, (x0, y0)), unsure) in enumerate(zip(self.drawn(parts), self.unsure)):
+        for v, ((object_pixels, covers, (x0, y0)), unsure) in enumerate(zip(drawing, self.unsure)):
             if object_pixels is None:
                 continue
             aside = (None if unsure is None
@@ -206,6 +215,8 @@ class _Rasters:
                 tallies[v, u] = (area, np.count_nonzero(explained), np.count_nonzero(extra),
                                  0 if aside is None else np.count_nonzero(explained & aside),
                                  0 if aside is None else np.count_nonzero(extra & aside))
+        tallies.flags.writeable = False
+        self._tallied[each] = tallies
         return tallies
 
     def carved_ious(self, before, after) -> np.ndarray:
