@@ -2084,11 +2084,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             image, empty = view.coarse[crop], view.background[crop]
             hidden = score[crop] == _HIDDEN
             darker = image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2)
-            asked = darker & (hidden | low)
-            off = np.full(darker.shape, np.inf, np.float32)
-            off[asked] = _off_colour(image[asked], empty[asked])
-            dark_table = low & darker
-            if np.count_nonzero(dark_table & (off < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table):
+            off = _off_colours(image, empty, darker & (hidden | low))
+            if _shadow_keeps_colour(off, low & darker):
                 mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
@@ -2106,9 +2103,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
                 brightness = image.sum(axis=2)
                 darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
                 # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
-                asked = darker & (hidden | low)
-                off_table = np.full(darker.shape, np.inf, np.float32)
-                off_table[asked] = _off_colour(image[asked], table_colour)
+                off_table = _off_colours(image, table_colour, darker & (hidden | low))
                 mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
@@ -2116,8 +2111,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
                 # would take. Only where the table's shadow is seen to keep the table's colour: where most of
                 # the dark table that the other views confirm is of another colour (a coloured lamp, a bluish
                 # sky), a shadow's colour is not known, and a dark pixel of any colour may be one.
-                dark_table = low & darker
-                if np.count_nonzero(dark_table & (off_table < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table):
+                if _shadow_keeps_colour(off_table, low & darker):
                     faces = hidden & sure & darker & (off_table > _NO_SHADOW)
                     faces[faces] = _off_colour(image[faces], _median_colour(image, shadow)) > _NO_SHADOW
                     mask[faces] = cv2.GC_FGD
@@ -2178,6 +2172,20 @@ def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray
 def _median_colour(image: np.ndarray, where: np.ndarray) -> np.ndarray:
     """(3,) float32 the median of each channel of ``image`` over ``where`` (not empty)."""
     return np.array([median(np.ascontiguousarray(image[..., k][where])) for k in range(3)], np.float32)
+
+
+def _off_colours(image: np.ndarray, colour: np.ndarray, asked: np.ndarray) -> np.ndarray:
+    """(H, W) :func:`_off_colour` of the ``asked`` pixels of ``image`` from ``colour`` ((3,), or (H, W, 3):
+    each pixel's own, the empty workspace's), infinite elsewhere."""
+    off = np.full(asked.shape, np.inf, np.float32)
+    off[asked] = _off_colour(image[asked], colour if colour.ndim == 1 else colour[asked])
+    return off
+
+
+def _shadow_keeps_colour(off: np.ndarray, dark_table: np.ndarray) -> bool:
+    """Whether the table's shadow is seen to keep the table's colour: :data:`_SHADOW_KNOWN` of the
+    ``dark_table`` the other views confirm lies within a shadow's colour of it (``off`` under 1)."""
+    return bool(np.count_nonzero(dark_table & (off < 1.0)) >= _SHADOW_KNOWN * np.count_nonzero(dark_table))
 
 
 def _off_colour(pixels: np.ndarray, colour: np.ndarray) -> np.ndarray:
