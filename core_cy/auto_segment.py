@@ -1221,7 +1221,59 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                     break
                 looked = found
         masks = looked
+    if plane is not None and len(views) > 2:
+        masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
     return masks
+
+
+def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray],
+                                  scores: Sequence[np.ndarray | None], plane: np.ndarray,
+                                  aim: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes without the table under the object's overhang (without a background).
+
+    The strip of table under a lying can is hidden from every other view by the can itself, so nothing but
+    its look tells it from the object; the first cut seeds it as probably table where it looks like the
+    shadow the other views confirm (:func:`_hidden_shadow`), but the graph cut keeps it wherever the
+    object's colour model holds a dark colour (a navy tin's shaded underside, which a colour model cannot
+    tell from dark grey). It is darker than any shadow seen in the open: the object hides the sky from it
+    as well as the lamp. A face turned from the lamp (a box's of its table's colour, a white box's on white
+    laminate) looks like the table in shadow too, but the sky and the lit table light it: it is no darker
+    than the cast shadow. So a hidden pixel with a shadow's look that is darker than
+    :data:`_UNDER_OBJECT` of the deepest shadow the other views confirm (its :data:`_SHADOW_DEEPEST`
+    quantile) is dropped, unless a point of the other views' hull above the plane on its ray looks alike
+    from another view (:func:`_seen_alike`): a dark can whose lower body is its mat's shadow's colour."""
+    hulls = _Hulls(views, masks, plane, aim)
+    found = list(masks)
+    for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
+        if score is None or view.background is not None:
+            continue
+        x0, y0, x1, y1 = _cut_box(view, mask)
+        crop = (slice(y0, y1), slice(x0, x1))
+        image = view.coarse[crop]
+        low = score[crop] < 1.0
+        hidden = score[crop] == _HIDDEN
+        seen = _shadow_seen(image, low, low & _shadow_like(image, low), hidden)
+        if seen is None:
+            continue
+        shadow, brightness, _, off_table = seen
+        deepest = np.quantile(brightness[shadow], _SHADOW_DEEPEST)
+        under = np.zeros(mask.shape, bool)
+        under[crop] = (_hidden_shadow(off_table < 1.0, brightness, shadow, hidden) & (mask[crop] > 0)
+                       & (brightness < _UNDER_OBJECT * deepest))
+        if not under.any():
+            continue
+        under &= ~_seen_alike(views, masks, hulls, i, np.where(under, 255, 0).astype(np.uint8))
+        if under.any():
+            kept = mask.copy()
+            kept[under] = 0
+            found[i] = _filled_region(kept, view)
+    return found
+
+
+#: The deepest shadow the other views confirm is taken at this quantile of its pixels' brightness, and the
+#: table under the object's overhang is darker than this share of it.
+_SHADOW_DEEPEST = 0.1
+_UNDER_OBJECT = 0.7
 
 
 def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
@@ -2063,9 +2115,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     (:func:`_hidden_shadow`) are seeded as table, not as object (without a background), and those darker
     than the table but of another colour than its shadow as object for sure."""
     cw, ch = view.coarse_size
-    x, y, w, h = cv2.boundingRect(region)
-    margin = max(8, int(_CUT_MARGIN * max(w, h)))
-    x0, y0, x1, y1 = max(0, x - margin), max(0, y - margin), min(cw, x + w + margin), min(ch, y + h + margin)
+    x0, y0, x1, y1 = _cut_box(view, region)
     mask = np.full((y1 - y0, x1 - x0), cv2.GC_PR_BGD, np.uint8)
     crop = (slice(y0, y1), slice(x0, x1))
     inside = region[crop] > 0
@@ -2095,15 +2145,9 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
         if hidden_shadows:
             image = view.coarse[crop]
             hidden = score[crop] == _HIDDEN
-            # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for
-            # a shadow pixel by pixel, but not over a few pixels together.
-            shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
-            if np.any(shadow):
-                table_colour = _median_colour(image, low)
-                brightness = image.sum(axis=2)
-                darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
-                # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
-                off_table = _off_colours(image, table_colour, darker & (hidden | low))
+            seen = _shadow_seen(image, low, shadow, hidden)
+            if seen is not None:
+                shadow, brightness, darker, off_table = seen
                 mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
@@ -2133,10 +2177,36 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     return _run_grabcut(view, mask, (x0, y0, x1, y1), iterations)
 
 
+def _cut_box(view: _View, region: np.ndarray) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) the graph cut's box around ``region`` (0/255), within the coarse image."""
+    cw, ch = view.coarse_size
+    x, y, w, h = cv2.boundingRect(region)
+    margin = max(8, int(_CUT_MARGIN * max(w, h)))
+    return max(0, x - margin), max(0, y - margin), min(cw, x + w + margin), min(ch, y + h + margin)
+
+
 #: The graph cut's box reaches this share of the region's size beyond it: table enough for its colour model.
 _CUT_MARGIN = 0.5
 #: Evidence over this many units of its noise, well within what stands out, seeds the object for sure.
 _SURE = 5.0
+
+
+def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
+                 hidden: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Within the graph cut's box: the ``shadow`` (:func:`_shadow_like` of the table the other views confirm,
+    ``low``) as a region, each pixel's brightness, whether it is darker than the table, and the dark pixels'
+    :func:`_off_colours` from the table's colour (the ``hidden`` ones and the confirmed table's); None where
+    no shadow region is seen."""
+    # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for
+    # a shadow pixel by pixel, but not over a few pixels together.
+    shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+    if not np.any(shadow):
+        return None
+    table_colour = _median_colour(image, low)
+    brightness = image.sum(axis=2)
+    darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
+    # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
+    return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
