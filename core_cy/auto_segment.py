@@ -1144,6 +1144,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     """
     done: set[int] = set()
     refused: set[int] = set()  # views whose cut again was given up: they keep their silhouettes, uncorrected
+    trimmed: set[int] = set()  # views cut back to the others' hull: they lost only what reached out of it
     everyone = set(range(len(views)))
     hulls: _Hulls | None = None
     for _ in range(len(views)):
@@ -1203,6 +1204,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             # and the view keeps its silhouette, as one not corrected (its bays are looked into below).
             if cv2.countNonZero(cv2.bitwise_and(cut, kept)) >= _KEPT_BY_CUT * cv2.countNonZero(kept):
                 masks[index] = cut
+                trimmed.add(index)
             else:
                 done.discard(index)
                 refused.add(index)
@@ -1210,7 +1212,11 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         hulls = None  # the last round corrected a view: the hulls are to be carved again
     if len(views) > 2:
         hulls = hulls or _Hulls(views, masks, plane, aim)
-        looked = _bays_looked_into(views, masks, scores, hulls, done, plane)
+        # A view cut back to the others' hull dropped what reached out of it (its shadow, a stretch of table),
+        # but a face it missed (a dark can's top of its mat's colour and light) is still missing: its bays
+        # are looked into too, as those of a view not corrected. A view cut again within the others' hull
+        # has looked there already.
+        looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
