@@ -1235,7 +1235,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
 def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray],
                                   scores: Sequence[np.ndarray | None], plane: np.ndarray,
                                   aim: np.ndarray) -> list[np.ndarray]:
-    """The silhouettes without the table under the object's overhang (without a background).
+    """The silhouettes without the table under the object's overhang.
 
     The strip of table under a lying can is hidden from every other view by the can itself, so nothing but
     its look tells it from the object; the first cut seeds it as probably table where it looks like the
@@ -1247,11 +1247,13 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
     than the cast shadow. So a hidden pixel with a shadow's look that is darker than
     :data:`_UNDER_OBJECT` of the deepest shadow the other views confirm (its :data:`_SHADOW_DEEPEST`
     quantile) is dropped, unless a point of the other views' hull above the plane on its ray looks alike
-    from another view (:func:`_seen_alike`): a dark can whose lower body is its mat's shadow's colour."""
+    from another view (:func:`_seen_alike`): a dark can whose lower body is its mat's shadow's colour.
+    With the empty workspace too: it shows the strip darkened as a shadow is, but the graph cut's colour
+    models, holding the tin's dark underside, keep it all the same."""
     hulls = _Hulls(views, masks, plane, aim)
     found = list(masks)
     for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
-        if score is None or view.background is not None:
+        if score is None:
             continue
         x0, y0, x1, y1 = _cut_box(view, mask)
         crop = (slice(y0, y1), slice(x0, x1))
