@@ -872,7 +872,7 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                     break
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
-    return [_refined(view, mask) for view, mask in zip(views, masks)]
+    return [_refined(view, mask, on_plane=plane is not None) for view, mask in zip(views, masks)]
 
 
 def unsure_pixels(image: np.ndarray, silhouette: np.ndarray, asked: np.ndarray | None = None) -> np.ndarray:
@@ -1667,7 +1667,7 @@ class _Hulls:
         return cv2.dilate(points, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
 
 
-def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _refined(view: _View, coarse_mask: np.ndarray, on_plane: bool) -> tuple[np.ndarray, np.ndarray]:
     """The full-resolution silhouette and its outline: the coarse edge, moved along its normal onto the
     image's own edge, to a fraction of a pixel.
 
@@ -1680,8 +1680,11 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
     step leaves nothing but table beyond. The table's colour is that just beyond the band, the median
     over a few neighbouring normals (its print and grain vary; a normal that ends on the object is
     outvoted); the table darkened, its colour kept, is the table too (the object's shadow beside its
-    foot, which the coarse cut often gives the object). The edge runs smoothly from one normal to the
-    next (a cheapest path round the outline), which carries it across stretches where object and
+    foot, which the coarse cut often gives the object), and the table's colour just within a candidate,
+    where the object's own is plainly unlike it, puts the edge further in when the object stands on a
+    known support plane (``on_plane``; :func:`_table_within`: the dark ring round the foot, a step as
+    sharp as the object's). The edge runs smoothly from one normal
+    to the next (a cheapest path round the outline), which carries it across stretches where object and
     table look alike, and its offsets, each found on one noisy profile, are averaged over a few
     neighbours. Each pixel whose centre lies inside the edge so found is object: the truth's rule for
     a pixel the edge crosses (half of it or more is object).
@@ -1708,7 +1711,7 @@ def _refined(view: _View, coarse_mask: np.ndarray) -> tuple[np.ndarray, np.ndarr
             cv2.drawContours(inside_edge, [contour], -1, 1, thickness=cv2.FILLED)
             continue
         loop, normals = _outline_loop(contour.reshape(-1, 2), _OUTLINE_SMOOTHING * max(view.sx, view.sy))
-        offsets = _edge_offsets(image, loop, normals, band)
+        offsets = _edge_offsets(image, loop, normals, band, on_plane)
         _fill_centres_inside(inside_edge, loop + offsets[:, None] * normals)
     # The edge moves at most the band's width: beyond it the coarse mask stands.
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
@@ -1765,13 +1768,20 @@ def _outline_loop(contour: np.ndarray, smoothing: float) -> tuple[np.ndarray, np
     return loop, (normals if signed_area >= 0 else -normals)
 
 
-def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band: int) -> np.ndarray:
+def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band: int,
+                  on_plane: bool) -> np.ndarray:
     """(M,) how far along each outward normal (px, within ``band``) the object's edge lies: the sharpest
-    colour step that leaves only the table's colour beyond it, on a path smooth round the loop (see
-    :func:`_refined`). ``image`` is float32 BGR, ``loop`` and ``normals`` as :func:`_outline_loop`."""
+    colour step that leaves only the table's colour beyond it, and, standing ``on_plane``, none of it just
+    within, on a path smooth round the loop (see :func:`_refined`). ``image`` is float32 BGR, ``loop``
+    and ``normals`` as :func:`_outline_loop`.
+
+    Without a support plane the scan names no table that the object stands on (a turntable's dark cloth, a
+    studio's backdrop), so no ring of it darkened round the object's foot is looked for."""
     # The profiles run on a little beyond the band, so that the table's colour is taken where the blur of
-    # an edge at the band's end does not reach.
-    offsets = np.arange(-band, band + _TABLE_BEYOND_PX + 1e-9, _EDGE_STEP)
+    # an edge at the band's end does not reach, and a little within it, so that the candidates at its
+    # inner end have what lies just within them too.
+    within = int(round(_TABLE_WITHIN_PX / _EDGE_STEP)) + 1
+    offsets = np.arange(-band - within * _EDGE_STEP, band + _TABLE_BEYOND_PX + 1e-9, _EDGE_STEP)
     count, candidates = len(loop), int(np.sum(offsets <= band + 1e-9))
 
     # The profiles at the candidates and half a pixel either side, in one: half a pixel is one candidate step,
@@ -1792,24 +1802,68 @@ def _edge_offsets(image: np.ndarray, loop: np.ndarray, normals: np.ndarray, band
     ends = colours[:, -depth:, :]
     table = _wrapped_median(np.median(ends, axis=1), _TABLE_NORMALS)
     spread = _wrapped_median(np.median(np.linalg.norm(ends - table[:, None, :], axis=2), axis=1), _TABLE_NORMALS)
-    unlike = np.maximum(_unlike_table(colours, table) - (2 * spread + _TABLE_TOLERANCE)[:, None], 0.0) * _EDGE_STEP
+    tolerance = (2 * spread + _TABLE_TOLERANCE)[:, None]
+    off_table = _unlike_table(colours, table)
+    unlike = np.maximum(off_table - tolerance, 0.0) * _EDGE_STEP
     # What lies beyond a candidate (from one blur's width outside it, past the edge's blur) and is not table.
-    gap = max(1, int(round(_edge_blur(colours[:, :depth, :].mean(axis=1), table, step[:, :candidates]) / _EDGE_STEP)))
+    band_start = colours[:, within:within + depth, :].mean(axis=1)
+    gap = max(1, int(round(_edge_blur(band_start, table, step[:, within:candidates]) / _EDGE_STEP)))
     beyond = np.zeros_like(unlike)
     beyond[:, :len(offsets) - gap - 1] = np.cumsum(unlike[:, ::-1], axis=1)[:, ::-1][:, gap + 1:]
-    cost = np.ascontiguousarray((_OUTSIDE_WEIGHT * beyond - step)[:, :candidates], dtype=np.float64)
+    cost = _OUTSIDE_WEIGHT * beyond - step
+    if on_plane:
+        cost += _INSIDE_WEIGHT * _table_within(colours, off_table < tolerance, table, tolerance, gap)
     path = np.empty(count, np.intp)
-    smoothest_path(cost, _EDGE_BEND_COST, 1, path)
+    smoothest_path(np.ascontiguousarray(cost[:, within:candidates], dtype=np.float64), _EDGE_BEND_COST, 1, path)
+    path += within
     # To a fraction of a step: the vertex of the parabola through the step's strength either side.
     rows = np.arange(count)
     before = step[rows, np.maximum(path - 1, 0)]
     at = step[rows, path]
     after = step[rows, path + 1]  # the profiles run on beyond the last candidate
     curvature = before - 2 * at + after
-    interior = (path > 0) & (curvature < 0)
+    interior = (path > within) & (curvature < 0)
     fraction = np.where(interior, 0.5 * (before - after) / np.where(interior, curvature, -1.0), 0.0)
     # Each offset is found on one noisy profile, while the edge runs on smoothly from one to the next.
     return _smoothed_round(offsets[path] + np.clip(fraction, -0.5, 0.5) * _EDGE_STEP, _EDGE_SMOOTHING)
+
+
+def _table_within(colours: np.ndarray, table_like: np.ndarray, table: np.ndarray, tolerance: np.ndarray,
+                  gap: int) -> np.ndarray:
+    """(M, D) what each candidate of the profiles ``colours`` (M, D, 3) pays for the samples with the
+    table's colour (``table_like``, (M, D) bool: within its row's ``tolerance`` (M, 1) of ``table`` (M, 3),
+    :func:`_unlike_table`) in the :data:`_TABLE_WITHIN_PX` just within it, past the edge's blur (``gap``
+    samples): per px, the contrast of the object's own colour (the profile's innermost
+    :data:`_OBJECT_DEPTH_PX`) with the table, where that contrast is plain (:data:`_OBJECT_UNLIKE`) and the
+    object's colour is no shade of the table's either; nothing where the object looks like the table, lit
+    or in shade.
+
+    The table darkened round the object's foot (the lamp and the sky hidden there) and its cast shadow
+    are the table's colour in shade: a candidate at their outer end leaves only the table beyond it, and
+    their step to the lit table is often as sharp as the object's own to them. What tells them from the
+    object is what lies within: the table's colour just within a candidate says the object ends further
+    in, unless the object's colour is the table's too, or the table's in shade (a dark can on a dark mat,
+    whose near-black a shadow gives the mat as well), where it says nothing."""
+    deep = max(1, int(round(_OBJECT_DEPTH_PX / _EDGE_STEP)))
+    own = np.median(colours[:, :deep, :], axis=1)[:, None, :]
+    contrast = _unlike_table(own, table)
+    plain = (contrast > _OBJECT_UNLIKE * tolerance) & (_off_every_shade(own, table)[0] > tolerance)
+    cost_per_px = np.where(plain, contrast, 0.0)
+    run = np.concatenate([np.zeros((len(colours), 1)), np.cumsum(table_like * _EDGE_STEP, axis=1)], axis=1)
+    end = np.clip(np.arange(colours.shape[1]) - gap, 0, None)
+    start = np.clip(end - int(round(_TABLE_WITHIN_PX / _EDGE_STEP)), 0, None)
+    return cost_per_px * (run[:, end] - run[:, start])
+
+
+#: The stretch (px) just within a candidate edge, past its blur, where the table's colour costs.
+_TABLE_WITHIN_PX = 1.0
+#: The table's colour there costs this share of the object's contrast with the table per px.
+_INSIDE_WEIGHT = 0.5
+#: The object's own colour: the median over the profile's innermost this-many px.
+_OBJECT_DEPTH_PX = 2.0
+#: The object's colour is plainly not the table's when it lies this many times the table's tolerance
+#: (its spread and the sensor's noise) from it.
+_OBJECT_UNLIKE = 3.0
 
 
 def _edge_blur(inside: np.ndarray, table: np.ndarray, steps: np.ndarray) -> float:
@@ -1852,12 +1906,19 @@ def _unlike_table(colours: np.ndarray, table: np.ndarray) -> np.ndarray:
     """(M, D) how far each colour of ``colours`` (M, D, 3) lies from its row's ``table`` colour (M, 3), in
     grey levels, the table in shade included: a colour close to the table's darkened (a shadow dims
     the table's light, not its colour) is as far as it is from that darkened colour."""
-    power = np.maximum(np.einsum("mk,mk->m", table, table), 1.0)[:, None]
-    darkening = np.clip(np.einsum("mdk,mk->md", colours, table) / power, _DEEPEST_SHADOW, 1.0)
-    from_shade = np.linalg.norm(colours - darkening[..., None] * table[:, None, :], axis=2)
+    from_shade, darkening, power = _off_every_shade(colours, table)
     from_table = np.linalg.norm(colours - table[:, None, :], axis=2)
     in_shade = from_shade < _SHADOW_COLOUR_CHANGE * darkening * np.sqrt(power)
     return np.where(in_shade, np.minimum(from_table, from_shade), from_table)
+
+
+def _off_every_shade(colours: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, D) how far each colour of ``colours`` (M, D, 3) lies from its row's ``table`` colour (M, 3) in the
+    shade that comes closest to it (from :data:`_DEEPEST_SHADOW` of its light to all of it), in grey levels;
+    and (M, D) that shade, and (M, 1) the table colour's squared length."""
+    power = np.maximum(np.einsum("mk,mk->m", table, table), 1.0)[:, None]
+    darkening = np.clip(np.einsum("mdk,mk->md", colours, table) / power, _DEEPEST_SHADOW, 1.0)
+    return np.linalg.norm(colours - darkening[..., None] * table[:, None, :], axis=2), darkening, power
 
 
 def _wrapped_median(values: np.ndarray, window: int) -> np.ndarray:
