@@ -2181,9 +2181,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     """GrabCut on a box around ``region`` (the pixels that stand out near the aim), seeded by the
     evidence ``score`` (in units of its noise); ``outside`` (0/255), where given, is sure table.
     ``hidden_shadows``: the pixels hidden from the other views that look like the shadow they confirm
-    (:func:`_hidden_shadow`) are seeded as table, not as object (with a background, unless the object's
-    faces look like the table: :func:`_faces_look_like_table`), and those darker than the table but of
-    another colour than its shadow as object for sure."""
+    (:func:`_hidden_shadow`; with a background, :func:`_hidden_table`) are seeded as table, not as object,
+    and those darker than the table but of another colour than its shadow as object for sure."""
     cw, ch = view.coarse_size
     x0, y0, x1, y1 = _cut_box(view, region)
     mask = np.full((y1 - y0, x1 - x0), cv2.GC_PR_BGD, np.uint8)
@@ -2207,16 +2206,14 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             off = _off_colours(image, empty, darker & (hidden | low))
             if _shadow_keeps_colour(off, low & darker):
                 mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
-            # The converse: a hidden pixel that is the empty workspace darkened, its colour kept, as deep as
-            # the shadow the other views confirm, is the table in the object's shadow (the strip under a
-            # lying can or an ellipsoid's belly, hidden from the other views by the object itself); seeded as
-            # object, the graph cut keeps it wherever the object's model holds a dark colour. Unless the
-            # object's own faces look like the table too (a white box on white laminate, a box of the
-            # table's wood): then a face turned from the lamp is the table's shadow to the eye as well.
+            # The converse: hidden pixels of the empty workspace's colour, darkened as the shadow the other
+            # views confirm, are the table in the object's shadow (_hidden_table).
             shadow = cv2.morphologyEx((low & darker & (off < 1.0)).astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
-            if np.any(shadow) and not _faces_look_like_table(image, empty, sure & (score[crop] > _SURE) & ~hidden):
-                darkening = image.sum(axis=2) / np.maximum(empty.sum(axis=2), 1.0)
-                mask[_hidden_shadow(off < 1.0, darkening, shadow, hidden)] = cv2.GC_PR_BGD
+            if np.any(shadow):
+                probable, certain = _hidden_table(image, empty, hidden & (off < 1.0), shadow,
+                                                  sure & (score[crop] > _SURE) & ~hidden)
+                mask[probable] = cv2.GC_PR_BGD
+                mask[certain] = cv2.GC_BGD
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
@@ -2319,16 +2316,37 @@ def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray
     return hidden & looks & (brightness <= np.quantile(brightness[shadow], _SHADOW_BRIGHTEST))
 
 
-def _faces_look_like_table(image: np.ndarray, empty: np.ndarray, faces: np.ndarray) -> bool:
-    """Whether :data:`_TABLE_LIKE_FACES` of the object's ``faces`` (the pixels that surely stand out and
-    that the other views see) have the colour of the empty workspace behind them, lit or darkened."""
-    table_like = np.count_nonzero(_off_colours(image, empty, faces) < 1.0)
-    return bool(table_like >= _TABLE_LIKE_FACES * np.count_nonzero(faces))
+def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow: np.ndarray,
+                  faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the hidden pixels that keep the empty workspace's colour (``kept``, darkened or not) are
+    probably, and which surely, the table in the object's shadow: as dark as the ``shadow`` the other
+    views confirm, and darker than its darkest. ``faces``, where the object surely stands and the other
+    views see it. (h, w) bool each, none if the object's faces look like the table.
+
+    The strip of table under a lying can or an ellipsoid's belly is hidden from the other views by the
+    object itself; seeded as object, the graph cut keeps it wherever the object's colour model holds a
+    dark colour. Against its own empty workspace such a pixel is the table darkened with its colour
+    kept. A face of the object's turned from the lamp may look so too where the object has the table's
+    colour (a white box on white laminate, a box of the table's wood): where most of its faces do,
+    nothing is said. Darker than the darkest of the open shadow is only the table that the object hides
+    from the sky as well as from the lamp, or a face darker still: only where none of the object's faces
+    of the table's colour is that dark is it the table for sure."""
+    like_table = _off_colours(image, empty, faces) < 1.0
+    if np.count_nonzero(like_table) >= _TABLE_LIKE_FACES * np.count_nonzero(faces):
+        return np.zeros_like(kept), np.zeros_like(kept)
+    darkening = image.sum(axis=2) / np.maximum(empty.sum(axis=2), 1.0)
+    probable = _hidden_shadow(kept, darkening, shadow, kept)
+    deepest = np.quantile(darkening[shadow], _DEEPEST)
+    if np.any(like_table):
+        deepest = min(deepest, np.quantile(darkening[like_table], _DEEPEST))
+    return probable, kept & (darkening < deepest)
 
 
 #: An object whose faces have the table's colour in this share of what is surely seen of them looks like
 #: the table, and its shaded faces like the table's shadow.
 _TABLE_LIKE_FACES = 0.5
+#: The darkest of a region is taken at this quantile of its pixels: a few are darker by the noise.
+_DEEPEST = 0.05
 
 
 def _median_colour(image: np.ndarray, where: np.ndarray) -> np.ndarray:
