@@ -1539,7 +1539,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a shadow's look
     against the empty workspace, if it has one. A piece with a shadow's look over half of it may be the
     shadow beside the object, whose table points the other views' feet hide from them here and there: it
-    is kept only where both the parallax and the other views seeing it alike say a face."""
+    is kept only where both the parallax and the other views seeing it alike say a face. Where the object
+    hides the table points behind most of it (a white box's face turned from the lamp on white laminate,
+    which looks like the shadow beside it), the parallax says nothing, and the other views seeing it alike
+    decide, as for any hidden piece."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1564,7 +1567,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             continue
         stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > 1.0
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
-            if not stands:
+            if not stands and 2 * len(evidence) > area:
                 continue
         elif 2 * len(evidence) > area:
             if stands:
