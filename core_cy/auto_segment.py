@@ -121,6 +121,7 @@ class _View:
         # (:func:`_texture_change`).
         self.grain_sums: np.ndarray | None = None
         self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
+        self.open_shadow: np.ndarray | None = None  # the open shadow's darkenings, all views' (_open_shadow)
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -2209,11 +2210,14 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             off = _off_colours(image, empty, darker & (hidden | low))
             if _shadow_keeps_colour(off, low & darker):
                 mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
-            # The converse: hidden pixels of the empty workspace's colour, darkened as the shadow the other
-            # views confirm, are the table in the object's shadow (_hidden_table).
-            shadow = cv2.morphologyEx((low & darker & (off < 1.0)).astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
-            if np.any(shadow):
-                probable, certain = _hidden_table(image, empty, hidden & (off < 1.0), shadow,
+            # The converse: hidden pixels of the empty workspace's colour, darkened as the open shadow, are
+            # the table in the object's shadow (_hidden_table). The open shadow in sight is the one the other
+            # views confirm here, or where the object hides all of it (a lamp behind a lying can), every
+            # view's (_open_shadow).
+            shadow = _open_shadow_in(image, empty, low)
+            darkenings = _darkening_of(image, empty)[shadow] if np.any(shadow) else view.open_shadow
+            if darkenings is not None and len(darkenings):
+                probable, certain = _hidden_table(image, empty, hidden & (off < 1.0), darkenings,
                                                   sure & (score[crop] > _SURE) & ~hidden)
                 mask[probable] = cv2.GC_PR_BGD
                 mask[certain] = cv2.GC_BGD
@@ -2322,9 +2326,9 @@ def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray
 def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow: np.ndarray,
                   faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Which of the hidden pixels that keep the empty workspace's colour (``kept``, darkened or not) are
-    probably, and which surely, the table in the object's shadow: as dark as the ``shadow`` the other
-    views confirm, and darker than its darkest. ``faces``, where the object surely stands and the other
-    views see it. (h, w) bool each, none if the object's faces look like the table.
+    probably, and which surely, the table in the object's shadow: as dark as the open shadow (``shadow``,
+    its darkenings, :func:`_open_shadow`), and darker than its darkest. ``faces``, where the object surely
+    stands and the other views see it. (h, w) bool each, none if the object's faces look like the table.
 
     The strip of table under a lying can or an ellipsoid's belly is hidden from the other views by the
     object itself; seeded as object, the graph cut keeps it wherever the object's colour model holds a
@@ -2337,12 +2341,38 @@ def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow
     like_table = _off_colours(image, empty, faces) < 1.0
     if np.count_nonzero(like_table) >= _TABLE_LIKE_FACES * np.count_nonzero(faces):
         return np.zeros_like(kept), np.zeros_like(kept)
-    darkening = image.sum(axis=2) / np.maximum(empty.sum(axis=2), 1.0)
-    probable = _hidden_shadow(kept, darkening, shadow, kept)
-    deepest = np.quantile(darkening[shadow], _DEEPEST)
+    darkening = _darkening_of(image, empty)
+    probable = kept & (darkening <= np.quantile(shadow, _SHADOW_BRIGHTEST))
+    deepest = np.quantile(shadow, _DEEPEST)
     if np.any(like_table):
         deepest = min(deepest, np.quantile(darkening[like_table], _DEEPEST))
     return probable, kept & (darkening < deepest)
+
+
+def _darkening_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
+    """(h, w) each pixel's brightness over the empty workspace's."""
+    return image.sum(axis=2) / np.maximum(empty.sum(axis=2), 1.0)
+
+
+def _open_shadow(views: Sequence[_View], scores: dict[int, np.ndarray]) -> np.ndarray:
+    """(N,) the darkenings (:func:`_darkening_of`) of the open shadow (:func:`_open_shadow_in`, where the
+    evidence ``scores`` is under 1), every view's pooled. The shadow's depth is the light's, the same on any
+    table point and from any view: a view whose own shadow is all hidden behind the object (a lamp behind
+    a lying can) knows it from the others."""
+    found = []
+    for view in views:
+        assert view.background is not None
+        shadow = _open_shadow_in(view.coarse, view.background, scores[view.index] < 1.0)
+        found.append(_darkening_of(view.coarse, view.background)[shadow])
+    return np.concatenate(found)
+
+
+def _open_shadow_in(image: np.ndarray, empty: np.ndarray, confirmed: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the ``confirmed`` pixels (another view sees their change alike at the same table
+    point) darker than the empty workspace and of its colour, a few together: the shadow in the open."""
+    candidates = confirmed & (image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2))
+    shadow = candidates & (_off_colours(image, empty, candidates) < 1.0)
+    return cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
 
 
 #: An object whose faces have the table's colour in this share of what is surely seen of them looks like
@@ -2646,6 +2676,9 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
     """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence;
     ``iterations``, the graph cut's (default :data:`_GC_ITERATIONS`)."""
     cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
+    open_shadow = _open_shadow(views, scores)
+    for view in views:
+        view.open_shadow = open_shadow
     for view in views:
         cw, ch = view.coarse_size
         centre = _coarse_aim(view, aim)
