@@ -613,3 +613,32 @@ def test_a_face_that_one_view_of_six_missed_is_looked_for_beyond_its_outline(tmp
     views see it alike (issue 20)."""
     ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-printed-ellipsoid", backgrounds=True)
     assert min(ious) > 0.9, ious
+
+
+def test_a_shadow_under_a_lying_tin_darker_than_the_open_shadow_is_table_with_the_empty_workspace(tmp_path):
+    """A lying tin on wood, with the empty workspace: the strip of shadow under it, hidden from the other
+    views by the tin, was seeded as the tin, and the graph cut kept it for the tin's dark blue foot (0.76
+    and 0.85 before in two views; the images alone do no better). Against its own empty workspace it is
+    the wood darkened with its colour kept, and darker than the darkest of the open shadow: the table.
+    The open shadow is every view's where the lamp behind the tin hides all of it in one (seed 5)."""
+    for seed in (1, 5):
+        ious = _printed_scene_ious(tmp_path / str(seed), seed, "wood-tin-lying-can", backgrounds=True)
+        assert min(ious) > 0.95, (seed, ious)
+
+
+def test_the_shadow_under_an_ellipsoid_s_belly_is_table_with_the_empty_workspace(tmp_path):
+    """A printed ellipsoid on fabric, with the empty workspace: the shadow under its belly, hidden from the
+    other views, stayed in two views' silhouettes (0.75 and 0.85 before; 0.99 and 0.97 from the images
+    alone). It is the fabric darkened as the open shadow, its colour kept: seeded as table."""
+    ious = _printed_scene_ious(tmp_path, 5, "fabric-printed-ellipsoid", backgrounds=True)
+    assert min(ious) > 0.93, ious
+
+
+def test_a_white_box_s_face_turned_from_the_lamp_is_kept_with_the_empty_workspace(tmp_path):
+    """A white box on white laminate, with the empty workspace: from one view its two faces turned from the
+    lamp look like the shadow beside them and hide their table points from the other views, so the
+    parallax says nothing of them, and the view lost them (0.61 before; 0.94 from the images alone). The
+    other views see them alike: they are kept, as without the empty workspace; nor are they taken for the
+    table in the box's shadow, the box's faces having the table's colour."""
+    ious = _printed_scene_ious(tmp_path, 5, "laminate-white-box", backgrounds=True)
+    assert min(ious) > 0.93, ious
