@@ -121,7 +121,8 @@ class _View:
         # (:func:`_texture_change`).
         self.grain_sums: np.ndarray | None = None
         self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
-        self.open_shadow: np.ndarray | None = None  # the open shadow's darkenings, all views' (_open_shadow)
+        # The open shadow's darkenings, all views' (_open_shadow), worked out when first asked.
+        self.open_shadow: Callable[[], np.ndarray] | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -2215,7 +2216,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             # views confirm here, or where the object hides all of it (a lamp behind a lying can), every
             # view's (_open_shadow).
             shadow = _open_shadow_in(image, empty, low)
-            darkenings = _darkening_of(image, empty)[shadow] if np.any(shadow) else view.open_shadow
+            darkenings = (_darkening_of(image, empty)[shadow] if np.any(shadow)
+                          else None if view.open_shadow is None else view.open_shadow())
             if darkenings is not None and len(darkenings):
                 probable, certain = _hidden_table(image, empty, hidden & (off < 1.0), darkenings,
                                                   sure & (score[crop] > _SURE) & ~hidden)
@@ -2351,7 +2353,7 @@ def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow
 
 def _darkening_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
     """(h, w) each pixel's brightness over the empty workspace's."""
-    return image.sum(axis=2) / np.maximum(empty.sum(axis=2), 1.0)
+    return cv2.transform(image, _CHANNEL_SUM) / np.maximum(cv2.transform(empty, _CHANNEL_SUM), 1.0)
 
 
 def _open_shadow(views: Sequence[_View], scores: dict[int, np.ndarray]) -> np.ndarray:
@@ -2676,7 +2678,8 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
     """Per view, the coarse silhouette cut around what stands out near the aim, and its evidence;
     ``iterations``, the graph cut's (default :data:`_GC_ITERATIONS`)."""
     cuts: list[tuple[np.ndarray, np.ndarray | None]] = []
-    open_shadow = _open_shadow(views, scores)
+    # Asked of a view only where its own is all hidden: once for all of them.
+    open_shadow = functools.cache(functools.partial(_open_shadow, views, scores))
     for view in views:
         view.open_shadow = open_shadow
     for view in views:
