@@ -1567,6 +1567,9 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask):
             continue
+        if _lit_above_its_surroundings(view, piece, mask):
+            grown[piece] = 255
+            continue
         stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > 1.0
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
@@ -1583,6 +1586,31 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray) -> bool:
+    """Whether most of the image round ``piece`` (bool, coarse) beyond the silhouette ``mask`` is darker than
+    the piece by over :data:`_DARKER_ROUND`.
+
+    What the cut takes beyond the silhouette as table is the shadow cast on the table, or a stretch of lit
+    table beside it: the lamp lights the table beyond a shadow, and a lit stretch has the shadow on one
+    side at most, so neither is brighter than most of what lies round it. A face of the object is: a face of
+    the table's colour in shade, under the sky alone, is as bright as the table in shadow, but stands over
+    the table's darkest points, the shadow it casts and the rim round its foot, where the object hides part
+    of the sky from the table too. Its colour matches the table point behind it; this does not."""
+    beyond = cv2.dilate(mask, _SMALL, iterations=2) == 0
+    round_it = (cv2.dilate(piece.astype(np.uint8), _SMALL, iterations=2) > 0) & ~piece & beyond
+    if not round_it.any():
+        return False
+    brightness = view.coarse.sum(axis=2)
+    darker = brightness[round_it] < (1.0 - _DARKER_ROUND) * float(np.median(brightness[piece]))
+    return bool(np.count_nonzero(darker) > _MOSTLY * darker.size)
+
+
+#: A piece's surroundings are darker than it where their brightness is under its own by over this share.
+_DARKER_ROUND = 0.1
+#: Most of a piece's surroundings: over this share of them.
+_MOSTLY = 0.75
 
 
 def _cut_within(view: _View, region: np.ndarray, score: np.ndarray) -> np.ndarray:

@@ -642,3 +642,13 @@ def test_a_white_box_s_face_turned_from_the_lamp_is_kept_with_the_empty_workspac
     table in the box's shadow, the box's faces having the table's colour."""
     ious = _printed_scene_ious(tmp_path, 5, "laminate-white-box", backgrounds=True)
     assert min(ious) > 0.93, ious
+
+
+def test_a_white_box_s_face_in_shade_over_its_shadow_is_kept_from_the_images_alone(tmp_path):
+    """A white box on white laminate, from the images alone: in one view the cut within the other views'
+    hull finds the box's shaded front face, but its grey matches the table in the shadow behind it, so the
+    colour evidence called it table (0.70 before). The face stands over the box's shadow and the dark rim
+    round its foot, so most of what lies round it beyond the silhouette is darker than it, which a shadow
+    on the table never is: kept."""
+    ious = _printed_scene_ious(tmp_path, 7, "laminate-white-box", backgrounds=False)
+    assert ious[2] > 0.77 and min(ious) > 0.77, ious
