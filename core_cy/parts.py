@@ -11,7 +11,10 @@ shade about its silhouettes, where a shadow may have been taken in or a dark fac
 out), a part must pay as much with what changes there set aside: a union that explains a
 segmentation's error explains nothing a camera saw. A part that no view sees rise off the
 table pays on the silhouettes as they are, and leaves the model at the end: it is the shadow
-they took in, which it kept off the other parts' outlines. So where the silhouettes and
+they took in, which it kept off the other parts' outlines. A sheet, a part whose thickness no view
+sees, is no body either (silhouettes that wrong, a face and a shadow, each drawn flat, explain
+them better than the body the views see): at the end a sheet floating over the table becomes the
+body beneath it, standing on the table, and any other leaves the model. So where the silhouettes and
 the one superquadric disagree by less than that, no part can pay and the object stays
 one superquadric: decided before anything else is done, from the pixels where they
 disagree farther from the other's outline than the edges' noise (a band along the
@@ -410,13 +413,47 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
             break
     if len(current) > 1 and plane is not None:
         current, ious = _rested(current, fitter, plane, ious, rasters)
-        if rasters.any_unsure:
-            # A part that no view sees rise off the table is the shadow the silhouettes took in: it kept
-            # the shadow off the other parts' outlines, and is no part of the object.
-            seen = tuple(part for part in current if not _flat_on_table(part, rasters.cameras, plane))
-            if seen and len(seen) < len(current):
-                current, ious = seen, rasters.ious(seen)[0]
+    if current != (single,) and any(_sheet(part, rasters.cameras) for part in current):
+        current, ious = _bodies(current, single, fitter, rasters, plane)
+    if len(current) > 1 and plane is not None and rasters.any_unsure:
+        # A part that no view sees rise off the table is the shadow the silhouettes took in: it kept
+        # the shadow off the other parts' outlines, and is no part of the object.
+        seen = tuple(part for part in current if not _flat_on_table(part, rasters.cameras, plane))
+        if seen and len(seen) < len(current):
+            current, ious = seen, rasters.ious(seen)[0]
     return PartsFit(current, ious, fitter.evaluations)
+
+
+def _bodies(parts, single: Superquadric, fitter: _Fitter, rasters: _Rasters, plane):
+    """The union with its sheets (:func:`_sheet`) made bodies or dropped: a sheet floating over the table
+    is the face of a body standing on it (resting on a face, taken down to the table), any other
+    sheet no body at all; the parts that then do not pay dropped; ``single`` if nothing is left."""
+    bodies = []
+    for part in parts:
+        if not _sheet(part, rasters.cameras):
+            bodies.append(part)
+        elif plane is not None:
+            grounded = _grounded(resting_on(part, plane[:3])[0], plane)
+            if grounded is not None:
+                bodies.append(grounded)
+    if not bodies:
+        return (single,), rasters.ious((single,))[0]
+    return _paying(tuple(bodies), fitter, rasters, plane)
+
+
+def _sheet(part: Superquadric, cameras) -> bool:
+    """Whether no view sees the part's thickness (its extent along its thinnest axis, through its
+    centre) span more than the edges' noise: to the cameras it is a sheet, no body. Where the views
+    see a body, a union of sheets explains a segmentation's errors (a face and a shadow, each drawn
+    flat), not the object."""
+    R, centre = part.T_world_object[:3, :3], part.T_world_object[:3, 3]
+    k = int(np.argmin(part.size))
+    ends = np.stack([centre - part.size[k] * R[:, k], centre + part.size[k] * R[:, k]])
+    for camera in cameras:
+        (near, far), _ = camera.project(ends)
+        if np.hypot(*(far - near)) > _EDGE_BAND_PX:
+            return False
+    return True
 
 
 def _flat_on_table(part: Superquadric, cameras, plane: np.ndarray) -> bool:
