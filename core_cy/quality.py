@@ -8,7 +8,8 @@ import numpy as np
 from .camera import Camera
 from .superquadric import Superquadric, inside_outside, surface_points
 
-__all__ = ["silhouette_iou", "hull_iou", "union_hull_iou", "hull_covers", "projected_outline", "radial_residual"]
+__all__ = ["silhouette_iou", "hull_iou", "union_hull_iou", "hull_covers", "projected_outline", "outline_distances",
+           "radial_residual"]
 
 _SUBPIXEL_BITS = 4
 
@@ -45,6 +46,25 @@ def projected_outline(part: Superquadric, camera: Camera, surface: np.ndarray | 
     ``surface``: the part's :func:`core_cy.superquadric.surface_points`, if already taken (for another view)."""
     uv, depth = camera.project(surface_points(part) if surface is None else surface)
     return uv[depth > 0]
+
+
+def outline_distances(part: Superquadric, camera: Camera, samples: np.ndarray) -> np.ndarray:
+    """(N,) signed distance (pixels) of each of ``samples`` ((N, 2) column, row) from the part's
+    projected outline: positive inside it, negative outside; -inf for every sample if the part is
+    behind the camera.
+
+    >>> from .camera import Camera
+    >>> camera = Camera(K=[[100, 0, 50], [0, 100, 50], [0, 0, 1]], T_world_cam=np.eye(4))
+    >>> ball = Superquadric([0.1, 0.1, 0.1], [1, 1], np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1.0], [0, 0, 0, 1]]))
+    >>> np.round(outline_distances(ball, camera, np.array([[50.0, 50.0], [70.0, 50.0]])), 0).tolist()
+    [10.0, -10.0]
+    """
+    samples = np.asarray(samples, dtype=np.float64).reshape(-1, 2)
+    uv = projected_outline(part, camera)
+    if len(uv) < 3:
+        return np.full(len(samples), -np.inf)
+    hull = cv2.convexHull(uv.astype(np.float32))
+    return np.array([cv2.pointPolygonTest(hull, (float(u), float(v)), True) for u, v in samples])
 
 
 def hull_iou(uv: np.ndarray, silhouette: np.ndarray, box=None) -> float:

@@ -20,9 +20,9 @@ from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
 from .parts import MAX_PARTS, agreement_gains, fit_parts, union_ious
-from .quality import radial_residual
+from .quality import outline_distances, radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
-from .silhouette_fit import fit_to_silhouettes
+from .silhouette_fit import _NOISE_PX, fit_to_silhouettes
 from .sphere import enclosing_sphere, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric, resting_on, start_superquadrics, upright_box
 
@@ -33,6 +33,9 @@ _JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
 # the other starts' descents are judged by their agreement, and the best goes on (at most this many steps).
 _DISAGREE = 0.8
 _RESTART_ITERATIONS = 20
+# An edge sample of auto's farther than this (px) from the one superquadric's outline, six times the
+# edges' own noise, is one that the views together contradict.
+_CONTRADICTED_PX = 6 * _NOISE_PX
 _RESTING_TILT = 30.0  # degrees
 
 
@@ -371,6 +374,21 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                           unsure=unsure_everywhere)
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
+    if options.silhouette_fit and found and len(parts) == 1:
+        # The model stays one superquadric: a stretch of one view's outline that runs far from it, where the
+        # other views hold it, is one they contradict (a shadow or a strip of table taken in, a face left
+        # out), whatever its colours say. Such samples are doubtful as those on unsure pixels are, their
+        # pull fading as they lie farther, and the fit goes on from where it is: they can no longer drag it.
+        contradicted = [None if index not in found else
+                        doubtful[index] | (np.abs(outline_distances(parts[0], camera, edges[index])) > _CONTRADICTED_PX)
+                        for index, camera in enumerate(cameras)]
+        if any(now is not None and np.any(now != before) for now, before in zip(contradicted, doubtful)):
+            refined = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=contradicted)
+            evaluations["fit"] += refined.evaluations
+            superquadric = refined.superquadric
+            parts = (superquadric,)
+            ious, _ = union_ious(parts, cameras, silhouettes, boxes)
+            lap("fit")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
     return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts,
