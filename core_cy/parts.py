@@ -69,7 +69,7 @@ from .quality import hull_covers, projected_outline
 from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
-__all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "agreement_gains", "fit_parts", "union_ious"]
+__all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
 
 MAX_PARTS = 6
 # What a part must explain to pay for its eleven parameters: this share of a view's
@@ -126,14 +126,6 @@ class PartsFit:
 def union_ious(parts, cameras, silhouettes, boxes) -> tuple[list[float], np.ndarray]:
     """Each view's silhouette IoU of the union, and (P, V) of the union without each part."""
     return _Rasters(cameras, silhouettes, boxes).ious(parts)
-
-
-def agreement_gains(after, before, cameras, silhouettes, boxes, unsure=None) -> np.ndarray:
-    """(V,) how much more of each view's silhouette IoU the union ``after`` explains than ``before``:
-    the less of two readings, the silhouettes as they are and with what changes on their ``unsure``
-    pixels set aside (as :func:`fit_parts` takes it), so that a model that agrees better only by
-    following a segmentation's doubtful pixels does not."""
-    return _Rasters(cameras, silhouettes, boxes, unsure).gains(tuple(after), tuple(before))
 
 
 def unexplained_shares(parts, cameras, silhouettes, boxes, band: float = _EDGE_BAND_PX) -> list[float]:

@@ -6,7 +6,6 @@ decode -> segment -> edge samples -> enclosing sphere -> carve -> support plane
 
 from __future__ import annotations
 
-import functools
 import time
 from dataclasses import dataclass, field
 
@@ -19,7 +18,7 @@ from .edges import about_samples, edge_samples, samples_near
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
-from .parts import MAX_PARTS, agreement_gains, fit_parts, union_ious
+from .parts import MAX_PARTS, fit_parts, union_ious
 from .quality import outline_distances, radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import _NOISE_PX, fit_to_silhouettes
@@ -322,14 +321,6 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         # face left out, and the other views decide.
         doubtful = [samples_near(edges[index], _unsure(view, decoded[index][0], found[index][0], edges[index]))
                     if index in found else None for index, view in enumerate(views)]
-
-        @functools.cache
-        def unsure_everywhere() -> list[np.ndarray | None]:
-            """Every pixel of auto's silhouettes that their colours cannot confirm (None for a mask's),
-            found once, and only if asked for: by a restart to be judged, or a part that could pay."""
-            return [_unsure(view, decoded[index][0], found[index][0]) if index in found else None
-                    for index, view in enumerate(views)]
-
         fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
@@ -340,9 +331,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             # tilted start) or an object that is no superquadric. The descents from the other starts,
             # each some steps on already (the fit went on with them, the silhouettes unexplained), are
             # judged by how well they agree with all the silhouettes; the one that agrees best goes on
-            # to its end, and is kept if it then agrees better than the fit (DESIGN.md §1.12), on the pixels
-            # auto's colours confirm as well as on all of them: on silhouettes that wrong, the descent that
-            # follows a shadow or a stretch of table taken in agrees the better with them as they are.
+            # to its end, and is kept if it then agrees better than the fit (DESIGN.md §1.12).
             agreement = [(float(np.mean(union_ious(other, cameras, silhouettes, boxes)[0])), other[0])
                          for other in fit.others]
             if agreement:
@@ -351,9 +340,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                                              max_iterations=_RESTART_ITERATIONS, doubtful=doubtful)
                 evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
-                gains = agreement_gains((restart.superquadric,), (superquadric,), cameras, silhouettes, boxes,
-                                        unsure_everywhere())
-                if np.mean(gains) > 0:
+                if np.mean(other_ious) > np.mean(ious):
                     superquadric, ious = restart.superquadric, other_ious
             lap("fit")
     else:
@@ -371,7 +358,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                           single_evaluations=evaluations["fit"],
                           # The pixels of auto's silhouettes that their colours cannot confirm, found only if
                           # a part could pay: it must pay on the rest too.
-                          unsure=unsure_everywhere)
+                          unsure=lambda: [_unsure(view, decoded[index][0], found[index][0]) if index in found
+                                          else None for index, view in enumerate(views)])
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
     if options.silhouette_fit and found and len(parts) == 1:
