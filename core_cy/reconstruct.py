@@ -367,9 +367,9 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         # other views hold it, is one they contradict (a shadow or a strip of table taken in, a face left
         # out), whatever its colours say. Such samples are doubtful as those on unsure pixels are, their
         # pull fading as they lie farther, and the fit goes on from where it is: they can no longer drag it.
-        contradicted = [None if index not in found else
-                        doubtful[index] | (np.abs(outline_distances(parts[0], camera, edges[index])) > _CONTRADICTED_PX)
-                        for index, camera in enumerate(cameras)]
+        contradicted = [None if before is None else
+                        before | (np.abs(outline_distances(parts[0], camera, samples)) > _CONTRADICTED_PX)
+                        for before, camera, samples in zip(doubtful, cameras, edges)]
         if any(now is not None and np.any(now != before) for now, before in zip(contradicted, doubtful)):
             refined = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=contradicted)
             evaluations["fit"] += refined.evaluations
