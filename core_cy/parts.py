@@ -4,12 +4,14 @@ The one-superquadric fit comes first. A part must pay for itself: it is kept onl
 when, without it, the union's silhouette IoU would drop by at least
 ``PART_GAIN`` in at least two views (in every view, with fewer); a part seen in one
 view only has no depth. A union may also carve away what one view shows empty, with
-no more volume: twice ``PART_GAIN`` there, by covering less of what it shows empty (a
-dumbbell's two weights without the gap between them, hidden behind them in the other
-views). Where the segmentation says which pixels it cannot confirm (``auto``: the table's
-shade about its silhouettes, where a shadow may have been taken in or a dark face left
-out), a part must pay as much with what changes there set aside: a union that explains a
-segmentation's error explains nothing a camera saw. A part that no view sees rise off the
+no more volume: twice ``PART_GAIN`` there, by covering less of what it shows empty within
+the silhouette's convex hull, the table seen through the object (a dumbbell's two weights
+without the gap between them, hidden behind them in the other views); beyond that hull a
+silhouette that stops short may as well have left a face out. Where the segmentation says
+which pixels it cannot confirm (``auto``: the table's shade about its silhouettes, where a
+shadow may have been taken in or a dark face left out), a part must pay as much with what
+changes there set aside: a union that explains a segmentation's error explains nothing a
+camera saw. A part that no view sees rise off the
 table pays on the silhouettes as they are, and leaves the model at the end: it is the shadow
 they took in, which it kept off the other parts' outlines. A sheet, a part whose thickness no view
 sees, is no body either (silhouettes that wrong, a face and a shadow, each drawn flat, explain
@@ -222,13 +224,42 @@ class _Rasters:
         self._tallied[each] = tallies
         return tallies
 
+    @cached_property
+    def enclosed(self) -> list:
+        """Per view, the silhouette's convex hull (the image's size): the table a view shows there, with
+        the object on either side of it, is seen through the object (a dumbbell's gap between its
+        weights); outside it a silhouette that stops short may as well have left a face out."""
+        hulls = []
+        for silhouette in self.silhouettes:
+            hull = np.zeros(silhouette.shape, np.uint8)
+            pixels = cv2.findNonZero(silhouette)
+            if pixels is not None:
+                cv2.fillConvexPoly(hull, cv2.convexHull(pixels), 1)
+            hulls.append(hull.view(bool))
+        return hulls
+
     def carved_ious(self, before, after) -> np.ndarray:
         """(V,) each view's IoU of ``before`` with what ``after`` covers of what the view shows empty
-        instead of its own: how much ``after`` explains the more by covering less of the empty."""
+        within the silhouette's convex hull (:attr:`enclosed`) instead of its own, and outside it the
+        more of the two: how much ``after`` explains the more by covering less of the table seen through
+        the object (what it leaves out beyond the silhouette's hull a face left out explains as well)."""
+        carved = np.zeros(len(self.cameras))
         explained = self._tallies(before, each=False)[:, 0, 1]
-        after = self._tallies(after, each=False)[:, 0]
-        union = after[:, 0] + after[:, 2]
-        return np.divide(explained, union, out=np.zeros_like(union), where=union > 0)
+        extras = []
+        for parts in (before, after):
+            counts = []
+            for (object_pixels, covers, (x0, y0)), enclosed in zip(self.drawn(parts), self.enclosed):
+                if object_pixels is None:
+                    counts.append((0, 0))
+                    continue
+                within = enclosed[y0:y0 + object_pixels.shape[0], x0:x0 + object_pixels.shape[1]]
+                extra = np.any(np.stack(covers), axis=0) & ~object_pixels
+                counts.append((int(np.count_nonzero(extra & within)), int(np.count_nonzero(extra & ~within))))
+            extras.append(np.array(counts, float))
+        (_, before_beyond), (after_within, after_beyond) = (extra.T for extra in extras)
+        union = self._tallies(after, each=False)[:, 0, 0] + after_within + np.maximum(before_beyond, after_beyond)
+        np.divide(explained, union, out=carved, where=union > 0)
+        return carved
 
     def unexplained(self, parts, band: float = _EDGE_BAND_PX) -> list[float]:
         """As :func:`unexplained_shares`."""
@@ -487,7 +518,9 @@ def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fi
     # hidden behind them); one that explains more there by covering more adds volume seen in one
     # view, its depth unseen, perhaps in the wrong place (a mug's handle behind its body; a thin slab
     # held edge-on to the other views, on a shadow that one view's silhouette took in): that pays in
-    # two views. Less volume is not enough: a thin part lies in the views' blind spot.
+    # two views. Less volume is not enough: a thin part lies in the views' blind spot. Nor is covering
+    # less beyond the silhouette's convex hull (:attr:`_Rasters.enclosed`): slabs round a column that
+    # leave out the face one view's silhouette left out explain a segmentation's error, not a gap.
     explains_more = gained >= _views_to_pay(len(candidate_ious))
     if not explains_more and float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current):
         carved = rasters.carved_ious(current, candidate) - np.asarray(ious)
