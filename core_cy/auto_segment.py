@@ -1123,6 +1123,18 @@ _LIGHT_FIELD_BEYOND = 0.2
 _LIGHT_FIELD_AT_MOST = 1.0
 
 
+def _excess_on_plane(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> bool:
+    """Whether at least :data:`_ON_PLANE` of a silhouette's pixels outside a hull are the plane by the view's
+    own evidence (a score under 1: they do not stand out from the table, nor is their table point hidden)."""
+    outside = (mask > 0) & (hull == 0)
+    return bool(outside.any()) and float(np.mean(score[outside] < 1.0)) >= _ON_PLANE
+
+
+#: A view's excess is taken to be on the plane when this share of it is by the view's own evidence: a
+#: part of the object that the other views missed stands out or hides its table point somewhere.
+_ON_PLANE = 0.95
+
+
 def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
     """The share of a silhouette outside a hull, in units of :data:`_DISAGREEMENT` (above 1: too much)."""
     area = max(cv2.countNonZero(mask), 1)
@@ -1138,7 +1150,9 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     its evidence missed a face the others found) carves every other view's hull, so that they reach
     out of it. Which is which: a view without which none of the others reaches out holds too little,
     and is cut again within their hull (seeded by its evidence: within their hull and its own
-    silhouette, by the colour models of its own seeds);
+    silhouette, by the colour models of its own seeds), unless what reaches out is on the plane by its
+    own view's evidence (:func:`_excess_on_plane`): with three views, leaving any one out clears the
+    others' excess, and the view reaching out is the one to blame;
     failing that, the view that reaches out most is cut again with what lies outside marked table (a
     view seeded by its own evidence only when no other view reaches out);
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
@@ -1153,9 +1167,14 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         hulls = _Hulls(views, masks, plane, aim)
         excess = {i: _excess(masks[i], hulls.of(everyone - {i})) for i in everyone}
         culprit, relief = -1, 0.0
+        # With three views, leaving any one out of the carving clears the others' excess, so a view's own
+        # evidence says which excess is real: one that lies (nearly) all on the plane by it is table or
+        # shadow that the view's graph cut took in, and no other view is to blame for it.
+        on_plane = {j for j, score in enumerate(scores) if score is not None and excess[j] > 1.0
+                    and _excess_on_plane(masks[j], hulls.of(everyone - {j}), score)}
         for k in everyone - done:
             others = everyone - {k}
-            if len(views) > 2 and max(excess[j] for j in others) > 1.0:
+            if len(views) > 2 and max(excess[j] for j in others) > 1.0 and not on_plane & others:
                 without = [_excess(masks[j], hulls.into(others - {j}, j)) for j in others]
                 gain = sum(excess[j] for j in others) - sum(without)
                 if max(without) <= 1.0 and gain > relief:
