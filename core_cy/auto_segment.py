@@ -1271,7 +1271,7 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
     from another view (:func:`_seen_alike`): a dark can whose lower body is its mat's shadow's colour.
     With the empty workspace too: it shows the strip darkened as a shadow is, but the graph cut's colour
     models, holding the tin's dark underside, keep it all the same."""
-    hulls = _Hulls(views, masks, plane, aim)
+    hulls: _Hulls | None = None  # carved only for a view that has such pixels: most scans have none
     found = list(masks)
     for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
         if score is None:
@@ -1291,6 +1291,7 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
                        & (brightness < _UNDER_OBJECT * deepest))
         if not under.any():
             continue
+        hulls = hulls or _Hulls(views, masks, plane, aim)
         under &= ~_seen_alike(views, masks, hulls, i, np.where(under, 255, 0).astype(np.uint8))
         if under.any():
             kept = mask.copy()
