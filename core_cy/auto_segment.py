@@ -64,6 +64,8 @@ _BACKGROUND_NOISE_FLOOR = 0.015
 #: below that of a sure seed.
 _HIDDEN = 3.0
 _HULL_GRID = 40
+#: A region of fewer coarse pixels than this is a speck of noise, not an object.
+_SPECK = 12
 
 
 def aim_point(cameras: Sequence[Camera]) -> np.ndarray:
@@ -735,15 +737,17 @@ def _noise_level(evidence: np.ndarray) -> float:
 
 
 def _component_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.ndarray | None:
-    """The connected region of ``binary`` that holds ``point`` or, failing that, the largest region
-    within ``reach`` px of it; None if there is none."""
+    """The connected region of ``binary`` that holds ``point`` or, failing that (or where it is a mere
+    speck), the largest region within ``reach`` px of it; None if there is none."""
     count, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
     if count <= 1:
         return None
     h, w = binary.shape
     x, y = int(round(min(max(point[0], 0), w - 1))), int(round(min(max(point[1], 0), h - 1)))
     label = labels[y, x]
-    if label == 0:
+    # The aim may fall on a speck inside the object's face (a white face that differs from the table in
+    # its edges and print only): the object is the large region around it, not the speck.
+    if label == 0 or stats[label, cv2.CC_STAT_AREA] < _SPECK:
         ys, xs = np.nonzero(labels)
         near = np.hypot(xs - point[0], ys - point[1]) <= reach
         if not near.any():
@@ -1217,7 +1221,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
             masks[index] = _cut_again_around_aim(views, masks, index, hull, aim)
         else:
             kept = cv2.bitwise_and(masks[index], hull)
-            if cv2.countNonZero(kept) < 12:
+            if cv2.countNonZero(kept) < _SPECK:
                 raise SilhouetteError(_NOTHING + " (the other views see nothing there)", view=view.index)
             cut = _graph_cut(view, kept, score, cv2.bitwise_not(hull))
             # The cut is to drop what lies beyond the others' hull, not what they agree on: one that keeps
@@ -2102,7 +2106,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     # A pixel is hidden only where the other views' first look saw something stand in front of its
     # table point: on an empty table, or with a shadow alone, nothing is hidden. An object of the
     # table's colour may be all hidden and hardly differ where the others see it.
-    if region is None or cv2.countNonZero(region) < 12 or not cv2.countNonZero(cv2.bitwise_and(region, differs)):
+    if region is None or cv2.countNonZero(region) < _SPECK or not cv2.countNonZero(cv2.bitwise_and(region, differs)):
         raise SilhouetteError(_NOTHING, view=view.index)
     if view.background is not None:
         # Against the empty workspace what differs is the object, but in pieces where its print or its
@@ -2736,7 +2740,7 @@ def _background_cut(views: Sequence[_View], aim: np.ndarray, scores: dict[int, n
         differs, score = standing[view.index], scores[view.index]
         near = _components_near(cv2.morphologyEx(differs, cv2.MORPH_CLOSE, _CLOSING), centre,
                                 reach=0.25 * np.hypot(cw, ch))
-        if cv2.countNonZero(near) < 12:
+        if cv2.countNonZero(near) < _SPECK:
             raise SilhouetteError(_NOTHING, view=view.index)
         # A silhouette has no holes: a hole in what stands out is a face that looked like a shadow there.
         region = _holes_filled(_joined_within_outline(near))

@@ -282,3 +282,29 @@ def test_any_within_by_hand():
     assert found.tolist() == [1, 1, 1, 0]
     with pytest.raises(ValueError):
         any_within(points, samples, 0.0, True, found)
+
+
+def test_the_region_near_the_aim_is_the_object_beside_a_speck_on_the_aim():
+    """A white face differs from the table only at its edges and print: the aim may fall on a speck of
+    its print, which is not the object; the large region around it is (a tall sugar box on laminate was
+    "nothing stands on the table" for it)."""
+    binary = np.zeros((150, 200), np.uint8)
+    binary[60:110, 80:115] = 255
+    binary[70:100, 90:105] = 0                    # the face's plain middle
+    binary[78:81, 99:102] = 255                   # a speck of print on the aim
+    binary[0:40, 0:40] = 255                      # a larger region, out of reach
+    region = auto_segment._component_near(binary, np.array([100.0, 79.0]), reach=40.0)
+    assert region is not None
+    expected = binary.copy()
+    expected[78:81, 99:102] = 0
+    expected[0:40, 0:40] = 0
+    assert np.array_equal(region, expected)
+    # A region on the aim that is no speck is the object.
+    binary[70:100, 90:105] = 255
+    region = auto_segment._component_near(binary, np.array([100.0, 79.0]), reach=40.0)
+    assert region is not None and region[79, 100] and not region[10, 10] and region[60, 80]
+    binary[:] = 0
+    binary[78:81, 99:102] = 255                   # a speck alone is what there is (the caller judges it)
+    region = auto_segment._component_near(binary, np.array([100.0, 79.0]), reach=40.0)
+    assert region is not None and np.count_nonzero(region) == 9
+    assert auto_segment._component_near(np.zeros((150, 200), np.uint8), np.array([100.0, 79.0]), 40.0) is None
