@@ -1407,6 +1407,7 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike)
+            looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
         elif plane is not None and views[i].shadow_look is not None:
             # The empty workspace does not show a face of the table's colour and light either (a white box's
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
@@ -1414,9 +1415,10 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # any number of views (_faces_beyond_outline says why).
             others = [view for view in views if view is not views[i]]
             parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike,
-                                              np.where(np.isnan(parallax), _HIDDEN, parallax),
+            parallax = np.where(np.isnan(parallax), _HIDDEN, parallax)
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, parallax,
                                               views[i].shadow_look)
+            looked[i] = _faces_standing_out(views[i], looked[i], parallax, hull, seen_alike)
     return looked
 
 
@@ -1610,6 +1612,59 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
+                        seen_alike: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``mask`` with the pieces beyond it, within the other views' ``hull``, where the view's own evidence
+    ``score`` (the plane's parallax in units of its noise, :data:`_HIDDEN` where no other view sees the
+    table point) stands out and the other views see the object alike.
+
+    A lit top of the table's colour and light (a white box's on white laminate, an oak box's on oak) gives
+    the colour models nothing to tell it from the table, so the cut within the hull
+    (:func:`_faces_beyond_outline`) gives it to the table. Yet it lies above the plane, and the plane maps
+    the table behind it from another view to another place: the parallax stands out over all of it, if
+    faintly. So does the table here and there (near another object's edge, over a coarse grain), so a pixel
+    stands out where its evidence is over what the table round the hull shows (its :data:`_TABLE_LEVEL`
+    quantile, 1 at least), over a piece wider than a 5-pixel disc (the band beside an edge is narrower).
+    The two cues must agree: the piece touches the silhouette, is of a face's size (:data:`_BAY`), and the
+    other views see a point of their hull on its rays alike over all of it but its rim (:data:`_ALL_BUT_RIM`,
+    :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
+    only where the object behind happens to have its colour. A face so found reaches as far as its evidence
+    stands out at all (over 1) and the other views see it alike."""
+    seen = score != _HIDDEN
+    round_it = (cv2.dilate(hull, _CLOSING, iterations=4) > 0) & (cv2.dilate(hull, _SMALL, iterations=2) == 0) & seen
+    if not round_it.any():
+        return mask
+    level = max(1.0, float(np.quantile(score[round_it], _TABLE_LEVEL)))
+    beyond = (hull > 0) & (mask == 0) & seen
+    stands: np.ndarray = np.where(beyond & (score > level), 255, 0).astype(np.uint8)
+    stands = cv2.morphologyEx(cv2.morphologyEx(stands, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _CLOSING)
+    count, labels = cv2.connectedComponents(stands, connectivity=8)
+    if count <= 1:
+        return mask
+    at_all: np.ndarray = np.where(beyond & (score > 1.0), 255, 0).astype(np.uint8)
+    at_all = cv2.morphologyEx(cv2.morphologyEx(at_all, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _SMALL)
+    _, reach = cv2.connectedComponents(cv2.bitwise_or(at_all, stands), connectivity=8)
+    touching = cv2.dilate(mask, _SMALL) > 0
+    area = cv2.countNonZero(mask)
+    grown = mask.copy()
+    for label in range(1, count):
+        piece = labels == label
+        if not (piece & touching).any() or piece.sum() <= _BAY * area:
+            continue
+        alike = seen_alike(cv2.dilate(np.where(piece, 255, 0).astype(np.uint8), _SMALL))
+        if np.count_nonzero(alike[piece]) > _ALL_BUT_RIM * piece.sum():
+            face = reach == np.bincount(reach[piece]).argmax()
+            alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
+            grown[piece | (face & alike)] = 255
+    return _filled_region(grown, view)
+
+
+#: The table round the other views' hull stands out by no more than this quantile of its evidence.
+_TABLE_LEVEL = 0.9
+#: A face the other views see is seen alike by them over all of it but its rim: over this share of it.
+_ALL_BUT_RIM = 0.85
 
 
 def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray) -> bool:
