@@ -1426,11 +1426,7 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     alike (``seen_alike``, :func:`_seen_alike` within a region, called only where the hull reaches a
     face's size beyond the silhouette: the voxels there look as a point on the object does), that has
     no shadow's look over half of it, touches the silhouette and is of a face's size (:data:`_BAY`), is
-    told whole: the image's grain regressed on the empty workspace's (the sums of :func:`_texture_change`)
-    over the piece's inner pixels, against the same over the table round it beyond the hull. The piece is
-    a face where the table round it keeps a grain (a slope over :data:`_GRAIN_TABLE_SLOPE`, clear of 3
-    standard errors) and the piece has lost it (its slope under half the table's by 3 standard errors).
-    The table is taken round each piece: a grain far away (another floor) says nothing of this one."""
+    told whole: it is a face where it hides the grain that the table round it keeps (:func:`_grain_hidden`)."""
     area = cv2.countNonZero(mask)
     beyond = cv2.morphologyEx(cv2.bitwise_and(hull, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _CLOSING)
     if cv2.countNonZero(beyond) <= _BAY * area:
@@ -1440,24 +1436,35 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     count, labels = cv2.connectedComponents(beyond, connectivity=8)
     if count <= 1:
         return mask
-    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
-    per_coarse = _fine_per_coarse(view)
-    outside = cv2.dilate(cv2.bitwise_or(hull, mask), _SMALL, iterations=2) == 0
+    assert view.shadow_look is not None  # set with the grain's sums (_background_cuts)
     touching = cv2.dilate(mask, _SMALL) > 0
-    shade = view.shadow_look
     grown = mask.copy()
     for label in range(1, count):
         piece = labels == label
-        if not (piece & touching).any() or piece.sum() <= _BAY * area or shade[piece].mean() >= 0.5:
+        if not (piece & touching).any() or piece.sum() <= _BAY * area or view.shadow_look[piece].mean() >= 0.5:
             continue
-        round_it = outside & ~shade & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
-        table = _pooled_grain(view.grain_sums, round_it, per_coarse)
-        if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
-            continue
-        found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
-        if found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]:
+        if _grain_hidden(view, piece, cv2.bitwise_or(hull, mask)):
             grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) hides the table's grain that the table round it keeps, told over the
+    piece whole: the image's grain regressed on the empty workspace's (the view's ``grain_sums``,
+    :func:`_texture_change`) over the piece's inner pixels, against the same over the table round it beyond
+    ``known`` (0/255, the silhouette and the other views' hull) with no shadow's look. The table keeps a
+    grain where its slope is over :data:`_GRAIN_TABLE_SLOPE`, clear of 3 standard errors; the piece has lost
+    it where its slope is under half the table's by 3 standard errors. The table is taken round the piece: a
+    grain far away (another floor) says nothing of this one."""
+    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+    per_coarse = _fine_per_coarse(view)
+    outside = cv2.dilate(known, _SMALL, iterations=2) == 0
+    round_it = outside & ~view.shadow_look & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+    table = _pooled_grain(view.grain_sums, round_it, per_coarse)
+    if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
+        return False
+    found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
+    return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
 
 
 def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
@@ -1564,7 +1571,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     is kept only where both the parallax and the other views seeing it alike say a face. Where the object
     hides the table points behind most of it (a white box's face turned from the lamp on white laminate,
     which looks like the shadow beside it), the parallax says nothing, and the other views seeing it alike
-    decide, as for any hidden piece."""
+    decide, as for any hidden piece. Unless the parallax says table, such a piece that hides the grain the
+    table round it keeps (:func:`_grain_hidden`) is a face in shade whatever the other views see (they may
+    see a lit face where it stands, which looks nothing like it), where it is no darker than the shadow
+    cast in the open (:func:`_darker_than_the_open_shadow`)."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1594,6 +1604,12 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
                 continue
+            # A shadow keeps the table's grain, a face in shade hides it; but so does the dark under the
+            # object's overhang, where the object hides the sky too and the grain fades under JPEG's floor.
+            if (view.grain_sums is not None and _grain_hidden(view, piece, cv2.bitwise_or(hull, mask))
+                    and not _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, mask), shadow)):
+                grown[piece] = 255
+                continue
         elif 2 * len(evidence) > area:
             if stands:
                 grown[piece] = 255
@@ -1606,6 +1622,20 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) is darker than :data:`_UNDER_OBJECT` of the deepest open shadow (its
+    :data:`_SHADOW_DEEPEST` quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond
+    ``known`` (0/255, the silhouette and the other views' hull). A face turned from the lamp is lit by the sky
+    and is no darker than the shadow cast in the open; the table under the object's overhang is
+    (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
+    open_shadow = shadow & (cv2.dilate(known, _SMALL, iterations=2) == 0)
+    if not open_shadow.any():
+        return True
+    brightness = view.coarse.sum(axis=2)
+    deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
+    return float(np.median(brightness[piece])) < _UNDER_OBJECT * deepest
 
 
 def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray) -> bool:
