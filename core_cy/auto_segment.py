@@ -416,6 +416,39 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
 
 
+def _plane_grain_sums(view: _View, others: Sequence[_View], plane: np.ndarray, standing: Sequence[np.ndarray],
+                      centre: np.ndarray) -> np.ndarray:
+    """(h, w, 3), per coarse pixel, the means over its fine pixels of what :func:`_pooled_grain` regresses,
+    with the other views mapped through the plane in place of the empty workspace: the view's grain brought
+    back to their light times theirs, theirs squared, the former squared; over the other views that see the
+    table point (``standing``, what stands in each, hides it), NaN where none does or out of the window
+    around the aim (coarse pixel ``centre``). The table's grain maps onto itself, in a shadow too (dimmed
+    by the light, as the other view sees it dimmed); a face above the plane hides it, even of the table's
+    colour and of the shadow's darkness behind it."""
+    window, fine_window = _aim_window(view, centre)
+    fh, fw = _fine_grey(view).shape
+    grey = _fine_grey(view)[fine_window]
+    own, own_light = _grain(grey), cv2.GaussianBlur(grey, (0, 0), _GRAIN_WINDOW)
+    rows, columns = _nearest_indices(view.coarse_size, (fw, fh))
+    window_rows, window_columns = rows[fine_window[0]], columns[fine_window[1]]
+    sums = np.zeros(grey.shape + (3,), np.float32)
+    seeing = np.zeros(grey.shape, np.float32)
+    for other, hidden in zip(others, standing):
+        maps, inside, _ = view.sees(other, plane, cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
+        warped = _remapped(_fine_grey(other), _fine_window_maps(view, other, maps, fine_window), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        theirs = _grain(warped)
+        lit = np.maximum((own_light + 1.0) / (cv2.GaussianBlur(warped, (0, 0), _GRAIN_WINDOW) + 1.0), 0.05)
+        relit = own / lit
+        sees = inside[window_rows][:, window_columns]
+        sums[sees] += np.stack([relit * theirs, theirs * theirs, relit * relit], axis=-1)[sees]
+        seeing[sees] += 1.0
+    coarse_seeing = _in_window(view, window, seeing)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(coarse_seeing[..., None] > 0.0, _in_window(view, window, sums) / coarse_seeing[..., None],
+                        np.nan).astype(np.float32)
+
+
 def _nearest_indices(size: tuple[int, int], to: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Which row and which column of an image of ``size`` (w, h) each row and column of it resized to ``to``
     (w, h) by cv2.resize's nearest neighbour is taken from: OpenCV's own choice, read off an image of
@@ -1237,7 +1270,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # but a face it missed (a dark can's top of its mat's colour and light) is still missing: its bays
         # are looked into too, as those of a view not corrected. A view cut again within the others' hull
         # has looked there already.
-        looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane)
+        looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane, aim)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
@@ -1378,7 +1411,7 @@ _FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      hulls: _Hulls, done: set[int], plane: np.ndarray | None) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -1402,7 +1435,11 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
         if views[i].grain_sums is not None and hulls.height is not None:
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike)
+            others = [view for view in views if view is not views[i]]
+            plane_grain = None if plane is None else functools.partial(
+                _plane_grain_sums, views[i], others, plane, [masks[view.index] for view in others],
+                _coarse_aim(views[i], aim))
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, plane_grain=plane_grain)
         elif plane is not None and views[i].shadow_look is not None:
             # The empty workspace does not show a face of the table's colour and light either (a white box's
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
@@ -1448,22 +1485,29 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     return _filled_region(grown, view)
 
 
-def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
+def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray | None = None,
+                  shade: np.ndarray | None = None) -> bool:
     """Whether ``piece`` (bool, coarse) hides the table's grain that the table round it keeps, told over the
     piece whole: the image's grain regressed on the empty workspace's (the view's ``grain_sums``,
     :func:`_texture_change`) over the piece's inner pixels, against the same over the table round it beyond
     ``known`` (0/255, the silhouette and the other views' hull) with no shadow's look. The table keeps a
     grain where its slope is over :data:`_GRAIN_TABLE_SLOPE`, clear of 3 standard errors; the piece has lost
     it where its slope is under half the table's by 3 standard errors. The table is taken round the piece: a
-    grain far away (another floor) says nothing of this one."""
-    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+    grain far away (another floor) says nothing of this one. Without an empty workspace, ``sums`` are the
+    other views' grain mapped through the plane (:func:`_plane_grain_sums`), and the table round the piece
+    is taken in its shadow too (``shade``, where the view has a shadow's look, None: everywhere)."""
+    if sums is None:
+        assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+        sums, shade = view.grain_sums, view.shadow_look
     per_coarse = _fine_per_coarse(view)
     outside = cv2.dilate(known, _SMALL, iterations=2) == 0
-    round_it = outside & ~view.shadow_look & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
-    table = _pooled_grain(view.grain_sums, round_it, per_coarse)
+    round_it = outside & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+    if shade is not None:
+        round_it &= ~shade
+    table = _pooled_grain(sums, round_it, per_coarse)
     if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
         return False
-    found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
+    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
     return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
 
 
@@ -1475,7 +1519,7 @@ def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) 
     count = int(np.count_nonzero(known))
     if not count:
         return None
-    shared, power, own, _ = sums[known].astype(np.float64).mean(axis=0)
+    shared, power, own = sums[known][:, :3].astype(np.float64).mean(axis=0)
     if power <= 0.0:
         return None
     slope = shared / power
@@ -1541,7 +1585,8 @@ _ALIKE_ABOVE = 1.5
 
 def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
                           seen_alike: Callable[[], np.ndarray] | None = None,
-                          parallax: np.ndarray | None = None, shadow: np.ndarray | None = None) -> np.ndarray:
+                          parallax: np.ndarray | None = None, shadow: np.ndarray | None = None,
+                          plane_grain: Callable[[], np.ndarray] | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1574,7 +1619,14 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     decide, as for any hidden piece. Unless the parallax says table, such a piece that hides the grain the
     table round it keeps (:func:`_grain_hidden`) is a face in shade whatever the other views see (they may
     see a lit face where it stands, which looks nothing like it), where it is no darker than the shadow
-    cast in the open (:func:`_darker_than_the_open_shadow`)."""
+    cast in the open (:func:`_darker_than_the_open_shadow`).
+
+    Without an empty workspace, a face of the table's colour turned from the lamp matches the table in the
+    object's shadow behind it, which the other views see, so the parallax of its colour says table. But the
+    other views see the table's grain there (``plane_grain``, :func:`_plane_grain_sums`, called only then),
+    which a shadow on the table carries and a face above it does not: a piece mostly seen, with a shadow's
+    look over half of it, that hides that grain (:func:`_grain_hidden`) and is no darker than the open
+    shadow, is a face in shade."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1590,6 +1642,36 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     seen = parallax != _HIDDEN
     grown = mask.copy()
     alike = None
+    known = cv2.bitwise_or(hull, mask)
+    sums, open_shadow = None, None
+    x0, y0, x1, y1 = _cut_box(view, mask)
+    crop = (slice(y0, y1), slice(x0, x1))
+
+    def hides_the_mapped_grain(piece: np.ndarray) -> bool:
+        """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
+        confirm round the object, of its chromaticity), hides the grain the other views see at its table
+        points, and is no darker than the open shadow."""
+        nonlocal sums, open_shadow
+        if plane_grain is None:
+            return False
+        low = score[crop] < 1.0
+        looks = np.zeros(mask.shape, bool)
+        looks[crop] = _shadow_like(view.coarse[crop], low | piece[crop])
+        if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
+            return False
+        if sums is None:
+            sums = plane_grain()
+            # The open shadow, as the table under the overhang is told from it: the table the other views
+            # confirm, with a shadow's look, round the object (:func:`_shadows_under_object_dropped`).
+            found = _shadow_seen(view.coarse[crop], low, low & _shadow_like(view.coarse[crop], low),
+                                 score[crop] == _HIDDEN)
+            open_shadow = np.zeros(mask.shape, bool)
+            if found is not None:
+                open_shadow[crop] = found[0]
+        assert open_shadow is not None
+        return _grain_hidden(view, piece, known, sums) and not _darker_than_the_open_shadow(
+            view, piece, known, open_shadow)
+
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
@@ -1606,12 +1688,14 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 continue
             # A shadow keeps the table's grain, a face in shade hides it; but so does the dark under the
             # object's overhang, where the object hides the sky too and the grain fades under JPEG's floor.
-            if (view.grain_sums is not None and _grain_hidden(view, piece, cv2.bitwise_or(hull, mask))
-                    and not _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, mask), shadow)):
+            if (view.grain_sums is not None and _grain_hidden(view, piece, known)
+                    and not _darker_than_the_open_shadow(view, piece, known, shadow)):
                 grown[piece] = 255
                 continue
         elif 2 * len(evidence) > area:
-            if stands:
+            # A face in shade may match the colour of the shadow behind it, but not carry the table's grain
+            # that the other views see there.
+            if stands or hides_the_mapped_grain(piece):
                 grown[piece] = 255
             continue
         # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
@@ -1625,17 +1709,17 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
 
 
 def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
-    """Whether ``piece`` (bool, coarse) is darker than :data:`_UNDER_OBJECT` of the deepest open shadow (its
-    :data:`_SHADOW_DEEPEST` quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond
-    ``known`` (0/255, the silhouette and the other views' hull). A face turned from the lamp is lit by the sky
-    and is no darker than the shadow cast in the open; the table under the object's overhang is
+    """Whether ``piece`` (bool, coarse) is darker than the deepest open shadow (its :data:`_SHADOW_DEEPEST`
+    quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond ``known`` (0/255, the
+    silhouette and the other views' hull). A face of the table's colour turned from the lamp is lit by the
+    sky and is no darker than the shadow cast in the open; the table under the object's overhang is
     (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
     open_shadow = shadow & (cv2.dilate(known, _SMALL, iterations=2) == 0)
     if not open_shadow.any():
         return True
     brightness = view.coarse.sum(axis=2)
     deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
-    return float(np.median(brightness[piece])) < _UNDER_OBJECT * deepest
+    return float(np.median(brightness[piece])) < deepest
 
 
 def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray) -> bool:
