@@ -1646,31 +1646,34 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     sums, open_shadow = None, None
     x0, y0, x1, y1 = _cut_box(view, mask)
     crop = (slice(y0, y1), slice(x0, x1))
+    low = score[crop] < 1.0
+
+    def darker_than_the_open_shadow(piece: np.ndarray) -> bool:
+        nonlocal open_shadow
+        if open_shadow is None:
+            # The open shadow, as the table under the overhang is told from it: the table the view's evidence
+            # confirms, with a shadow's look, round the object (:func:`_shadows_under_object_dropped`).
+            found = _shadow_seen(view.coarse[crop], low, low & _shadow_like(view.coarse[crop], low),
+                                 score[crop] == _HIDDEN)
+            open_shadow = np.zeros(mask.shape, bool)
+            if found is not None:
+                open_shadow[crop] = found[0]
+        return _darker_than_the_open_shadow(view, piece, known, open_shadow)
 
     def hides_the_mapped_grain(piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
         confirm round the object, of its chromaticity), hides the grain the other views see at its table
         points, and is no darker than the open shadow."""
-        nonlocal sums, open_shadow
+        nonlocal sums
         if plane_grain is None:
             return False
-        low = score[crop] < 1.0
         looks = np.zeros(mask.shape, bool)
         looks[crop] = _shadow_like(view.coarse[crop], low | piece[crop])
         if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
             return False
         if sums is None:
             sums = plane_grain()
-            # The open shadow, as the table under the overhang is told from it: the table the other views
-            # confirm, with a shadow's look, round the object (:func:`_shadows_under_object_dropped`).
-            found = _shadow_seen(view.coarse[crop], low, low & _shadow_like(view.coarse[crop], low),
-                                 score[crop] == _HIDDEN)
-            open_shadow = np.zeros(mask.shape, bool)
-            if found is not None:
-                open_shadow[crop] = found[0]
-        assert open_shadow is not None
-        return _grain_hidden(view, piece, known, sums) and not _darker_than_the_open_shadow(
-            view, piece, known, open_shadow)
+        return _grain_hidden(view, piece, known, sums) and not darker_than_the_open_shadow(piece)
 
     for label in range(1, count):
         piece = labels == label
@@ -1689,7 +1692,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             # A shadow keeps the table's grain, a face in shade hides it; but so does the dark under the
             # object's overhang, where the object hides the sky too and the grain fades under JPEG's floor.
             if (view.grain_sums is not None and _grain_hidden(view, piece, known)
-                    and not _darker_than_the_open_shadow(view, piece, known, shadow)):
+                    and not darker_than_the_open_shadow(piece)):
                 grown[piece] = 255
                 continue
         elif 2 * len(evidence) > area:
