@@ -1624,9 +1624,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     Without an empty workspace, a face of the table's colour turned from the lamp matches the table in the
     object's shadow behind it, which the other views see, so the parallax of its colour says table. But the
     other views see the table's grain there (``plane_grain``, :func:`_plane_grain_sums`, called only then),
-    which a shadow on the table carries and a face above it does not: a piece mostly seen, with a shadow's
-    look over half of it, that hides that grain (:func:`_grain_hidden`) and is no darker than the open
-    shadow, is a face in shade."""
+    which a shadow on the table carries and a face above it does not: a piece with a shadow's look over half
+    of it, that hides that grain (:func:`_grain_hidden`, told over the part of it whose table points the
+    others see, however small: its standard error says how sure) and is no darker than the open shadow, is
+    a face in shade, whether the colour's parallax says table or nothing."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1700,6 +1701,9 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             # that the other views see there.
             if stands or hides_the_mapped_grain(piece):
                 grown[piece] = 255
+            continue
+        elif hides_the_mapped_grain(piece):
+            grown[piece] = 255
             continue
         # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
         # over most of it.
