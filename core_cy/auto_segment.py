@@ -418,6 +418,39 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     return _in_window(view, window, np.where(seen, 1.0 - best, 0.0).astype(np.float32))
 
 
+def _plane_grain_sums(view: _View, others: Sequence[_View], plane: np.ndarray, standing: Sequence[np.ndarray],
+                      centre: np.ndarray) -> np.ndarray:
+    """(h, w, 3), per coarse pixel, the means over its fine pixels of what :func:`_pooled_grain` regresses,
+    with the other views mapped through the plane in place of the empty workspace: the view's grain brought
+    back to their light times theirs, theirs squared, the former squared; over the other views that see the
+    table point (``standing``, what stands in each, hides it), NaN where none does or out of the window
+    around the aim (coarse pixel ``centre``). The table's grain maps onto itself, in a shadow too (dimmed
+    by the light, as the other view sees it dimmed); a face above the plane hides it, even of the table's
+    colour and of the shadow's darkness behind it."""
+    window, fine_window = _aim_window(view, centre)
+    fh, fw = _fine_grey(view).shape
+    grey = _fine_grey(view)[fine_window]
+    own, own_light = _grain(grey), cv2.GaussianBlur(grey, (0, 0), _GRAIN_WINDOW)
+    rows, columns = _nearest_indices(view.coarse_size, (fw, fh))
+    window_rows, window_columns = rows[fine_window[0]], columns[fine_window[1]]
+    sums = np.zeros(grey.shape + (3,), np.float32)
+    seeing = np.zeros(grey.shape, np.float32)
+    for other, hidden in zip(others, standing):
+        maps, inside, _ = view.sees(other, plane, cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
+        warped = _remapped(_fine_grey(other), _fine_window_maps(view, other, maps, fine_window), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        theirs = _grain(warped)
+        lit = np.maximum((own_light + 1.0) / (cv2.GaussianBlur(warped, (0, 0), _GRAIN_WINDOW) + 1.0), 0.05)
+        relit = own / lit
+        sees = inside[window_rows][:, window_columns]
+        sums[sees] += np.stack([relit * theirs, theirs * theirs, relit * relit], axis=-1)[sees]
+        seeing[sees] += 1.0
+    coarse_seeing = _in_window(view, window, seeing)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(coarse_seeing[..., None] > 0.0, _in_window(view, window, sums) / coarse_seeing[..., None],
+                        np.nan).astype(np.float32)
+
+
 def _nearest_indices(size: tuple[int, int], to: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Which row and which column of an image of ``size`` (w, h) each row and column of it resized to ``to``
     (w, h) by cv2.resize's nearest neighbour is taken from: OpenCV's own choice, read off an image of
@@ -1241,7 +1274,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # but a face it missed (a dark can's top of its mat's colour and light) is still missing: its bays
         # are looked into too, as those of a view not corrected. A view cut again within the others' hull
         # has looked there already.
-        looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane)
+        looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane, aim)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
@@ -1382,7 +1415,7 @@ _FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      hulls: _Hulls, done: set[int], plane: np.ndarray | None) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -1406,7 +1439,11 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
         if views[i].grain_sums is not None and hulls.height is not None:
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike)
+            others = [view for view in views if view is not views[i]]
+            plane_grain = None if plane is None else functools.partial(
+                _plane_grain_sums, views[i], others, plane, [masks[view.index] for view in others],
+                _coarse_aim(views[i], aim))
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, plane_grain=plane_grain)
             looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
         elif plane is not None and views[i].shadow_look is not None:
             # The empty workspace does not show a face of the table's colour and light either (a white box's
@@ -1432,11 +1469,7 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     alike (``seen_alike``, :func:`_seen_alike` within a region, called only where the hull reaches a
     face's size beyond the silhouette: the voxels there look as a point on the object does), that has
     no shadow's look over half of it, touches the silhouette and is of a face's size (:data:`_BAY`), is
-    told whole: the image's grain regressed on the empty workspace's (the sums of :func:`_texture_change`)
-    over the piece's inner pixels, against the same over the table round it beyond the hull. The piece is
-    a face where the table round it keeps a grain (a slope over :data:`_GRAIN_TABLE_SLOPE`, clear of 3
-    standard errors) and the piece has lost it (its slope under half the table's by 3 standard errors).
-    The table is taken round each piece: a grain far away (another floor) says nothing of this one."""
+    told whole: it is a face where it hides the grain that the table round it keeps (:func:`_grain_hidden`)."""
     area = cv2.countNonZero(mask)
     beyond = cv2.morphologyEx(cv2.bitwise_and(hull, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _CLOSING)
     if cv2.countNonZero(beyond) <= _BAY * area:
@@ -1446,24 +1479,42 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
     count, labels = cv2.connectedComponents(beyond, connectivity=8)
     if count <= 1:
         return mask
-    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
-    per_coarse = _fine_per_coarse(view)
-    outside = cv2.dilate(cv2.bitwise_or(hull, mask), _SMALL, iterations=2) == 0
+    assert view.shadow_look is not None  # set with the grain's sums (_background_cuts)
     touching = cv2.dilate(mask, _SMALL) > 0
-    shade = view.shadow_look
     grown = mask.copy()
     for label in range(1, count):
         piece = labels == label
-        if not (piece & touching).any() or piece.sum() <= _BAY * area or shade[piece].mean() >= 0.5:
+        if not (piece & touching).any() or piece.sum() <= _BAY * area or view.shadow_look[piece].mean() >= 0.5:
             continue
-        round_it = outside & ~shade & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
-        table = _pooled_grain(view.grain_sums, round_it, per_coarse)
-        if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
-            continue
-        found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
-        if found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]:
+        if _grain_hidden(view, piece, cv2.bitwise_or(hull, mask)):
             grown[piece] = 255
     return _filled_region(grown, view)
+
+
+def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray | None = None,
+                  shade: np.ndarray | None = None) -> bool:
+    """Whether ``piece`` (bool, coarse) hides the table's grain that the table round it keeps, told over the
+    piece whole: the image's grain regressed on the empty workspace's (the view's ``grain_sums``,
+    :func:`_texture_change`) over the piece's inner pixels, against the same over the table round it beyond
+    ``known`` (0/255, the silhouette and the other views' hull) with no shadow's look. The table keeps a
+    grain where its slope is over :data:`_GRAIN_TABLE_SLOPE`, clear of 3 standard errors; the piece has lost
+    it where its slope is under half the table's by 3 standard errors. The table is taken round the piece: a
+    grain far away (another floor) says nothing of this one. Without an empty workspace, ``sums`` are the
+    other views' grain mapped through the plane (:func:`_plane_grain_sums`), and the table round the piece
+    is taken in its shadow too (``shade``, where the view has a shadow's look, None: everywhere)."""
+    if sums is None:
+        assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+        sums, shade = view.grain_sums, view.shadow_look
+    per_coarse = _fine_per_coarse(view)
+    outside = cv2.dilate(known, _SMALL, iterations=2) == 0
+    round_it = outside & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+    if shade is not None:
+        round_it &= ~shade
+    table = _pooled_grain(sums, round_it, per_coarse)
+    if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
+        return False
+    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
+    return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
 
 
 def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
@@ -1474,7 +1525,7 @@ def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) 
     count = int(np.count_nonzero(known))
     if not count:
         return None
-    shared, power, own, _ = sums[known].astype(np.float64).mean(axis=0)
+    shared, power, own = sums[known][:, :3].astype(np.float64).mean(axis=0)
     if power <= 0.0:
         return None
     slope = shared / power
@@ -1540,7 +1591,8 @@ _ALIKE_ABOVE = 1.5
 
 def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
                           seen_alike: Callable[[], np.ndarray] | None = None,
-                          parallax: np.ndarray | None = None, shadow: np.ndarray | None = None) -> np.ndarray:
+                          parallax: np.ndarray | None = None, shadow: np.ndarray | None = None,
+                          plane_grain: Callable[[], np.ndarray] | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1570,7 +1622,18 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     is kept only where both the parallax and the other views seeing it alike say a face. Where the object
     hides the table points behind most of it (a white box's face turned from the lamp on white laminate,
     which looks like the shadow beside it), the parallax says nothing, and the other views seeing it alike
-    decide, as for any hidden piece."""
+    decide, as for any hidden piece. Unless the parallax says table, such a piece that hides the grain the
+    table round it keeps (:func:`_grain_hidden`) is a face in shade whatever the other views see (they may
+    see a lit face where it stands, which looks nothing like it), where it is no darker than the shadow
+    cast in the open (:func:`_darker_than_the_open_shadow`).
+
+    Without an empty workspace, a face of the table's colour turned from the lamp matches the table in the
+    object's shadow behind it, which the other views see, so the parallax of its colour says table. But the
+    other views see the table's grain there (``plane_grain``, :func:`_plane_grain_sums`, called only then),
+    which a shadow on the table carries and a face above it does not: a piece with a shadow's look over half
+    of it, that hides that grain (:func:`_grain_hidden`, told over the part of it whose table points the
+    others see, however small: its standard error says how sure) and is no darker than the open shadow, is
+    a face in shade, whether the colour's parallax says table or nothing."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1586,6 +1649,39 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     seen = parallax != _HIDDEN
     grown = mask.copy()
     alike = None
+    known = cv2.bitwise_or(hull, mask)
+    sums, open_shadow = None, None
+    x0, y0, x1, y1 = _cut_box(view, mask)
+    crop = (slice(y0, y1), slice(x0, x1))
+    low = score[crop] < 1.0
+
+    def darker_than_the_open_shadow(piece: np.ndarray) -> bool:
+        nonlocal open_shadow
+        if open_shadow is None:
+            # The open shadow, as the table under the overhang is told from it: the table the view's evidence
+            # confirms, with a shadow's look, round the object (:func:`_shadows_under_object_dropped`).
+            found = _shadow_seen(view.coarse[crop], low, low & _shadow_like(view.coarse[crop], low),
+                                 score[crop] == _HIDDEN)
+            open_shadow = np.zeros(mask.shape, bool)
+            if found is not None:
+                open_shadow[crop] = found[0]
+        return _darker_than_the_open_shadow(view, piece, known, open_shadow)
+
+    def hides_the_mapped_grain(piece: np.ndarray) -> bool:
+        """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
+        confirm round the object, of its chromaticity), hides the grain the other views see at its table
+        points, and is no darker than the open shadow."""
+        nonlocal sums
+        if plane_grain is None:
+            return False
+        looks = np.zeros(mask.shape, bool)
+        looks[crop] = _shadow_like(view.coarse[crop], low | piece[crop])
+        if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
+            return False
+        if sums is None:
+            sums = plane_grain()
+        return _grain_hidden(view, piece, known, sums) and not darker_than_the_open_shadow(piece)
+
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
@@ -1600,9 +1696,20 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
                 continue
-        elif 2 * len(evidence) > area:
-            if stands:
+            # A shadow keeps the table's grain, a face in shade hides it; but so does the dark under the
+            # object's overhang, where the object hides the sky too and the grain fades under JPEG's floor.
+            if (view.grain_sums is not None and _grain_hidden(view, piece, known)
+                    and not darker_than_the_open_shadow(piece)):
                 grown[piece] = 255
+                continue
+        elif 2 * len(evidence) > area:
+            # A face in shade may match the colour of the shadow behind it, but not carry the table's grain
+            # that the other views see there.
+            if stands or hides_the_mapped_grain(piece):
+                grown[piece] = 255
+            continue
+        elif hides_the_mapped_grain(piece):
+            grown[piece] = 255
             continue
         # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
         # over most of it.
@@ -1665,6 +1772,20 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
 _TABLE_LEVEL = 0.9
 #: A face the other views see is seen alike by them over all of it but its rim: over this share of it.
 _ALL_BUT_RIM = 0.85
+
+
+def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) is darker than the deepest open shadow (its :data:`_SHADOW_DEEPEST`
+    quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond ``known`` (0/255, the
+    silhouette and the other views' hull). A face of the table's colour turned from the lamp is lit by the
+    sky and is no darker than the shadow cast in the open; the table under the object's overhang is
+    (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
+    open_shadow = shadow & (cv2.dilate(known, _SMALL, iterations=2) == 0)
+    if not open_shadow.any():
+        return True
+    brightness = view.coarse.sum(axis=2)
+    deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
+    return float(np.median(brightness[piece])) < deepest
 
 
 def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray) -> bool:
