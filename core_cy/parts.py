@@ -71,7 +71,7 @@ from .quality import hull_covers, projected_outline
 from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
-__all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "fit_parts", "union_ious"]
+__all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "explains_more", "fit_parts", "union_ious"]
 
 MAX_PARTS = 6
 # What a part must explain to pay for its eleven parameters: this share of a view's
@@ -299,6 +299,14 @@ def _as_on_unsure(tallies: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
+
+
+def explains_more(ious, than) -> bool:
+    """Whether a model whose silhouette IoUs are ``ious`` explains the silhouettes more than one with
+    ``than`` as more parts must to pay for themselves: by ``PART_GAIN`` in two views (in every view, with
+    fewer), and in no view less by as much (that moves one view's error to another)."""
+    gains = np.asarray(ious, dtype=np.float64) - np.asarray(than, dtype=np.float64)
+    return bool(_views_paid(gains) >= _views_to_pay(len(gains)) and float(np.min(gains)) > -PART_GAIN)
 
 
 def _views_paid(gains) -> np.ndarray:

@@ -18,7 +18,7 @@ from .edges import about_samples, edge_samples, samples_near
 from .errors import FitError, GeometryError, ImageError
 from .images import checked_size
 from .auto_segment import auto_silhouettes, unsure_pixels
-from .parts import MAX_PARTS, fit_parts, union_ious
+from .parts import MAX_PARTS, explains_more, fit_parts, union_ious
 from .quality import outline_distances, radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import _NOISE_PX, fit_to_silhouettes
@@ -376,7 +376,20 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             superquadric = refined.superquadric
             parts = (superquadric,)
             ious, _ = union_ious(parts, cameras, silhouettes, boxes)
+            doubtful = contradicted
             lap("fit")
+    if options.silhouette_fit and plane is not None and len(parts) == 1:
+        # An object on the support plane rests on it in equilibrium, and one superquadric, its mass about its
+        # centre, rests only on a face or a side, an axis along the plane's normal: tilted, a box balanced on
+        # an edge, it would topple. So the model is also fitted held at rest (turning only about the normal),
+        # and a tilt is kept only where it pays as a part must (DESIGN.md §1.11): two more parameters that
+        # explain little more may only follow one view's wrong silhouette (a shadow taken in, a face left out).
+        resting = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True)
+        evaluations["fit"] += resting.evaluations
+        resting_ious, _ = union_ious(resting.parts, cameras, silhouettes, boxes)
+        if not explains_more(ious, resting_ious):
+            superquadric, parts, ious = resting.superquadric, resting.parts, resting_ious
+        lap("fit")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
     return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts,

@@ -20,7 +20,8 @@ from a start (the point fit) minimises the sum. A sample where the segmentation
 cannot confirm the edge (``auto``'s unsure pixels: a shadow taken in, a dark face
 left out) counts alike while near the model's outline, but its pull fades as it
 lies farther: one view's doubtful stretch of outline cannot drag the model from
-what the other views say.
+what the other views say. Held at rest on the support plane (``resting``), each part turns only
+about the plane's normal.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import numpy as np
 from ._silhouette_fit_cy import normal_equations, outline_angles, part_planes, sample_rays
 from .errors import FitError
 from .least_squares import Descent
-from .superquadric import Superquadric, _rotation
+from .superquadric import Superquadric, _rotation, resting_on
 
 __all__ = ["SilhouetteFit", "fit_to_silhouettes"]
 
@@ -153,7 +154,8 @@ class _Problem:
     """The silhouette fit of a union of parts about one start: parameters to tangent planes, cost
     and normal equations. Part p's 11 parameters are ``x[11 p: 11 p + 11]``."""
 
-    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale, tally: list[int] | None = None):
+    def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale, tally: list[int] | None = None,
+                 resting: bool = False):
         parts = [start] if isinstance(start, Superquadric) else list(start)
         self.count = len(parts)
         self.tally = [0] if tally is None else tally  # part evaluations so far, shared by a fitter's problems
@@ -178,6 +180,13 @@ class _Problem:
             low, high, x0 = self.low[block], self.high[block], self.x0[block]
             low[3:5], high[3:5] = _SHAPE_BOUNDS
             low[:3], high[:3] = x0[:3] - _LOG_SIZE_RANGE, x0[:3] + _LOG_SIZE_RANGE
+        # Resting, each part's axis along the plane's normal stays so: it turns only about that axis
+        # (R = R0 Rz Ry Rx, so with all three angles 0 the two about its other axes are what tilt it).
+        self.held: list[int] = []
+        if resting:
+            for p in range(self.count):
+                upright = int(np.argmax(np.abs(support_plane[:3] @ self.R0[p])))
+                self.held += [11 * p + 8 + axis for axis in range(3) if axis != upright]
 
     def part(self, x: np.ndarray, p: int) -> Superquadric:
         y = x[11 * p: 11 * p + 11]
@@ -199,8 +208,14 @@ class _Problem:
                            views.all_samples, views.starts, views.Ks, views.Rs, views.pixels_per_unit, views.rays,
                            self.grid, self.uv, self.counts, planes):
             return np.inf  # a part reaches behind a camera, or its outline in a view is no polygon
-        return normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
+        cost = normal_equations(x, self.R0, self.t0, self.scale, planes, self.loss_scale, self.support_plane,
                                 self.plane_weight, _TILT, JtJ, Jtr, True, self.owner, views.doubtful)
+        if self.held:  # no step along a held parameter: its row and column of the normal equations are set aside
+            JtJ[self.held, :] = 0.0
+            JtJ[:, self.held] = 0.0
+            JtJ[self.held, self.held] = 1.0
+            Jtr[self.held] = 0.0
+        return cost
 
     def keep(self, accepted: bool) -> None:
         if accepted:
@@ -222,7 +237,8 @@ def _other_axes_as_z(sq: Superquadric) -> list[Superquadric]:
 class _Fitter:
     """The views packed once, and the settings every start shares: descents from starts."""
 
-    def __init__(self, cameras, edges, reference, support_plane, loss_scale: float, doubtful=None):
+    def __init__(self, cameras, edges, reference, support_plane, loss_scale: float, doubtful=None,
+                 resting: bool = False):
         if len(cameras) != len(edges):
             raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
         self.views = views = _Views.pack(cameras, edges, reference, doubtful)
@@ -235,6 +251,7 @@ class _Fitter:
             self.plane = np.asarray(support_plane, dtype=np.float64)
             self.plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
         self.loss_scale = float(loss_scale)
+        self.resting = resting
         # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
         self.tolerance = 0.5 * 1e-4 * views.count
         self.tally = [0]
@@ -247,7 +264,8 @@ class _Fitter:
 
     def descent(self, start) -> Descent:
         """A descent from ``start`` (a Superquadric, or the parts of a union), not yet run."""
-        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale, self.tally)
+        problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale, self.tally,
+                           self.resting)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
     def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
@@ -303,7 +321,7 @@ def _first_part(start) -> Superquadric:
 
 
 def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
-                       max_iterations: int = 40, doubtful=None) -> SilhouetteFit:
+                       max_iterations: int = 40, doubtful=None, resting: bool = False) -> SilhouetteFit:
     """Refine a model until its outline in every view runs through that view's edge samples.
 
     The model is one superquadric, or a union of parts: the union's outline is the
@@ -334,6 +352,10 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         unsure pixels: :func:`core_cy.auto_segment.unsure_pixels`): their pull fades as they lie
         farther from the model's outline, so that a stretch of one view's outline that the
         others contradict (a shadow taken in, a dark face left out) cannot drag the model.
+    resting : bool
+        Each part is set resting on the support plane (its axis nearest the plane's normal
+        along it: :func:`core_cy.superquadric.resting_on`) and kept so, turning only about that
+        axis: the model of an object at rest on the plane. Needs ``support_plane``.
 
     Returns
     -------
@@ -347,8 +369,14 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     starts = [starts] if isinstance(starts, Superquadric) else list(starts)
     if not starts:
         raise FitError("need at least one start")
+    if resting:
+        if support_plane is None:
+            raise FitError("a model resting on the support plane needs the plane")
+        normal = np.asarray(support_plane, dtype=np.float64)[:3]
+        starts = [tuple(resting_on(part, normal)[0] for part in ([start] if isinstance(start, Superquadric) else start))
+                  for start in starts]
     fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale,
-                     doubtful)
+                     doubtful, resting)
     best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
     descents = fitter.descents
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body

@@ -177,6 +177,18 @@ def test_a_dark_band_one_view_left_out_on_unsure_pixels_does_not_pull_the_fit():
     assert volumetric_iou(fit.superquadric, truth) > 0.99
 
 
+def test_a_fit_held_at_rest_turns_only_about_the_table_s_normal():
+    """From a start tilted 10 degrees, the box fitted held at rest stands on a face (its axis exactly
+    along the normal) and is the box; without the plane there is nothing to rest on."""
+    truth, cameras, edges = _ideal_scan("box", 3)
+    fit = fit_to_silhouettes(_perturbed(truth, seed=1), cameras, edges, support_plane=[0, 0, 1, 0], resting=True)
+    R = fit.superquadric.T_world_object[:3, :3]
+    assert np.max(np.abs(R[2])) == pytest.approx(1.0, abs=1e-12)
+    assert volumetric_iou(fit.superquadric, truth) > 0.98
+    with pytest.raises(FitError, match="needs the plane"):
+        fit_to_silhouettes(truth, cameras, edges, resting=True)
+
+
 def test_bad_input_is_refused():
     truth, cameras, edges = _ideal_scan("box", 3)
     with pytest.raises(FitError, match="2 sets of edge samples"):
