@@ -9,8 +9,9 @@ the silhouette's convex hull, the table seen through the object (a dumbbell's tw
 without the gap between them, hidden behind them in the other views); beyond that hull a
 silhouette that stops short may as well have left a face out. Where the segmentation says
 which pixels it cannot confirm (``auto``: the table's shade about its silhouettes, where a
-shadow may have been taken in or a dark face left out), a part must pay as much with what
-changes there set aside: a union that explains a segmentation's error explains nothing a
+shadow may have been taken in or a dark face left out, and everything beyond a silhouette's
+convex hull, where a face may have been left out whatever its colour), a part must pay as much
+with what changes there set aside: a union that explains a segmentation's error explains nothing a
 camera saw. A part that no view sees rise off the
 table pays on the silhouettes as they are, and leaves the model at the end: it is the shadow
 they took in, which it kept off the other parts' outlines. A sheet, a part whose thickness no view
@@ -153,9 +154,15 @@ class _Rasters:
     @cached_property
     def unsure(self) -> list:
         """Per view, the pixels whose side the segmentation cannot confirm (None: every pixel is sure),
-        found once a part is to pay, if ``unsure`` came as the function that finds them."""
+        found once a part is to pay, if ``unsure`` came as the function that finds them; and with them
+        every pixel beyond the silhouette's convex hull (:attr:`enclosed`): there a silhouette that stops
+        short may as well have left a face out (a lit top of the table's colour), so a union that explains
+        it the better by covering less there explains the segmentation's error, not the object (as a union
+        may not carve there either)."""
         unsure = self._unsure() if callable(self._unsure) else self._unsure
-        return [None] * len(self.cameras) if unsure is None else list(unsure)
+        if unsure is None:
+            return [None] * len(self.cameras)
+        return [None if view is None else view | ~hull for view, hull in zip(unsure, self.enclosed)]
 
     def drawn(self, parts) -> list:
         """Per view, ``hull_covers`` of the parts' projections."""
