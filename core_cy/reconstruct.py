@@ -362,21 +362,29 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                                           else None for index, view in enumerate(views)])
         parts, ious, evaluations["parts"] = model.parts, model.silhouette_iou, model.evaluations
         lap("fit")  # the parts are the fit's too
+
+    def refitted_where_contradicted(model: Superquadric, resting: bool) -> Superquadric | None:
+        """``model`` (one superquadric) fitted again with auto's edge samples that run far from its own
+        outline doubtful; None if there are none such."""
+        contradicted = [None if before is None else
+                        before | (np.abs(outline_distances(model, camera, samples)) > _CONTRADICTED_PX)
+                        for before, camera, samples in zip(doubtful, cameras, edges)]
+        if not any(now is not None and np.any(now != before) for now, before in zip(contradicted, doubtful)):
+            return None
+        refined = fit_to_silhouettes(model, cameras, edges, support_plane=plane, doubtful=contradicted,
+                                     resting=resting)
+        evaluations["fit"] += refined.evaluations
+        return refined.superquadric
+
     if options.silhouette_fit and found and len(parts) == 1:
         # The model stays one superquadric: a stretch of one view's outline that runs far from it, where the
         # other views hold it, is one they contradict (a shadow or a strip of table taken in, a face left
         # out), whatever its colours say. Such samples are doubtful as those on unsure pixels are, their
         # pull fading as they lie farther, and the fit goes on from where it is: they can no longer drag it.
-        contradicted = [None if before is None else
-                        before | (np.abs(outline_distances(parts[0], camera, samples)) > _CONTRADICTED_PX)
-                        for before, camera, samples in zip(doubtful, cameras, edges)]
-        if any(now is not None and np.any(now != before) for now, before in zip(contradicted, doubtful)):
-            refined = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=contradicted)
-            evaluations["fit"] += refined.evaluations
-            superquadric = refined.superquadric
-            parts = (superquadric,)
+        refined = refitted_where_contradicted(parts[0], resting=False)
+        if refined is not None:
+            superquadric, parts = refined, (refined,)
             ious, _ = union_ious(parts, cameras, silhouettes, boxes)
-            doubtful = contradicted
             lap("fit")
     if options.silhouette_fit and plane is not None and len(parts) == 1:
         # An object on the support plane rests on it in equilibrium, and one superquadric, its mass about its
@@ -384,11 +392,16 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         # an edge, it would topple. So the model is also fitted held at rest (turning only about the normal),
         # and a tilt is kept only where it pays as a part must (DESIGN.md §1.11): two more parameters that
         # explain little more may only follow one view's wrong silhouette (a shadow taken in, a face left out).
+        # Which of auto's samples the views contradict is judged by the resting model's own outline, not by
+        # the tilted one's: each model is held to the samples that it, not another, leaves far off.
         resting = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True)
         evaluations["fit"] += resting.evaluations
-        resting_ious, _ = union_ious(resting.parts, cameras, silhouettes, boxes)
+        at_rest = resting.superquadric
+        if found:
+            at_rest = refitted_where_contradicted(at_rest, resting=True) or at_rest
+        resting_ious, _ = union_ious((at_rest,), cameras, silhouettes, boxes)
         if not explains_more(ious, resting_ious):
-            superquadric, parts, ious = resting.superquadric, resting.parts, resting_ious
+            superquadric, parts, ious = at_rest, (at_rest,), resting_ious
         lap("fit")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
