@@ -2567,7 +2567,14 @@ def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow
     colour (a white box on white laminate, a box of the table's wood): where most of its faces do,
     nothing is said. Darker than the darkest of the open shadow is only the table that the object hides
     from the sky as well as from the lamp, or a face darker still: only where none of the object's faces
-    of the table's colour is that dark is it the table for sure."""
+    of the table's colour is that dark is it the table for sure.
+
+    And only where something tells it from a face in shade. Its colour does where the pixel is bright
+    enough (:func:`_told_from_table_above`): in the dark, the few grey levels that set a face's colour
+    apart from the table's are within the noise, and a near-black can's lower body keeps "the table's
+    colour" as well as the table does. Failing that, its darkness does where no face of the object in
+    shade is that dark: a face turned from the lamp is still lit by the sky, as the open shadow is, so it
+    is at least as bright as the object's darkest face in sight dimmed by the open shadow's depth."""
     like_table = _off_colours(image, empty, faces) < 1.0
     if np.count_nonzero(like_table) >= _TABLE_LIKE_FACES * np.count_nonzero(faces):
         return np.zeros_like(kept), np.zeros_like(kept)
@@ -2576,7 +2583,25 @@ def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow
     deepest = np.quantile(shadow, _DEEPEST)
     if np.any(like_table):
         deepest = min(deepest, np.quantile(darkening[like_table], _DEEPEST))
-    return probable, kept & (darkening < deepest)
+    shaded_face = np.quantile(darkening[faces], _DEEPEST) * np.quantile(shadow, _DEEPEST)
+    told = (image.sum(axis=2) >= _told_from_table_above(image[faces], empty[faces])) | (darkening < shaded_face)
+    return probable, kept & (darkening < deepest) & told
+
+
+def _told_from_table_above(faces: np.ndarray, empty: np.ndarray) -> float:
+    """The brightness (summed over the channels) above which most of the object's ``faces`` ((N, 3), not
+    empty; ``empty``, the empty workspace's colours there), darkened to it, are told from the table's
+    colour by :func:`_off_colour`. A face keeps its colour in shade, but the grey levels that set it
+    apart from the table's shrink with the light, while the test's floor (:data:`_SHADOW_TINT_FLOOR`,
+    the noise) does not: a face whose colour lies a share u of its brightness from the table's is told
+    only above _SHADOW_TINT_FLOOR / u, and never where u is within :data:`_SHADOW_TINT`."""
+    brightness = faces.sum(axis=1)
+    scaled = empty * (brightness / np.maximum(empty.sum(axis=1), 1.0))[:, None]
+    unlike = np.abs(faces - scaled).sum(axis=1) / np.maximum(brightness, 1.0)
+    told_above = np.full(len(faces), np.inf)
+    apart = unlike > _SHADOW_TINT
+    told_above[apart] = _SHADOW_TINT_FLOOR / unlike[apart]
+    return float(np.quantile(told_above, _TABLE_LIKE_FACES, method="higher"))  # no interpolation to infinity
 
 
 def _darkening_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
