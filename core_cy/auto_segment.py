@@ -680,7 +680,6 @@ def _plane_maps(other: _View, points: np.ndarray, valid: np.ndarray,
     return coarse_uv.reshape(ch, cw, 2), inside
 
 
-
 def _plane_homography(view: _View, other: _View, plane: np.ndarray,
                       to_full: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """For two pinhole cameras without distortion, the plane's homography from pixels of ``view`` (on a grid

@@ -98,6 +98,7 @@ def test_a_refused_move_never_reaches_the_controller(protocol, target, options, 
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_the_program_checks_again_with_its_own_limits(protocol):
     wide = Workspace(min=[-2.0, -2.0, 0.0], max=[2.0, 2.0, 2.0], max_tilt_deg=90)
+
     async def scenario():
         async with kuka_cell(protocol, workspace=wide) as (controller, backend):
             with pytest.raises(ControllerRefused, match=r"RC_ERROR 3\): the target is outside") as refused:
@@ -231,6 +232,7 @@ def test_command_ids_never_repeat_the_last_finished_one(protocol):
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_the_gripper_closes_where_the_arm_stands_and_says_what_its_input_says(protocol):
     low = lambda pose: pose[2, 3] < 0.35  # the simulated gripper holds a part only below 35 cm
+
     async def scenario():
         async with kuka_cell(protocol, sim={"holds": low, "grip_in": 7, "grip_timeout_s": 0.2}) as (controller,
                                                                                                      backend):

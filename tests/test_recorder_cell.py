@@ -139,7 +139,6 @@ def test_a_recording_on_a_device_that_refuses_every_write_is_named_in_the_result
     asyncio.run(asyncio.wait_for(scenario(), LIMIT_S))
 
 
-
 @contextlib.asynccontextmanager
 async def _daemon_viewed(network: MemoryNetwork, config, view: str) -> AsyncIterator[AsyncCellClient]:
     """As ``tests.test_cell_inprocess.daemon``, the daemon streaming every job to ``view``."""
