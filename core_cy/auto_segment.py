@@ -1761,7 +1761,7 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
             continue
         alike = seen_alike(cv2.dilate(np.where(piece, 255, 0).astype(np.uint8), _SMALL))
         if np.count_nonzero(alike[piece]) > _ALL_BUT_RIM * piece.sum():
-            face = reach == np.bincount(reach[piece]).argmax()
+            face = reach == int(np.argmax(np.bincount(reach[piece])))
             alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
             grown[piece | (face & alike)] = 255
     return _filled_region(grown, view)
