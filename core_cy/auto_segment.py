@@ -1691,6 +1691,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if _lit_above_its_surroundings(view, piece, mask):
             grown[piece] = 255
             continue
+        if seen_alike is not None and _nearer_the_lamp_than_the_table(view, piece, known):
+            # The parallax of a top of the table's colour says nothing: its table point looks as it does.
+            if alike is None:
+                alike = seen_alike()
+            if np.count_nonzero(alike[piece]) * 2 > area:
+                grown[piece] = 255
+                continue
         stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > 1.0
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
@@ -1806,6 +1813,28 @@ def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray
     return bool(np.count_nonzero(darker) > _MOSTLY * darker.size)
 
 
+def _nearer_the_lamp_than_the_table(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) is brighter over most of it than the brightest of the table round
+    ``known`` (0/255, the silhouette and the other views' hull), its :data:`_LIT_TABLE` quantile, by more
+    than that quantile stands above the table's median: beyond the spread of the table's own brightness.
+
+    A face turned up above the table (a white box's top on white laminate) stands nearer the lamp than the
+    table and sees all of the sky, so it is lit more than any table point beside the object, whose sky the
+    object hides in part: a top of the table's colour is brighter than the lit table round it, and a
+    stretch of that table, lit or in shadow, is not. The table's grain, print and JPEG's noise spread its
+    brightness (on a dark mat a few grey levels are much of it), so the margin is that spread."""
+    outside = cv2.dilate(known, _SMALL, iterations=2) == 0
+    round_it = outside & (cv2.dilate(known, _CLOSING, iterations=4) > 0)
+    if not round_it.any():
+        return False
+    brightness = view.coarse.sum(axis=2)
+    table = brightness[round_it]
+    middle, bright = float(np.median(table)), float(np.quantile(table, _LIT_TABLE))
+    return float(np.median(brightness[piece])) - bright > bright - middle
+
+
+#: The brightest of the lit table round an object: this quantile of its brightness.
+_LIT_TABLE = 0.9
 #: A piece's surroundings are darker than it where their brightness is under its own by over this share.
 _DARKER_ROUND = 0.1
 #: Most of a piece's surroundings: over this share of them.
