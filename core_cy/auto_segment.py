@@ -1740,6 +1740,9 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     faintly. So does the table here and there (near another object's edge, over a coarse grain), so a pixel
     stands out where its evidence is over what the table round the hull shows (its :data:`_TABLE_LEVEL`
     quantile, 1 at least), over a piece wider than a 5-pixel disc (the band beside an edge is narrower).
+    Where the parallax is within the noise (the table point behind the top, far off, looks as the top does),
+    a pixel stands out by its light too: over what the lit table round the hull reaches
+    (:func:`_lit_table_ceiling`), as a top nearer the lamp than the table is.
     The two cues must agree: the piece touches the silhouette, is of a face's size (:data:`_BAY`), and the
     other views see a point of their hull on its rays alike over all of it but its rim (:data:`_ALL_BUT_RIM`,
     :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
@@ -1751,7 +1754,12 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
         return mask
     level = max(1.0, float(np.quantile(score[round_it], _TABLE_LEVEL)))
     beyond = (hull > 0) & (mask == 0) & seen
-    stands: np.ndarray = np.where(beyond & (score > level), 255, 0).astype(np.uint8)
+    above = beyond & (score > level)
+    ceiling = _lit_table_ceiling(view, cv2.bitwise_or(hull, mask))
+    if ceiling is not None:
+        # A top nearer the lamp than the table stands out by its light, whatever its parallax says.
+        above |= (hull > 0) & (mask == 0) & (view.coarse.sum(axis=2) > ceiling)
+    stands: np.ndarray = np.where(above, 255, 0).astype(np.uint8)
     stands = cv2.morphologyEx(cv2.morphologyEx(stands, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _CLOSING)
     count, labels = cv2.connectedComponents(stands, connectivity=8)
     if count <= 1:
@@ -1823,14 +1831,21 @@ def _nearer_the_lamp_than_the_table(view: _View, piece: np.ndarray, known: np.nd
     object hides in part: a top of the table's colour is brighter than the lit table round it, and a
     stretch of that table, lit or in shadow, is not. The table's grain, print and JPEG's noise spread its
     brightness (on a dark mat a few grey levels are much of it), so the margin is that spread."""
+    ceiling = _lit_table_ceiling(view, known)
+    return ceiling is not None and float(np.median(view.coarse[piece].sum(axis=1))) > ceiling
+
+
+def _lit_table_ceiling(view: _View, known: np.ndarray) -> float | None:
+    """The brightness that the table round ``known`` (0/255) stays under: its :data:`_LIT_TABLE` quantile and
+    as much again as that stands above its median (:func:`_nearer_the_lamp_than_the_table`); None where no
+    table is round it."""
     outside = cv2.dilate(known, _SMALL, iterations=2) == 0
     round_it = outside & (cv2.dilate(known, _CLOSING, iterations=4) > 0)
     if not round_it.any():
-        return False
-    brightness = view.coarse.sum(axis=2)
-    table = brightness[round_it]
+        return None
+    table = view.coarse.sum(axis=2)[round_it]
     middle, bright = float(np.median(table)), float(np.quantile(table, _LIT_TABLE))
-    return float(np.median(brightness[piece])) - bright > bright - middle
+    return 2.0 * bright - middle
 
 
 #: The brightest of the lit table round an object: this quantile of its brightness.
