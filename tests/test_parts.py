@@ -363,7 +363,7 @@ def test_which_samples_a_resting_box_contradicts_its_own_outline_says(tmp_path):
 def test_a_tilt_that_every_view_sees_is_kept():
     """A box held tilted 20 degrees on the table (on a wedge, say): resting on a face, it would explain
     every view worse by far more than a part must pay, so the tilt stays (volumetric IoU 0.93, as before
-the model was tried at rest)."""
+    the model was tried at rest)."""
     c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
     T = np.eye(4)
     T[:3, :3] = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
