@@ -1666,6 +1666,11 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 open_shadow[crop] = found[0]
         return _darker_than_the_open_shadow(view, piece, known, open_shadow)
 
+    @functools.cache
+    def lit_table_ceiling() -> float | None:
+        # The same for every piece: the table round the silhouette and the other views' hull.
+        return _lit_table_ceiling(view, known)
+
     def hides_the_mapped_grain(piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
         confirm round the object, of its chromaticity), hides the grain the other views see at its table
@@ -1691,7 +1696,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if _lit_above_its_surroundings(view, piece, mask):
             grown[piece] = 255
             continue
-        if seen_alike is not None and _nearer_the_lamp_than_the_table(view, piece, known):
+        if seen_alike is not None and _nearer_the_lamp_than_the_table(view, piece, lit_table_ceiling()):
             # The parallax of a top of the table's colour says nothing: its table point looks as it does.
             if alike is None:
                 alike = seen_alike()
@@ -1821,17 +1826,17 @@ def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray
     return bool(np.count_nonzero(darker) > _MOSTLY * darker.size)
 
 
-def _nearer_the_lamp_than_the_table(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
+def _nearer_the_lamp_than_the_table(view: _View, piece: np.ndarray, ceiling: float | None) -> bool:
     """Whether ``piece`` (bool, coarse) is brighter over most of it than the brightest of the table round
-    ``known`` (0/255, the silhouette and the other views' hull), its :data:`_LIT_TABLE` quantile, by more
-    than that quantile stands above the table's median: beyond the spread of the table's own brightness.
+    the silhouette and the other views' hull, its :data:`_LIT_TABLE` quantile, by more than that quantile
+    stands above the table's median: beyond the spread of the table's own brightness (``ceiling``, as
+    :func:`_lit_table_ceiling` gives it; None where no table is round them: never).
 
     A face turned up above the table (a white box's top on white laminate) stands nearer the lamp than the
     table and sees all of the sky, so it is lit more than any table point beside the object, whose sky the
     object hides in part: a top of the table's colour is brighter than the lit table round it, and a
     stretch of that table, lit or in shadow, is not. The table's grain, print and JPEG's noise spread its
     brightness (on a dark mat a few grey levels are much of it), so the margin is that spread."""
-    ceiling = _lit_table_ceiling(view, known)
     return ceiling is not None and float(np.median(view.coarse[piece].sum(axis=1))) > ceiling
 
 

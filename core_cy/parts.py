@@ -536,17 +536,17 @@ def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fi
     # two views. Less volume is not enough: a thin part lies in the views' blind spot. Nor is covering
     # less beyond the silhouette's convex hull (:attr:`_Rasters.enclosed`): slabs round a column that
     # leave out the face one view's silhouette left out explain a segmentation's error, not a gap.
-    explains_more = gained >= _views_to_pay(len(candidate_ious))
-    if not explains_more and float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current):
+    pays = gained >= _views_to_pay(len(candidate_ious))
+    if not pays and float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current):
         carved = rasters.carved_ious(current, candidate) - np.asarray(ious)
-        explains_more = float(np.max(carved)) >= _CARVED_GAIN
-    if explains_more and len(candidate) <= len(current):
-        explains_more = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
+        pays = float(np.max(carved)) >= _CARVED_GAIN
+    if pays and len(candidate) <= len(current):
+        pays = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
     # What more parts explain the more in some views they must not explain as much the less in another,
     # on either reading of the silhouettes (``gains``, the less of the two): that moves an error from one
     # view to another (a view's wrong silhouette, a shadow taken in or a face left out, followed at the
     # others' cost), and which view is wrong no part can say.
-    if explains_more and (len(candidate) <= len(current) or float(np.min(gains)) > -PART_GAIN):
+    if pays and (len(candidate) <= len(current) or float(np.min(gains)) > -PART_GAIN):
         return "kept"
     if may_trial and len(candidate) > len(base) and gained >= 1:
         return "trial"  # it explains more in one view at least: not just a part cut in two
