@@ -2826,7 +2826,35 @@ def _log_ratio(view: _View) -> np.ndarray:
     """(h, w, 3) float32: the log of each channel of the image over the empty workspace. The table's own
     texture divides out; a shadow is a smooth darkening, the same seen from any view."""
     assert view.background is not None
-    return np.log((view.coarse + _RATIO_OFFSET) / (view.background + _RATIO_OFFSET)).astype(np.float32)
+    return _log_ratio_of(view.coarse, view.background)
+
+
+def _log_ratio_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
+    """:func:`_log_ratio` of two images of the same size."""
+    return np.log((image + _RATIO_OFFSET) / (empty + _RATIO_OFFSET)).astype(np.float32)
+
+
+def _change_noise(view: _View, change: np.ndarray) -> float:
+    """The noise of the view's ``change`` against the empty workspace (:func:`_log_ratio`'s magnitudes summed
+    over the channels) on the table: its :func:`_noise_level`, unless the coarse images' rounding to whole
+    grey levels made that estimate; then the noise of the same change before the rounding.
+
+    Rounding moves each channel of either image by half a grey level at most, so the rounded change lies
+    within a grey level's step of the unrounded one, and so would its noise. On a dark, flat table it does
+    not: there the coarse change is 0 or one grey level in most pixels, and the median and spread of so few
+    values read the steps, not the noise (on a near-black mat, twice the noise or more). A dark can a
+    little darker than its mat (0.85 of it, four grey levels) then fell within that false noise and was
+    left out. An estimate that rounding made too low (over half the pixels unchanged: none at all) lets
+    more pass as changed, and the look through the plane that follows still tells the table; it is kept
+    (read before the rounding there too, two dark cans' views lost 0.12 and 0.18)."""
+    rounded = _noise_level(change)
+    assert view.background is not None and view.full_background is not None
+    image = cv2.resize(view.image.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
+    empty = cv2.resize(view.full_background.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
+    unrounded = _noise_level(np.abs(_log_ratio_of(image, empty)).sum(axis=2))
+    table = np.median(view.background.reshape(-1, 3), axis=0)
+    step = float(np.log((table + 1.0 + _RATIO_OFFSET) / (table + _RATIO_OFFSET)).sum())
+    return unrounded if rounded > unrounded + step else rounded
 
 
 def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
@@ -2878,7 +2906,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         shades[view.index] = shade & ~tables[view.index]
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
-        score = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
+        score = np.maximum(change / max(_change_noise(view, change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         # A face as bright as the table changed its tint only (the other views judge whether the table
         # itself took that tint: the glow of a coloured object beside it).
         score = np.maximum(score, _tint_change(view))
