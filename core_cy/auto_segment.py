@@ -1674,7 +1674,11 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     def hides_the_mapped_grain(piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
         confirm round the object, of its chromaticity), hides the grain the other views see at its table
-        points, and is no darker than the open shadow."""
+        points, and is no darker than the open shadow unless the other views see most of its table points.
+        The table under the object's overhang is hidden from the other views by the object above it, so
+        the grain they show is told there from a few points only; a face in shade stands in front of the
+        table points behind it, which they see: its darkness beside the open shadow says nothing (a face
+        turned from the lamp sees half of the sky, the shadow round the object most of it)."""
         nonlocal sums
         if plane_grain is None:
             return False
@@ -1684,7 +1688,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             return False
         if sums is None:
             sums = plane_grain()
-        return _grain_hidden(view, piece, known, sums) and not darker_than_the_open_shadow(piece)
+        if not _grain_hidden(view, piece, known, sums):
+            return False
+        others_see_behind = bool(2 * np.count_nonzero(seen[piece]) > np.count_nonzero(piece))
+        return others_see_behind or not darker_than_the_open_shadow(piece)
 
     for label in range(1, count):
         piece = labels == label

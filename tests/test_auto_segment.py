@@ -738,3 +738,14 @@ def test_a_face_in_shade_that_hides_the_grain_the_other_views_see_is_kept_from_t
     is gone from the faces, which a shadow on the table keeps: faces, kept."""
     ious = _printed_scene_ious(tmp_path, 4, "oak-table-colour-box", backgrounds=False)
     assert ious[1] > 0.88 and min(ious) > 0.9, ious
+
+
+def test_a_face_in_shade_as_dark_as_the_shadow_is_kept_where_the_others_see_the_table_behind_it(tmp_path):
+    """A box of its table's colour, from the images alone: in one view only its lit top was found (0.51
+    before). The cut within the other views' hull finds its two faces turned from the lamp, which hide the
+    oak's grain the other views see at the table points behind them, but they are as dark as the box's
+    shadow, most of which lies within that hull too, so the open shadow left beside it was a strip of its
+    soft edge, and the faces were taken for the table under an overhang. That table is hidden from the
+    other views by the object above it; the table behind these faces is not: kept."""
+    ious = _printed_scene_ious(tmp_path, 14, "oak-table-colour-box", backgrounds=False)
+    assert ious[0] > 0.75 and min(ious) > 0.8, ious
