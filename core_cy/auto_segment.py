@@ -1504,16 +1504,42 @@ def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.nd
     if sums is None:
         assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
         sums, shade = view.grain_sums, view.shadow_look
-    per_coarse = _fine_per_coarse(view)
+    table = _table_grain_round(view, piece, known, sums, shade)
+    if table is None:
+        return False
+    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), _fine_per_coarse(view))
+    return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
+
+
+def _table_grain_round(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray,
+                       shade: np.ndarray | None) -> tuple[float, float] | None:
+    """The slope of the grain the table round ``piece`` keeps, beyond ``known`` and out of ``shade`` (as
+    :func:`_grain_hidden` takes them), and the power of the grain compared with there; None where it keeps
+    none clear of its uncertainty."""
     outside = cv2.dilate(known, _SMALL, iterations=2) == 0
     round_it = outside & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
     if shade is not None:
         round_it &= ~shade
-    table = _pooled_grain(sums, round_it, per_coarse)
+    table = _pooled_grain(sums, round_it, _fine_per_coarse(view))
     if table is None or table[0] < max(3.0 * table[1], _GRAIN_TABLE_SLOPE):
-        return False
-    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), per_coarse)
-    return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
+        return None
+    return table[0], float(np.nanmean(sums[round_it][:, 1]))
+
+
+def _grain_lost_pixels(sums: np.ndarray, region: np.ndarray, table_slope: float, fine_per_coarse: float) -> np.ndarray:
+    """(h, w) bool: the pixels of ``region`` whose grain, regressed as :func:`_pooled_grain` does over the
+    window of :data:`_CLOSING`'s size round each, has a slope under half the table's (``table_slope``) by 3
+    standard errors, where over half of that window's grain is known."""
+    known = np.isfinite(sums[..., 0])
+    size = _CLOSING.shape[::-1]
+    shared, power, own = (cv2.boxFilter(np.where(known, sums[..., k], 0.0).astype(np.float64), -1, size)
+                          for k in range(3))
+    counted = cv2.boxFilter(known.astype(np.float64), -1, size, normalize=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = shared / power
+        error = np.sqrt(np.maximum(own - slope * shared, 0.0) / (counted * fine_per_coarse * power))
+        lost = (2.0 * counted > _CLOSING.size) & (power > 0.0) & (slope + 3.0 * error < 0.5 * table_slope)
+    return region & lost
 
 
 def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
@@ -1531,6 +1557,9 @@ def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) 
     return slope, float(np.sqrt(max(own - slope * shared, 0.0) / (count * fine_per_coarse * power)))
 
 
+#: The grain the other views see at a piece's table points is the table's where its power is within this
+#: factor of the power they see round it (twice or half its amplitude).
+_GRAIN_POWER_SPREAD = 4.0
 #: The table round a piece keeps a grain where its slope (the image's grain on the empty workspace's, which
 #: the empty workspace's own noise lowers on a faint grain) is over this.
 _GRAIN_TABLE_SLOPE = 0.2
@@ -1632,14 +1661,15 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     which a shadow on the table carries and a face above it does not: a piece with a shadow's look over half
     of it, that hides that grain (:func:`_grain_hidden`, told over the part of it whose table points the
     others see, however small: its standard error says how sure) and is no darker than the open shadow, is
-    a face in shade, whether the colour's parallax says table or nothing."""
+    a face in shade, whether the colour's parallax says table or nothing. Where the cut gave such a face to
+    the shadow beside it, the grain splits the two (``faces_the_cut_gave_the_shadow``)."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
         return mask
     added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _SMALL)
     count, labels = cv2.connectedComponents(added, connectivity=8)
-    if count <= 1:
+    if count <= 1 and plane_grain is None:
         return mask
     touching = cv2.dilate(mask, _SMALL) > 0
     if parallax is None:
@@ -1693,6 +1723,53 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         others_see_behind = bool(2 * np.count_nonzero(seen[piece]) > np.count_nonzero(piece))
         return others_see_behind or not darker_than_the_open_shadow(piece)
 
+    def faces_the_cut_gave_the_shadow(grown: np.ndarray) -> np.ndarray:
+        """``grown`` with the faces in shade within the hull that the cut gave to the shadow beside them.
+
+        The colour models cannot tell a face of the table's colour turned from the lamp from the box's
+        shadow beside it, so the cut may give both to the table, or find one piece of the two. What tells
+        them apart pixel by pixel is the grain the other views see at the table points: the shadow keeps it,
+        the face hides it. So each stretch beyond ``grown`` within the hull with a shadow's look is split
+        where the grain is lost (:func:`_grain_lost_pixels`: clear of its uncertainty in each pixel's own
+        window, so that a few noisy windows chosen for their low slope do not pass the test told over the
+        piece), and a part that touches the silhouette and is of a face's size is weighed as a piece of the
+        cut is (``hides_the_mapped_grain``). The grain the others see there must be the table's, as strong
+        as round it within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint grain (white
+        laminate) leaves them none above JPEG's floor, and the object's own print seen at a table point is
+        stronger than any grain of the table."""
+        nonlocal sums
+        assert plane_grain is not None
+        beyond = np.zeros(mask.shape, bool)
+        beyond[crop] = (hull[crop] > 0) & (grown[crop] == 0)
+        looks = np.zeros(mask.shape, bool)
+        looks[crop] = _shadow_like(view.coarse[crop], low | beyond[crop]) & beyond[crop]
+        looks = cv2.morphologyEx(looks.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+        near = cv2.dilate(grown, _SMALL) > 0
+        least = _BAY * cv2.countNonZero(mask)
+        count, labels = cv2.connectedComponents(looks.astype(np.uint8), connectivity=8)
+        for label in range(1, count):
+            stretch = labels == label
+            if not (stretch & near).any() or stretch.sum() <= least:
+                continue
+            if sums is None:
+                sums = plane_grain()
+            table = _table_grain_round(view, stretch, known, sums, None)
+            if table is None:
+                continue
+            slope, power = table
+            lost = _grain_lost_pixels(sums, stretch, slope, _fine_per_coarse(view))
+            parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                                   connectivity=8)
+            for part in range(1, parts):
+                piece = split == part
+                if not (piece & near).any() or piece.sum() <= least:
+                    continue
+                seen_there = float(np.nanmean(sums[piece][:, 1]))
+                if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and \
+                        hides_the_mapped_grain(piece):
+                    grown[piece] = 255
+        return grown
+
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
@@ -1736,6 +1813,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 alike = seen_alike()
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
+    if plane_grain is not None:
+        grown = faces_the_cut_gave_the_shadow(grown)
+        if count <= 1 and np.array_equal(grown, mask):
+            return mask
     return _filled_region(grown, view)
 
 
