@@ -1662,14 +1662,15 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     of it, that hides that grain (:func:`_grain_hidden`, told over the part of it whose table points the
     others see, however small: its standard error says how sure) and is no darker than the open shadow, is
     a face in shade, whether the colour's parallax says table or nothing. Where the cut gave such a face to
-    the shadow beside it, the grain splits the two (``faces_the_cut_gave_the_shadow``)."""
+    the shadow beside it, the grain (the other views' or the empty workspace's) splits the two
+    (``faces_the_cut_gave_the_shadow``)."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
         return mask
     added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _SMALL)
     count, labels = cv2.connectedComponents(added, connectivity=8)
-    if count <= 1 and plane_grain is None:
+    if count <= 1 and plane_grain is None and (shadow is None or view.grain_sums is None):
         return mask
     touching = cv2.dilate(mask, _SMALL) > 0
     if parallax is None:
@@ -1701,6 +1702,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         # The same for every piece: the table round the silhouette and the other views' hull.
         return _lit_table_ceiling(view, known)
 
+    def mapped_grain() -> np.ndarray:
+        nonlocal sums
+        assert plane_grain is not None
+        if sums is None:
+            sums = plane_grain()
+        return sums
+
     def hides_the_mapped_grain(piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
         confirm round the object, of its chromaticity), hides the grain the other views see at its table
@@ -1709,40 +1717,40 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         the grain they show is told there from a few points only; a face in shade stands in front of the
         table points behind it, which they see: its darkness beside the open shadow says nothing (a face
         turned from the lamp sees half of the sky, the shadow round the object most of it)."""
-        nonlocal sums
         if plane_grain is None:
             return False
         looks = np.zeros(mask.shape, bool)
         looks[crop] = _shadow_like(view.coarse[crop], low | piece[crop])
         if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
             return False
-        if sums is None:
-            sums = plane_grain()
-        if not _grain_hidden(view, piece, known, sums):
+        if not _grain_hidden(view, piece, known, mapped_grain()):
             return False
         others_see_behind = bool(2 * np.count_nonzero(seen[piece]) > np.count_nonzero(piece))
         return others_see_behind or not darker_than_the_open_shadow(piece)
 
-    def faces_the_cut_gave_the_shadow(grown: np.ndarray) -> np.ndarray:
+    def hides_the_empty_workspace_grain(piece: np.ndarray) -> bool:
+        """Whether ``piece`` hides the grain the empty workspace shows and is no darker than the open shadow:
+        a shadow keeps the table's grain, a face in shade hides it; but so does the dark under the object's
+        overhang, where the object hides the sky too and the grain fades under JPEG's floor."""
+        return (view.grain_sums is not None and _grain_hidden(view, piece, known)
+                and not darker_than_the_open_shadow(piece))
+
+    def faces_the_cut_gave_the_shadow(grown: np.ndarray, looks: np.ndarray, grain: Callable[[], np.ndarray],
+                                      shade: np.ndarray | None, hides: Callable[[np.ndarray], bool]) -> np.ndarray:
         """``grown`` with the faces in shade within the hull that the cut gave to the shadow beside them.
 
         The colour models cannot tell a face of the table's colour turned from the lamp from the box's
         shadow beside it, so the cut may give both to the table, or find one piece of the two. What tells
-        them apart pixel by pixel is the grain the other views see at the table points: the shadow keeps it,
-        the face hides it. So each stretch beyond ``grown`` within the hull with a shadow's look is split
-        where the grain is lost (:func:`_grain_lost_pixels`: clear of its uncertainty in each pixel's own
-        window, so that a few noisy windows chosen for their low slope do not pass the test told over the
-        piece), and a part that touches the silhouette and is of a face's size is weighed as a piece of the
-        cut is (``hides_the_mapped_grain``). The grain the others see there must be the table's, as strong
-        as round it within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint grain (white
-        laminate) leaves them none above JPEG's floor, and the object's own print seen at a table point is
-        stronger than any grain of the table."""
-        nonlocal sums
-        assert plane_grain is not None
-        beyond = np.zeros(mask.shape, bool)
-        beyond[crop] = (hull[crop] > 0) & (grown[crop] == 0)
-        looks = np.zeros(mask.shape, bool)
-        looks[crop] = _shadow_like(view.coarse[crop], low | beyond[crop]) & beyond[crop]
+        them apart pixel by pixel is the table's grain (``grain``: the other views' mapped through the plane,
+        or the empty workspace's; the table round a stretch is taken out of ``shade``): the shadow keeps
+        it, the face hides it. So each stretch beyond ``grown`` with a shadow's look (``looks``, bool) is
+        split where the grain is lost (:func:`_grain_lost_pixels`: clear of its uncertainty in each pixel's
+        own window, so that a few noisy windows chosen for their low slope do not pass the test told over
+        the piece), and a part that touches the silhouette and is of a face's size is weighed as a piece of
+        the cut is (``hides``). The grain compared with there must be the table's, as strong as round it
+        within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint grain (white laminate) leaves
+        none above JPEG's floor, and the object's own print seen at a table point is stronger than any
+        grain of the table."""
         looks = cv2.morphologyEx(looks.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
         near = cv2.dilate(grown, _SMALL) > 0
         least = _BAY * cv2.countNonZero(mask)
@@ -1751,22 +1759,19 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             stretch = labels == label
             if not (stretch & near).any() or stretch.sum() <= least:
                 continue
-            if sums is None:
-                sums = plane_grain()
-            table = _table_grain_round(view, stretch, known, sums, None)
+            table = _table_grain_round(view, stretch, known, grain(), shade)
             if table is None:
                 continue
             slope, power = table
-            lost = _grain_lost_pixels(sums, stretch, slope, _fine_per_coarse(view))
+            lost = _grain_lost_pixels(grain(), stretch, slope, _fine_per_coarse(view))
             parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
                                                    connectivity=8)
             for part in range(1, parts):
                 piece = split == part
                 if not (piece & near).any() or piece.sum() <= least:
                     continue
-                seen_there = float(np.nanmean(sums[piece][:, 1]))
-                if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and \
-                        hides_the_mapped_grain(piece):
+                seen_there = float(np.nanmean(grain()[piece][:, 1]))
+                if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and hides(piece):
                     grown[piece] = 255
         return grown
 
@@ -1791,10 +1796,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
                 continue
-            # A shadow keeps the table's grain, a face in shade hides it; but so does the dark under the
-            # object's overhang, where the object hides the sky too and the grain fades under JPEG's floor.
-            if (view.grain_sums is not None and _grain_hidden(view, piece, known)
-                    and not darker_than_the_open_shadow(piece)):
+            if hides_the_empty_workspace_grain(piece):
                 grown[piece] = 255
                 continue
         elif 2 * len(evidence) > area:
@@ -1813,10 +1815,17 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 alike = seen_alike()
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
+    beyond = (hull > 0) & (grown == 0)
     if plane_grain is not None:
-        grown = faces_the_cut_gave_the_shadow(grown)
-        if count <= 1 and np.array_equal(grown, mask):
-            return mask
+        looks = np.zeros(mask.shape, bool)
+        looks[crop] = _shadow_like(view.coarse[crop], low | beyond[crop]) & beyond[crop]
+        grown = faces_the_cut_gave_the_shadow(grown, looks, mapped_grain, None, hides_the_mapped_grain)
+    elif shadow is not None and view.grain_sums is not None:
+        empty_workspace_grain = view.grain_sums
+        grown = faces_the_cut_gave_the_shadow(grown, beyond & shadow, lambda: empty_workspace_grain,
+                                              view.shadow_look, hides_the_empty_workspace_grain)
+    if count <= 1 and np.array_equal(grown, mask):
+        return mask
     return _filled_region(grown, view)
 
 
