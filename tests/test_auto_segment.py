@@ -748,7 +748,7 @@ def test_a_face_in_shade_as_dark_as_the_shadow_is_kept_where_the_others_see_the_
     soft edge, and the faces were taken for the table under an overhang. That table is hidden from the
     other views by the object above it; the table behind these faces is not: kept."""
     ious = _printed_scene_ious(tmp_path, 14, "oak-table-colour-box", backgrounds=False)
-    assert ious[0] > 0.75 and min(ious) > 0.8, ious
+    assert ious[0] > 0.75 and min(ious[1:]) > 0.8, ious
 
 
 def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_beside_it_is_split_off_by_the_grain(tmp_path):
