@@ -1420,21 +1420,30 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
     evidence missed (a box's or a can's top) leaves such a bay between the faces found around it; the two
     other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
-    own evidence, looks for the object there too; what the view had found is kept."""
+    own evidence, looks for the object there too; what the view had found is kept. A view corrected already
+    (cut again within the others' hull) is looked into only for faces standing out
+    (:func:`_faces_standing_out`), which no cut by colour finds."""
     everyone = set(range(len(views)))
     looked = list(masks)
-    for i in everyone - done:
+    for i in sorted(everyone):
         score = scores[i]
         if score is None:
             continue
         hull = hulls.of(everyone - {i})
+        seen_alike = functools.partial(_seen_alike, views, masks, hulls, i)
+        if i in done:
+            # A view cut again within the others' hull has looked into its bays, by the colour models of its
+            # own seeds; but they cannot find a top of the table's colour, nor can the cut, that the view's
+            # light or parallax shows standing out.
+            if len(views) == 3 and views[i].background is None:
+                looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
+            continue
         outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
         bay = cv2.bitwise_and(cv2.bitwise_and(outline, hull), cv2.bitwise_not(masks[i]))
         bay = cv2.morphologyEx(bay, cv2.MORPH_OPEN, _SMALL)
         if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
             found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
             looked[i] = _filled_region(cv2.bitwise_or(masks[i], found), views[i])
-        seen_alike = functools.partial(_seen_alike, views, masks, hulls, i)
         if views[i].grain_sums is not None and hulls.height is not None:
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
@@ -1849,7 +1858,14 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     other views see a point of their hull on its rays alike over all of it but its rim (:data:`_ALL_BUT_RIM`,
     :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
     only where the object behind happens to have its colour. A face so found reaches as far as its evidence
-    stands out at all (over 1) and the other views see it alike."""
+    stands out at all (over 1) and the other views see it alike.
+
+    A piece nearer the lamp than the table (:func:`_nearer_the_lamp_than_the_table`) is told from the table
+    by its light already, and needs the others' likeness over :data:`_MOSTLY` of it only: where another view
+    missed its own view of the same top (two low side views of a tall box), that view carves the far part of
+    the top from the hull, and nothing is seen alike there. Such a top reaches as far as its light stands
+    out over the lit table round the hull, beyond the hull too: the model's fit takes a top found in part
+    for a rounded or tilted one, and one left out whole for nothing."""
     seen = score != _HIDDEN
     round_it = (cv2.dilate(hull, _CLOSING, iterations=4) > 0) & (cv2.dilate(hull, _SMALL, iterations=2) == 0) & seen
     if not round_it.any():
@@ -1877,10 +1893,22 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
         if not (piece & touching).any() or piece.sum() <= _BAY * area:
             continue
         alike = seen_alike(cv2.dilate(np.where(piece, 255, 0).astype(np.uint8), _SMALL))
-        if np.count_nonzero(alike[piece]) > _ALL_BUT_RIM * piece.sum():
-            face = reach == int(np.argmax(np.bincount(reach[piece])))
-            alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
-            grown[piece | (face & alike)] = 255
+        nearer_the_lamp = _nearer_the_lamp_than_the_table(view, piece, ceiling)
+        # Another view may have missed its own view of a top (a tall box's, seen low from the side, as this
+        # one did), and that carves the far part of the top from the others' hull: there they see nothing
+        # alike. A top nearer the lamp than the table, which its light tells from the table already, is seen
+        # alike over most of it, not all but its rim.
+        if np.count_nonzero(alike[piece]) <= (_MOSTLY if nearer_the_lamp else _ALL_BUT_RIM) * piece.sum():
+            continue
+        face = reach == int(np.argmax(np.bincount(reach[piece])))
+        alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
+        grown[piece | (face & alike)] = 255
+        if nearer_the_lamp:
+            # Such a top reaches as far as its light stands out over the lit table, beyond the hull too.
+            assert ceiling is not None
+            lit = np.where(piece | ((mask == 0) & (view.coarse.sum(axis=2) > ceiling)), 255, 0).astype(np.uint8)
+            _, lit_labels = cv2.connectedComponents(cv2.morphologyEx(lit, cv2.MORPH_CLOSE, _SMALL), connectivity=8)
+            grown[lit_labels == int(np.argmax(np.bincount(lit_labels[piece])))] = 255
     return _filled_region(grown, view)
 
 

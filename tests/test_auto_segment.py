@@ -522,6 +522,25 @@ def test_a_top_that_the_cut_gives_the_table_stands_out_by_its_light(tmp_path):
     assert min(ious) > 0.9, ious
 
 
+def test_a_lit_top_that_the_others_missed_too_stands_out_by_its_light_where_they_see_most_of_it_alike(tmp_path):
+    """A tall white-and-blue box on white laminate, with the empty workspace: from one view its white top
+    changes hardly at all against it and the cut gives it to the table (0.83 before). It is brighter than
+    the lit laminate round the box, but the other views' hull, carved by a view that missed its own view of
+    the top, holds only the near part of it, so they see it alike over most of it, not all but its rim."""
+    ious = _printed_scene_ious(tmp_path, 5, "laminate-sugar-box-tall-box", backgrounds=True)
+    assert ious[2] > 0.93 and min(ious) > 0.9, ious
+
+
+def test_a_lit_top_that_two_side_views_miss_stands_out_in_both_even_the_one_cut_again(tmp_path):
+    """A tall white-and-blue box on white laminate seen low from two sides: each side view's top is of the
+    laminate's colour, a little brighter than the lit laminate, and both leave it out (0.51 and 0.62
+    before). One of them, blamed for holding too little, was cut again within the others' hull, by colour
+    models that cannot tell the top from the table, and no more was looked for there; the top's light
+    stands out in both."""
+    ious = _printed_scene_ious(tmp_path, 18, "laminate-sugar-box-tall-box", backgrounds=False)
+    assert min(ious[1], ious[2]) > 0.8 and ious[0] > 0.93, ious
+
+
 def test_a_top_of_the_mat_s_colour_is_found_by_the_grain_it_hides(tmp_path):
     """A dark can on a dark rubber mat, with the empty workspace: from one view its top is of the mat's
     colour and light, changed against the empty workspace in nothing but the mat's speckle, too faint for
