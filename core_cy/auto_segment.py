@@ -1225,8 +1225,12 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 # The view's own evidence missed part of the object (a top of the table's colour and light,
                 # a dark face taken for the shadow beside it) that the others agree on: what the others'
                 # hull adds is looked for there too, by the colour models its own seeds trained, and
-                # nothing beyond the two is.
-                masks[culprit] = _cut_within(view, cv2.bitwise_or(masks[culprit], hull), score)
+                # nothing beyond the two is. The colour models may take the shadow by the foot there too; the
+                # plane's parallax, the evidence without an empty workspace, tells it (_shadows_left_out).
+                cut = _cut_within(view, cv2.bitwise_or(masks[culprit], hull), score)
+                if view.background is None:
+                    cut = _shadows_left_out(view, masks[culprit], cut, score, hull)
+                masks[culprit] = cut
             continue
         # A view seeded by the aim alone is cut again within the others' hull. A view whose evidence seeded
         # it (the plane's parallax, the empty workspace) knows better than a hull that another view's miss
@@ -1287,6 +1291,46 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     if plane is not None and len(views) > 2:
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
     return masks
+
+
+def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score: np.ndarray,
+                      hull: np.ndarray) -> np.ndarray:
+    """``found`` (0/255), a view's cut again within the others' ``hull``, without the pieces it added to
+    ``before`` that are the shadow by the object's foot: a piece with a shadow's look over most of it
+    (:data:`_MOSTLY`; darker than the table the view's evidence ``score``, the plane's parallax, confirms
+    round it, of its chromaticity), whose table points the other views see over half of it and confirm
+    (the evidence's median under 1), and darker than the shadow cast in the open
+    (:func:`_darker_than_the_open_shadow`).
+
+    The others' hull is looser than the object and holds a band of table round its foot, with the shadow
+    there; where the object's faces in shade are of the shadow's colour (a white box on white laminate),
+    the colour models the view's seeds trained give that shadow to the object. A face in shade may match
+    the shadow behind it as well, so the evidence alone does not tell; but such a face is lit by the sky
+    and no darker than the open shadow, while the table by the foot, whose sky the object hides in part,
+    is. A face that looks like the table (a dark can's top on its mat) has no shadow's look."""
+    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(added, connectivity=8)
+    if count <= 1:
+        return found
+    x0, y0, x1, y1 = _cut_box(view, found)
+    crop = (slice(y0, y1), slice(x0, x1))
+    confirmed = score[crop] < 1.0
+    open_shadow = None
+    kept = found.copy()
+    for label in range(1, count):
+        piece = labels == label
+        area = int(piece.sum())
+        evidence = score[piece & (score != _HIDDEN)]
+        if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
+            continue
+        looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
+        if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
+            continue
+        if open_shadow is None:
+            open_shadow = _confirmed_shadow_round(view, score, crop)
+        if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
+            kept[piece] = 0
+    return kept
 
 
 def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray],
@@ -1697,13 +1741,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     def darker_than_the_open_shadow(piece: np.ndarray) -> bool:
         nonlocal open_shadow
         if open_shadow is None:
-            # The open shadow, as the table under the overhang is told from it: the table the view's evidence
-            # confirms, with a shadow's look, round the object (:func:`_shadows_under_object_dropped`).
-            found = _shadow_seen(view.coarse[crop], low, low & _shadow_like(view.coarse[crop], low),
-                                 score[crop] == _HIDDEN)
-            open_shadow = np.zeros(mask.shape, bool)
-            if found is not None:
-                open_shadow[crop] = found[0]
+            open_shadow = _confirmed_shadow_round(view, score, crop)
         return _darker_than_the_open_shadow(view, piece, known, open_shadow)
 
     @functools.cache
@@ -1916,6 +1954,19 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
 _TABLE_LEVEL = 0.9
 #: A face the other views see is seen alike by them over all of it but its rim: over this share of it.
 _ALL_BUT_RIM = 0.85
+
+
+def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
+    """(h, w) bool: the open shadow, as the table under the overhang is told from it: the table that the view's
+    evidence ``score`` confirms within ``crop`` (the graph cut's box), with a shadow's look, round the object
+    (:func:`_shadows_under_object_dropped`)."""
+    confirmed = score[crop] < 1.0
+    found = _shadow_seen(view.coarse[crop], confirmed, confirmed & _shadow_like(view.coarse[crop], confirmed),
+                         score[crop] == _HIDDEN)
+    open_shadow = np.zeros(score.shape, bool)
+    if found is not None:
+        open_shadow[crop] = found[0]
+    return open_shadow
 
 
 def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
