@@ -1569,8 +1569,7 @@ def _table_grain_round(view: _View, piece: np.ndarray, known: np.ndarray, sums: 
     """The slope of the grain the table round ``piece`` keeps, beyond ``known`` and out of ``shade`` (as
     :func:`_grain_hidden` takes them), and the power of the grain compared with there; None where it keeps
     none clear of its uncertainty."""
-    outside = cv2.dilate(known, _SMALL, iterations=2) == 0
-    round_it = outside & (cv2.dilate(piece.astype(np.uint8), _CLOSING, iterations=4) > 0)
+    round_it = _table_round(piece.astype(np.uint8), known)
     if shade is not None:
         round_it &= ~shade
     table = _pooled_grain(sums, round_it, _fine_per_coarse(view))
@@ -1905,7 +1904,7 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     out over the lit table round the hull, beyond the hull too: the model's fit takes a top found in part
     for a rounded or tilted one, and one left out whole for nothing."""
     seen = score != _HIDDEN
-    round_it = (cv2.dilate(hull, _CLOSING, iterations=4) > 0) & (cv2.dilate(hull, _SMALL, iterations=2) == 0) & seen
+    round_it = _table_round(hull, hull) & seen
     if not round_it.any():
         return mask
     level = max(1.0, float(np.quantile(score[round_it], _TABLE_LEVEL)))
@@ -1975,7 +1974,7 @@ def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarr
     silhouette and the other views' hull). A face of the table's colour turned from the lamp is lit by the
     sky and is no darker than the shadow cast in the open; the table under the object's overhang is
     (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
-    open_shadow = shadow & (cv2.dilate(known, _SMALL, iterations=2) == 0)
+    open_shadow = shadow & _clear_of(known)
     if not open_shadow.any():
         return True
     brightness = view.coarse.sum(axis=2)
@@ -1993,7 +1992,7 @@ def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray
     the table's colour in shade, under the sky alone, is as bright as the table in shadow, but stands over
     the table's darkest points, the shadow it casts and the rim round its foot, where the object hides part
     of the sky from the table too. Its colour matches the table point behind it; this does not."""
-    beyond = cv2.dilate(mask, _SMALL, iterations=2) == 0
+    beyond = _clear_of(mask)
     round_it = (cv2.dilate(piece.astype(np.uint8), _SMALL, iterations=2) > 0) & ~piece & beyond
     if not round_it.any():
         return False
@@ -2020,13 +2019,25 @@ def _lit_table_ceiling(view: _View, known: np.ndarray) -> float | None:
     """The brightness that the table round ``known`` (0/255) stays under: its :data:`_LIT_TABLE` quantile and
     as much again as that stands above its median (:func:`_nearer_the_lamp_than_the_table`); None where no
     table is round it."""
-    outside = cv2.dilate(known, _SMALL, iterations=2) == 0
-    round_it = outside & (cv2.dilate(known, _CLOSING, iterations=4) > 0)
+    round_it = _table_round(known, known)
     if not round_it.any():
         return None
     table = view.coarse.sum(axis=2)[round_it]
     middle, bright = float(np.median(table)), float(np.quantile(table, _LIT_TABLE))
     return 2.0 * bright - middle
+
+
+def _clear_of(region: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the coarse pixels clear of ``region`` (uint8, nonzero in it) by two steps of
+    :data:`_SMALL`, where its soft rim and the blur of its edge no longer reach."""
+    return cv2.dilate(region, _SMALL, iterations=2) == 0
+
+
+def _table_round(region: np.ndarray, clear_of: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the band round ``region`` (uint8, nonzero in it; four steps of :data:`_CLOSING`) that is
+    clear of ``clear_of`` (uint8, :func:`_clear_of`): the table beside an object or a piece, measured to
+    compare with it."""
+    return _clear_of(clear_of) & (cv2.dilate(region, _CLOSING, iterations=4) > 0)
 
 
 #: The brightest of the lit table round an object: this quantile of its brightness.
@@ -2988,7 +2999,7 @@ def _cut_around_aim(view: _View, centre: np.ndarray, hull: np.ndarray | None = N
         mask[hull > 0] = cv2.GC_PR_FGD
         if object_colours is not None:
             mask[(hull > 0) & ~object_colours] = cv2.GC_PR_BGD
-        mask[cv2.dilate(hull, _SMALL, iterations=2) == 0] = cv2.GC_BGD
+        mask[_clear_of(hull)] = cv2.GC_BGD
     cv2.circle(mask, (cx, cy), max(2, cw // 40), cv2.GC_FGD, thickness=-1)
     return _run_grabcut(view, mask, (0, 0, cw, ch))
 
