@@ -308,12 +308,22 @@ def _views_to_pay(views: int) -> int:
     return min(_VIEWS_TO_PAY, views)
 
 
-def explains_more(ious, than) -> bool:
-    """Whether a model whose silhouette IoUs are ``ious`` explains the silhouettes more than one with
-    ``than`` as more parts must to pay for themselves: by ``PART_GAIN`` in two views (in every view, with
-    fewer), and in no view less by as much (that moves one view's error to another)."""
-    gains = np.asarray(ious, dtype=np.float64) - np.asarray(than, dtype=np.float64)
-    return bool(_views_paid(gains) >= _views_to_pay(len(gains)) and float(np.min(gains)) > -PART_GAIN)
+def explains_more(gains) -> bool:
+    """Whether a model explains the silhouettes more than another as more parts must to pay for
+    themselves, ``gains`` (V,) its IoU less the other's per view: :func:`_paid` and :func:`_loses_nowhere`."""
+    return _paid(gains) and _loses_nowhere(gains)
+
+
+def _paid(gains) -> bool:
+    """Whether the gains (V,) reach ``PART_GAIN`` in two views (in every view, with fewer)."""
+    return bool(_views_paid(gains) >= _views_to_pay(len(gains)))
+
+
+def _loses_nowhere(gains) -> bool:
+    """Whether in no view the gains (V,) are a loss of ``PART_GAIN``: what a model explains the more in some
+    views at as much loss in another moves one view's error (a shadow taken in, a face left out) to another,
+    and which view is wrong no part can say."""
+    return bool(float(np.min(gains)) > -PART_GAIN)
 
 
 def _views_paid(gains) -> np.ndarray:
@@ -325,7 +335,7 @@ def _could_pay(shares) -> bool:
     """Whether a new part could pay, or a union carve away what one view shows empty: either can
     explain a view's unexplained share at most."""
     shares = np.asarray(shares)
-    return bool(_views_paid(shares) >= _views_to_pay(len(shares)) or float(np.max(shares)) >= _CARVED_GAIN)
+    return _paid(shares) or float(np.max(shares)) >= _CARVED_GAIN
 
 
 def _pays(gains: np.ndarray) -> np.ndarray:
@@ -536,17 +546,15 @@ def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fi
     # two views. Less volume is not enough: a thin part lies in the views' blind spot. Nor is covering
     # less beyond the silhouette's convex hull (:attr:`_Rasters.enclosed`): slabs round a column that
     # leave out the face one view's silhouette left out explain a segmentation's error, not a gap.
-    pays = gained >= _views_to_pay(len(candidate_ious))
+    pays = _paid(gains)
     if not pays and float(np.max(gains)) >= _CARVED_GAIN and _volume(candidate) <= _volume(current):
         carved = rasters.carved_ious(current, candidate) - np.asarray(ious)
         pays = float(np.max(carved)) >= _CARVED_GAIN
     if pays and len(candidate) <= len(current):
         pays = len(candidate) > 1 and fitter.descent(candidate).cost < fitter.descent(current).cost
-    # What more parts explain the more in some views they must not explain as much the less in another,
-    # on either reading of the silhouettes (``gains``, the less of the two): that moves an error from one
-    # view to another (a view's wrong silhouette, a shadow taken in or a face left out, followed at the
-    # others' cost), and which view is wrong no part can say.
-    if pays and (len(candidate) <= len(current) or float(np.min(gains)) > -PART_GAIN):
+    # More parts must lose nowhere (:func:`_loses_nowhere`), on either reading of the silhouettes
+    # (``gains``, the less of the two): as :func:`explains_more`, with carving in place of two views paid.
+    if pays and (len(candidate) <= len(current) or _loses_nowhere(gains)):
         return "kept"
     if may_trial and len(candidate) > len(base) and gained >= 1:
         return "trial"  # it explains more in one view at least: not just a part cut in two

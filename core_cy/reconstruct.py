@@ -400,7 +400,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         if found:
             at_rest = refitted_where_contradicted(at_rest, resting=True) or at_rest
         resting_ious, _ = union_ious((at_rest,), cameras, silhouettes, boxes)
-        if not explains_more(ious, resting_ious):
+        if not explains_more(np.subtract(ious, resting_ious)):
             superquadric, parts, ious = at_rest, (at_rest,), resting_ious
         lap("fit")
     residual = radial_residual(superquadric, points)
