@@ -49,10 +49,11 @@ with more parts and losing less than that in every view (what one view pays for 
 cost moves an error between views), or with no more and a lower edge cost (a better minimum); a union whose
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
-parts. Last, each part standing a little tilted is tried resting on a face
-(DESIGN.md §1.12), kept where that fits better, and a part that floats (what
-holds it up hidden behind it in every view) is taken down to the table where
-that explains the silhouettes as well.
+parts. Last, a part that floats (what holds it up hidden behind it in every
+view) is taken down to the table where that explains the silhouettes as well;
+whether the model rests on the table, its parts on a face or a side, is decided
+after, for one part and many alike (:func:`explains_more`, in
+:func:`core_cy.reconstruct.reconstruct`).
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ from scipy.spatial import cKDTree
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter
+from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "explains_more", "fit_parts", "union_ious"]
@@ -96,8 +97,8 @@ _SLABS, _WIDTH_DIRECTIONS, _WAIST = 12, 8, 0.5
 _GROUPS = 2  # the largest groups each make a proposal
 _START_SHAPE = np.array([0.5, 0.5])
 _FLOOR = 0.05  # a start's semi-axis is at least this share of its parent's
-# A part tilted more than this (degrees) from resting on a face is also tried resting on it.
-_MIN_TILT, _MAX_TILT = 1.0, 90.0
+# A part tilted less than this (degrees) from resting on a face stands on it: it may be taken down to the table.
+_MIN_TILT = 1.0
 # A part taken down to the table is kept where the silhouettes' cost grows by no more than this factor
 # (the noise of a few steps).
 _GROUNDED_COST = 1.1
@@ -468,7 +469,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         else:
             break
     if len(current) > 1 and plane is not None:
-        current, ious = _rested(current, fitter, plane, ious, rasters)
+        current, ious = _taken_down(current, fitter, plane, ious, rasters)
     if current != (single,) and any(_sheet(part, rasters.cameras) for part in current):
         current, ious = _bodies(current, single, fitter, rasters, plane)
     if len(current) > 1 and plane is not None and rasters.any_unsure:
@@ -561,20 +562,13 @@ def _verdict(candidate, candidate_ious, current, ious, base, may_trial: bool, fi
     return None
 
 
-def _rested(parts, fitter: _Fitter, plane: np.ndarray, ious, rasters: _Rasters):
-    """The union with each part that stands tilted tried upright (it rests on a face), kept where
-    that fits the silhouettes better; and each upright part that floats (what holds it up hidden
-    behind it in every view) taken down to the table (through the parts it stands on, whose volume
-    it then shares), kept where that explains them about as well."""
+def _taken_down(parts, fitter: _Fitter, plane: np.ndarray, ious, rasters: _Rasters):
+    """The union with each part that floats (what holds it up hidden behind it in every view), set
+    resting on a face, taken down to the table (through the parts it stands on, whose volume it then
+    shares), kept where that explains the silhouettes about as well."""
     best = fitter.descent(parts)
     for k, part in enumerate(parts):
-        upright, tilt = resting_on(part, plane[:3])
-        if _MIN_TILT < tilt:
-            other = fitter.descent(parts[:k] + (upright,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
-            if other.cost < best.cost:
-                other.run(_ITERATIONS)
-                best, parts = other, other.problem.parts(other.x)
-        grounded = _grounded(upright, plane)
+        grounded = _grounded(resting_on(part, plane[:3])[0], plane)
         if grounded is not None:
             other = fitter.descent(parts[:k] + (grounded,) + parts[k + 1:]).run(_GROUNDED_STEPS)
             if other.cost <= _GROUNDED_COST * best.cost:

@@ -386,22 +386,26 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             superquadric, parts = refined, (refined,)
             ious, _ = union_ious(parts, cameras, silhouettes, boxes)
             lap("fit")
-    if options.silhouette_fit and plane is not None and len(parts) == 1:
+    if options.silhouette_fit and plane is not None:
         # An object on the support plane rests on it in equilibrium, and one superquadric, its mass about its
         # centre, rests only on a face or a side, an axis along the plane's normal: tilted, a box balanced on
-        # an edge, it would topple. So the model is also fitted held at rest (turning only about the normal),
-        # and a tilt is kept only where it pays as a part must (DESIGN.md §1.11): two more parameters that
-        # explain little more may only follow one view's wrong silhouette (a shadow taken in, a face left out).
+        # an edge, it would topple. So the model, one part or a union, is also fitted held at rest (each part
+        # turning only about the normal), and a tilt is kept only where it pays as a part must (DESIGN.md
+        # §1.11): two more parameters to a part that explain little more may only follow one view's wrong
+        # silhouette (a shadow taken in, a face left out). This is the one place a model is set at rest.
         # Which of auto's samples the views contradict is judged by the resting model's own outline, not by
         # the tilted one's: each model is held to the samples that it, not another, leaves far off.
-        resting = fit_to_silhouettes(parts[0], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True)
+        resting = fit_to_silhouettes([parts], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True)
         evaluations["fit"] += resting.evaluations
-        at_rest = resting.superquadric
-        if found:
-            at_rest = refitted_where_contradicted(at_rest, resting=True) or at_rest
-        resting_ious, _ = union_ious((at_rest,), cameras, silhouettes, boxes)
+        at_rest = resting.parts
+        if found and len(at_rest) == 1:
+            refined = refitted_where_contradicted(at_rest[0], resting=True)
+            at_rest = at_rest if refined is None else (refined,)
+        resting_ious, _ = union_ious(at_rest, cameras, silhouettes, boxes)
         if not explains_more(np.subtract(ious, resting_ious)):
-            superquadric, parts, ious = at_rest, (at_rest,), resting_ious
+            parts, ious = at_rest, resting_ious
+            if len(parts) == 1:
+                superquadric = parts[0]
         lap("fit")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
