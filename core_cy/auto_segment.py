@@ -1492,11 +1492,14 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             looked[i] = _faces_hiding_the_grain(views[i], looked[i], hull, seen_alike)
         if len(views) == 3 and views[i].background is None:
             others = [view for view in views if view is not views[i]]
-            plane_grain = None if plane is None else functools.partial(
+            # The grain mapped once, for the faces in shade and the lit faces both.
+            plane_grain = None if plane is None else functools.cache(functools.partial(
                 _plane_grain_sums, views[i], others, plane, [masks[view.index] for view in others],
-                _coarse_aim(views[i], aim))
+                _coarse_aim(views[i], aim)))
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, plane_grain=plane_grain)
             looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
+            if plane_grain is not None:
+                looked[i] = _lit_faces_hiding_the_grain(views[i], looked[i], score, hull, seen_alike, plane_grain)
         elif plane is not None and views[i].shadow_look is not None:
             # The empty workspace does not show a face of the table's colour and light either (a white box's
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
@@ -1790,36 +1793,9 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         them apart pixel by pixel is the table's grain (``grain``: the other views' mapped through the plane,
         or the empty workspace's; the table round a stretch is taken out of ``shade``): the shadow keeps
         it, the face hides it. So each stretch beyond ``grown`` with a shadow's look (``looks``, bool) is
-        split where the grain is lost (:func:`_grain_lost_pixels`: clear of its uncertainty in each pixel's
-        own window, so that a few noisy windows chosen for their low slope do not pass the test told over
-        the piece), and a part that touches the silhouette and is of a face's size is weighed as a piece of
-        the cut is (``hides``). The grain compared with there must be the table's, as strong as round it
-        within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint grain (white laminate) leaves
-        none above JPEG's floor, and the object's own print seen at a table point is stronger than any
-        grain of the table."""
-        looks = cv2.morphologyEx(looks.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
-        near = cv2.dilate(grown, _SMALL) > 0
-        least = _BAY * cv2.countNonZero(mask)
-        count, labels = cv2.connectedComponents(looks.astype(np.uint8), connectivity=8)
-        for label in range(1, count):
-            stretch = labels == label
-            if not (stretch & near).any() or stretch.sum() <= least:
-                continue
-            table = _table_grain_round(view, stretch, known, grain(), shade)
-            if table is None:
-                continue
-            slope, power = table
-            lost = _grain_lost_pixels(grain(), stretch, slope, _fine_per_coarse(view))
-            parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                                   connectivity=8)
-            for part in range(1, parts):
-                piece = split == part
-                if not (piece & near).any() or piece.sum() <= least:
-                    continue
-                seen_there = float(np.nanmean(grain()[piece][:, 1]))
-                if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and hides(piece):
-                    grown[piece] = 255
-        return grown
+        split where the grain is lost (:func:`_split_by_lost_grain`), and a part is weighed as a piece of
+        the cut is (``hides``)."""
+        return _split_by_lost_grain(view, grown, mask, looks, grain, shade, known, hides)
 
     for label in range(1, count):
         piece = labels == label
@@ -1873,6 +1849,81 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     if count <= 1 and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
+
+
+def _split_by_lost_grain(view: _View, grown: np.ndarray, mask: np.ndarray, stretches: np.ndarray,
+                         grain: Callable[[], np.ndarray], shade: np.ndarray | None, known: np.ndarray,
+                         accepts: Callable[[np.ndarray], bool]) -> np.ndarray:
+    """``grown`` with the parts of ``stretches`` (bool, beyond it) that hide the table's grain and that
+    ``accepts`` takes for faces.
+
+    Each stretch is split where the grain is lost (:func:`_grain_lost_pixels`: clear of its uncertainty in
+    each pixel's own window, so that a few noisy windows chosen for their low slope do not pass the test
+    told over the piece), against the grain the table round it keeps beyond ``known`` (0/255) and out of
+    ``shade`` (:func:`_table_grain_round`; ``grain``: the other views' mapped through the plane, or the
+    empty workspace's, called only where a stretch is weighed); a part that touches ``grown`` and is of a
+    face's size (:data:`_BAY` of ``mask``) is weighed by ``accepts``. The grain compared with there must be
+    the table's, as strong as round it within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint
+    grain (white laminate) leaves none above JPEG's floor, and the object's own print seen at a table point
+    is stronger than any grain of the table."""
+    stretches = cv2.morphologyEx(stretches.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+    near = cv2.dilate(grown, _SMALL) > 0
+    least = _BAY * cv2.countNonZero(mask)
+    count, labels = cv2.connectedComponents(stretches.astype(np.uint8), connectivity=8)
+    for label in range(1, count):
+        stretch = labels == label
+        if not (stretch & near).any() or stretch.sum() <= least:
+            continue
+        table = _table_grain_round(view, stretch, known, grain(), shade)
+        if table is None:
+            continue
+        slope, power = table
+        lost = _grain_lost_pixels(grain(), stretch, slope, _fine_per_coarse(view))
+        parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                               connectivity=8)
+        for part in range(1, parts):
+            piece = split == part
+            if not (piece & near).any() or piece.sum() <= least:
+                continue
+            seen_there = float(np.nanmean(grain()[piece][:, 1]))
+            if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and accepts(piece):
+                grown[piece] = 255
+    return grown
+
+
+def _lit_faces_hiding_the_grain(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
+                                seen_alike: Callable[[np.ndarray], np.ndarray],
+                                grain: Callable[[], np.ndarray]) -> np.ndarray:
+    """``mask`` with the lit faces of the table's colour within the other views' ``hull`` that neither the
+    cut nor the light found, told by the grain the other views see at their table points (``grain``,
+    :func:`_plane_grain_sums`, called only where a stretch is weighed).
+
+    A lit face of an oak box on oak is of the table's colour and light, and no brighter than the lit table
+    round it where the lamp is low: the colour models give it to the table, and
+    :func:`_faces_standing_out` finds only what stands out over a face's size. But the face hides the grain
+    that the table behind it shows to the other views. So each lit stretch beyond the silhouette (no
+    shadow's look) is split where the grain is lost (:func:`_split_by_lost_grain`), after the faces
+    standing out are in: a part of a face found there would leave the rest of the face too small to stand
+    out. A part is a face where it hides the grain over it whole (:func:`_grain_hidden`) and the other views
+    see it alike (:func:`_seen_alike`) over most of it (:data:`_MOSTLY`): a stretch of table beside a tall
+    object may lose its grain to the object's print that the others see at its table points, but they do
+    not see that stretch alike. The parallax says nothing here: the lit face matches the table point
+    behind it."""
+    known = cv2.bitwise_or(hull, mask)
+    x0, y0, x1, y1 = _cut_box(view, mask)
+    crop = (slice(y0, y1), slice(x0, x1))
+    beyond = (hull > 0) & (mask == 0)
+    lit = np.zeros(mask.shape, bool)
+    lit[crop] = ~_shadow_like(view.coarse[crop], (score[crop] < 1.0) | beyond[crop]) & beyond[crop]
+
+    def a_lit_face(piece: np.ndarray) -> bool:
+        if not _grain_hidden(view, piece, known, grain()):
+            return False
+        alike = seen_alike(cv2.dilate(np.where(piece, 255, 0).astype(np.uint8), _SMALL))
+        return bool(np.count_nonzero(alike[piece]) > _MOSTLY * np.count_nonzero(piece))
+
+    grown = _split_by_lost_grain(view, mask.copy(), mask, lit, grain, None, known, a_lit_face)
+    return mask if np.array_equal(grown, mask) else _filled_region(grown, view)
 
 
 def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
