@@ -1718,7 +1718,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     others see, however small: its standard error says how sure) and is no darker than the open shadow, is
     a face in shade, whether the colour's parallax says table or nothing. Where the cut gave such a face to
     the shadow beside it, the grain (the other views' or the empty workspace's) splits the two
-    (``faces_the_cut_gave_the_shadow``)."""
+    (:func:`_split_by_lost_grain`)."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -1784,19 +1784,6 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         return (view.grain_sums is not None and _grain_hidden(view, piece, known)
                 and not darker_than_the_open_shadow(piece))
 
-    def faces_the_cut_gave_the_shadow(grown: np.ndarray, looks: np.ndarray, grain: Callable[[], np.ndarray],
-                                      shade: np.ndarray | None, hides: Callable[[np.ndarray], bool]) -> np.ndarray:
-        """``grown`` with the faces in shade within the hull that the cut gave to the shadow beside them.
-
-        The colour models cannot tell a face of the table's colour turned from the lamp from the box's
-        shadow beside it, so the cut may give both to the table, or find one piece of the two. What tells
-        them apart pixel by pixel is the table's grain (``grain``: the other views' mapped through the plane,
-        or the empty workspace's; the table round a stretch is taken out of ``shade``): the shadow keeps
-        it, the face hides it. So each stretch beyond ``grown`` with a shadow's look (``looks``, bool) is
-        split where the grain is lost (:func:`_split_by_lost_grain`), and a part is weighed as a piece of
-        the cut is (``hides``)."""
-        return _split_by_lost_grain(view, grown, mask, looks, grain, shade, known, hides)
-
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
@@ -1837,15 +1824,20 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 alike = seen_alike()
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
+    # The colour models cannot tell a face of the table's colour turned from the lamp from the box's shadow
+    # beside it, so the cut may give both to the table, or find one piece of the two. The table's grain (the
+    # other views' mapped through the plane, or the empty workspace's) tells them apart pixel by pixel: the
+    # shadow keeps it, the face hides it. So each stretch beyond the silhouette with a shadow's look is split
+    # where the grain is lost, and a part weighed as a piece of the cut is.
     beyond = (hull > 0) & (grown == 0)
     if plane_grain is not None:
         looks = np.zeros(mask.shape, bool)
         looks[crop] = _shadow_like(view.coarse[crop], low | beyond[crop]) & beyond[crop]
-        grown = faces_the_cut_gave_the_shadow(grown, looks, mapped_grain, None, hides_the_mapped_grain)
+        grown = _split_by_lost_grain(view, grown, mask, looks, mapped_grain, None, known, hides_the_mapped_grain)
     elif shadow is not None and view.grain_sums is not None:
         empty_workspace_grain = view.grain_sums
-        grown = faces_the_cut_gave_the_shadow(grown, beyond & shadow, lambda: empty_workspace_grain,
-                                              view.shadow_look, hides_the_empty_workspace_grain)
+        grown = _split_by_lost_grain(view, grown, mask, beyond & shadow, lambda: empty_workspace_grain,
+                                     view.shadow_look, known, hides_the_empty_workspace_grain)
     if count <= 1 and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
@@ -1962,9 +1954,11 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     beyond = (hull > 0) & (mask == 0) & seen
     above = beyond & (score > level)
     ceiling = _lit_table_ceiling(view, cv2.bitwise_or(hull, mask))
-    if ceiling is not None:
+    # Beyond the silhouette, brighter than the lit table round it (none where no table is round it).
+    brighter = (mask == 0) & (view.coarse.sum(axis=2) > ceiling) if ceiling is not None else None
+    if brighter is not None:
         # A top nearer the lamp than the table stands out by its light, whatever its parallax says.
-        above |= (hull > 0) & (mask == 0) & (view.coarse.sum(axis=2) > ceiling)
+        above |= (hull > 0) & brighter
     stands: np.ndarray = np.where(above, 255, 0).astype(np.uint8)
     stands = cv2.morphologyEx(cv2.morphologyEx(stands, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _CLOSING)
     count, labels = cv2.connectedComponents(stands, connectivity=8)
@@ -1993,8 +1987,8 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
         grown[piece | (face & alike)] = 255
         if nearer_the_lamp:
             # Such a top reaches as far as its light stands out over the lit table, beyond the hull too.
-            assert ceiling is not None
-            lit = np.where(piece | ((mask == 0) & (view.coarse.sum(axis=2) > ceiling)), 255, 0).astype(np.uint8)
+            assert brighter is not None
+            lit = np.where(piece | brighter, 255, 0).astype(np.uint8)
             _, lit_labels = cv2.connectedComponents(cv2.morphologyEx(lit, cv2.MORPH_CLOSE, _SMALL), connectivity=8)
             grown[lit_labels == int(np.argmax(np.bincount(lit_labels[piece])))] = 255
     return _filled_region(grown, view)
