@@ -3138,6 +3138,10 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         shades[view.index] = shade & ~tables[view.index]
         # A face of the table's colour changes the grain, not the colour; a shadow keeps it.
         textures[view.index] = np.nan_to_num(texture / max(_noise_level(texture), _GRAIN_NOISE_FLOOR))
+        # Lost whole, the grain says a face for sure, though on a table whose grain the noise blurs that reads
+        # under _SURE of its noise: the graph cut's colour models would give a face of the table's colour
+        # (a box of its table's wood) to the table, and are not to be asked there.
+        textures[view.index][np.nan_to_num(texture) >= _GRAIN_LOST_WHOLE] = _GRAIN_LOST_WHOLE_SCORE
         score = np.maximum(change / max(_change_noise(view, change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         # A face as bright as the table changed its tint only (the other views judge whether the table
         # itself took that tint: the glow of a coloured object beside it).
@@ -3162,6 +3166,10 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     return _background_cut(views, aim, scores, standing)
 
 
+#: The grain lost in this share or more is lost whole (JPEG and the sensor's noise take less on the table), and
+#: counts as this evidence: the object's for sure (:data:`_SURE`).
+_GRAIN_LOST_WHOLE = 0.9
+_GRAIN_LOST_WHOLE_SCORE = 2 * _SURE
 #: How many times the silhouettes cut from the evidence hide the table behind them for the next evidence.
 _OCCLUSION_ROUNDS = 2
 #: The graph cut's iterations in those rounds: their silhouettes, shrunk by a pixel, only say where the

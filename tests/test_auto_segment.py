@@ -796,3 +796,13 @@ def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_is_split_off_by_the_emp
     keeps and the face hides, tells them apart pixel by pixel."""
     ious = _printed_scene_ious(tmp_path, 12, "oak-table-colour-box", backgrounds=True)
     assert ious[2] > 0.85 and min(ious) > 0.8, ious
+
+
+def test_a_lit_face_of_the_table_s_colour_that_hides_the_grain_whole_is_kept_with_the_empty_workspace(tmp_path):
+    """A box of its table's colour with its empty workspace: in one view its lit face is the oak's colour and
+    light, and changes against the empty workspace only by the grain it hides. It hides all of it, but on a
+    table whose grain the noise blurs that reads under a sure change, so the graph cut's colour models, which
+    cannot tell the face from the table, gave it to the table (0.57 before). A grain lost whole is no shadow
+    and no noise: the face is seeded as the object for sure."""
+    ious = _printed_scene_ious(tmp_path, 9, "oak-table-colour-box", backgrounds=True)
+    assert ious[1] > 0.85 and min(ious) > 0.85, ious
