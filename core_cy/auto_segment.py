@@ -1230,6 +1230,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
                 cut = _cut_within(view, cv2.bitwise_or(masks[culprit], hull), score)
                 if view.background is None:
                     cut = _shadows_left_out(view, masks[culprit], cut, score, hull)
+                else:
+                    cut = _shadows_keeping_the_grain_left_out(view, masks[culprit], cut, hull)
                 masks[culprit] = cut
             continue
         # A view seeded by the aim alone is cut again within the others' hull. A view whose evidence seeded
@@ -1331,6 +1333,38 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
         if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
             kept[piece] = 0
     return kept
+
+
+def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: np.ndarray,
+                                        hull: np.ndarray) -> np.ndarray:
+    """``found`` (0/255), a view's cut again within the others' ``hull`` with its empty workspace, without the
+    pieces it added to ``before`` that are the shadow by the object's foot: a piece with a shadow's look
+    against the empty workspace over most of it (:data:`_MOSTLY`) that keeps its grain as the table round
+    it does (:func:`_grain_kept`). The others' hull holds a band of table round the object's foot, with the
+    shadow there, which the colour models the view's seeds trained may give to the object (a box of its
+    table's colour, whose face in shade is of its shadow's colour); a face in shade hides the grain."""
+    if view.shadow_look is None or view.grain_sums is None:
+        return found
+    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(added, connectivity=8)
+    known = cv2.bitwise_or(hull, before)
+    kept = found.copy()
+    for label in range(1, count):
+        piece = labels == label
+        if np.count_nonzero(view.shadow_look[piece]) <= _MOSTLY * np.count_nonzero(piece):
+            continue
+        table = _table_grain_round(view, piece, known, view.grain_sums, view.shadow_look)
+        if table is None:
+            continue
+        # The cut may join a face in shade to the shadow beside it: the pixels whose own window has lost the
+        # grain are the face's, and what is left, told whole, the shadow's if it keeps the grain.
+        rest = piece & ~_grain_lost_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
+        parts, part_labels = cv2.connectedComponents(
+            cv2.morphologyEx(rest.astype(np.uint8), cv2.MORPH_OPEN, _SMALL), connectivity=8)
+        for part in range(1, parts):
+            if _grain_kept(view, part_labels == part, known):
+                kept[part_labels == part] = 0
+    return found if np.array_equal(kept, found) else _filled_region(kept, view)
 
 
 def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray],
@@ -1565,6 +1599,19 @@ def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.nd
         return False
     found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), _fine_per_coarse(view))
     return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
+
+
+def _grain_kept(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
+    """Whether ``piece`` (bool) keeps the grain the empty workspace shows, as the table round it does: the
+    converse of :func:`_grain_hidden`, its slope over half the table's by 3 standard errors. A shadow keeps
+    the grain; a face in shade hides it, and a piece that is both holds less than half of it."""
+    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+    table = _table_grain_round(view, piece, known, view.grain_sums, view.shadow_look)
+    if table is None:
+        return False
+    found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0),
+                          _fine_per_coarse(view))
+    return found is not None and found[0] - 3.0 * found[1] > 0.5 * table[0]
 
 
 def _table_grain_round(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray,
@@ -1807,6 +1854,10 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 continue
             if hides_the_empty_workspace_grain(piece):
                 grown[piece] = 255
+                continue
+            # One that keeps the empty workspace's grain as the table round it does is the shadow, whatever
+            # the other views see above it (the object beside it may look as dark from them).
+            if view.grain_sums is not None and _grain_kept(view, piece, known):
                 continue
         elif 2 * len(evidence) > area:
             # A face in shade may match the colour of the shadow behind it, but not carry the table's grain
