@@ -1353,18 +1353,34 @@ def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: 
         piece = labels == label
         if np.count_nonzero(view.shadow_look[piece]) <= _MOSTLY * np.count_nonzero(piece):
             continue
-        table = _table_grain_round(view, piece, known, view.grain_sums, view.shadow_look)
-        if table is None:
-            continue
-        # The cut may join a face in shade to the shadow beside it: the pixels whose own window has lost the
-        # grain are the face's, and what is left, told whole, the shadow's if it keeps the grain.
-        rest = piece & ~_grain_lost_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
-        parts, part_labels = cv2.connectedComponents(
-            cv2.morphologyEx(rest.astype(np.uint8), cv2.MORPH_OPEN, _SMALL), connectivity=8)
-        for part in range(1, parts):
-            if _grain_kept(view, part_labels == part, known):
-                kept[part_labels == part] = 0
+        # The cut may join a face in shade to the shadow beside it.
+        kept[_parts_keeping_the_grain(view, piece, known, in_shade=True)] = 0
     return found if np.array_equal(kept, found) else _filled_region(kept, view)
+
+
+def _parts_keeping_the_grain(view: _View, piece: np.ndarray, known: np.ndarray, in_shade: bool) -> np.ndarray:
+    """(h, w) bool: the parts of ``piece`` (bool) that keep the empty workspace's grain, where a face that
+    hides it is joined to the table beside it, each part told whole (:func:`_grain_kept`). The parts are
+    split off by each pixel's own window: ``in_shade`` (the table beside the face in the object's shadow),
+    a dimmed grain is too faint for a window to show it kept, so the face is the pixels whose window has
+    lost it (:func:`_grain_lost_pixels`) and the parts are what is left; in the light, the parts are the
+    pixels whose window keeps it (:func:`_grain_kept_pixels`). None where the table round the piece keeps
+    no grain clear of its uncertainty."""
+    assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
+    found = np.zeros(piece.shape, bool)
+    table = _table_grain_round(view, piece, known, view.grain_sums, view.shadow_look)
+    if table is None:
+        return found
+    if in_shade:
+        split = piece & ~_grain_lost_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
+    else:
+        split = _grain_kept_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
+    parts, labels = cv2.connectedComponents(cv2.morphologyEx(split.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                            connectivity=8)
+    for part in range(1, parts):
+        if _grain_kept(view, labels == part, known):
+            found |= labels == part
+    return found
 
 
 def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray],
@@ -1575,8 +1591,10 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
         piece = labels == label
         if not (piece & touching).any() or piece.sum() <= _BAY * area or view.shadow_look[piece].mean() >= 0.5:
             continue
-        if _grain_hidden(view, piece, cv2.bitwise_or(hull, mask)):
-            grown[piece] = 255
+        known = cv2.bitwise_or(hull, mask)
+        if _grain_hidden(view, piece, known):
+            # Told whole, a face joined to the lit table beside it hides the grain as well.
+            grown[piece & ~_parts_keeping_the_grain(view, piece, known, in_shade=False)] = 255
     return _filled_region(grown, view)
 
 
@@ -1632,6 +1650,23 @@ def _grain_lost_pixels(sums: np.ndarray, region: np.ndarray, table_slope: float,
     """(h, w) bool: the pixels of ``region`` whose grain, regressed as :func:`_pooled_grain` does over the
     window of :data:`_CLOSING`'s size round each, has a slope under half the table's (``table_slope``) by 3
     standard errors, where over half of that window's grain is known."""
+    slope, error, enough = _window_grain(sums, fine_per_coarse)
+    with np.errstate(invalid="ignore"):
+        return region & enough & (slope + 3.0 * error < 0.5 * table_slope)
+
+
+def _grain_kept_pixels(sums: np.ndarray, region: np.ndarray, table_slope: float, fine_per_coarse: float) -> np.ndarray:
+    """(h, w) bool: the converse of :func:`_grain_lost_pixels`, the pixels of ``region`` whose window's slope
+    is over half the table's by 3 standard errors."""
+    slope, error, enough = _window_grain(sums, fine_per_coarse)
+    with np.errstate(invalid="ignore"):
+        return region & enough & (slope - 3.0 * error > 0.5 * table_slope)
+
+
+def _window_grain(sums: np.ndarray, fine_per_coarse: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per coarse pixel, the slope of the grain regressed as :func:`_pooled_grain` does over the window of
+    :data:`_CLOSING`'s size round it, its standard error, and whether over half of that window's grain is
+    known (and any of it)."""
     known = np.isfinite(sums[..., 0])
     size = _CLOSING.shape[::-1]
     shared, power, own = (cv2.boxFilter(np.where(known, sums[..., k], 0.0).astype(np.float64), -1, size)
@@ -1640,8 +1675,7 @@ def _grain_lost_pixels(sums: np.ndarray, region: np.ndarray, table_slope: float,
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = shared / power
         error = np.sqrt(np.maximum(own - slope * shared, 0.0) / (counted * fine_per_coarse * power))
-        lost = (2.0 * counted > _CLOSING.size) & (power > 0.0) & (slope + 3.0 * error < 0.5 * table_slope)
-    return region & lost
+    return slope, error, (2.0 * counted > _CLOSING.size) & (power > 0.0)
 
 
 def _pooled_grain(sums: np.ndarray, region: np.ndarray, fine_per_coarse: float) -> tuple[float, float] | None:
