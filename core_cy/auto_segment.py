@@ -1768,7 +1768,12 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     shadow): what the view's evidence says there decides. The plane's parallax against a white top on a
     white table is faint, yet above the table's noise over most of the face (the tint and the light of a
     face above the plane are not quite those of the table point behind it); where another view confirms
-    the table point behind a piece within the table's own noise over most of it, the piece is table.
+    the table point behind a piece within the table's own noise over most of it, the piece is table. A
+    piece stands out where its median is over what the table round the hull stands out by (beside the
+    object's foot the parallax of the table is not all noise: a stretch of lit oak beside a mustard bottle
+    stood out by 1.2, the oak round the hull by 1.8); where the piece as a whole does not, the part of it
+    that does, of a face's size, is a face (a dark can's side in shade that the cut gave one piece with
+    its shadow).
 
     Without an empty workspace, only in a scan of three views, where the hull is of two and cannot show a
     face missing. With one, in a scan of any number: the hull of three views or more forgives one view's
@@ -1777,7 +1782,9 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     the silhouette). Where the object hides the table points behind most of it from the other views (a
     tall box's white top, whose table points lie behind the box from the others), the view has no
     evidence there; such a piece is kept where the other views see it alike (``seen_alike``, called only
-    then: :func:`_seen_alike`) over most of it.
+    then: :func:`_seen_alike`) over most of it (:data:`_MOSTLY`; over half of it with an empty workspace).
+    Without one their likeness is all that speaks for it, and the table beside a lying can, which the can
+    hides from them, is seen alike over half of it where the can behind it has the table's colour.
 
     ``parallax``, the plane's parallax in units of its noise (:data:`_HIDDEN` where hidden) where ``score``
     is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a shadow's look
@@ -1828,6 +1835,14 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         return _darker_than_the_open_shadow(view, piece, known, open_shadow)
 
     @functools.cache
+    def table_level() -> float:
+        # What the table round the hull stands out by (its _TABLE_LEVEL quantile, 1 at least), as for the faces
+        # standing out (_faces_standing_out): beside the object's foot, in its shadow or over a coarse grain
+        # the parallax is not all noise, and a stretch of table there stands out over 1 as a face does.
+        round_it = _table_round(hull, hull) & seen
+        return max(1.0, float(np.quantile(parallax[round_it], _TABLE_LEVEL))) if round_it.any() else 1.0
+
+    @functools.cache
     def lit_table_ceiling() -> float | None:
         # The same for every piece: the table round the silhouette and the other views' hull.
         return _lit_table_ceiling(view, known)
@@ -1865,12 +1880,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         return (view.grain_sums is not None and _grain_hidden(view, piece, known)
                 and not darker_than_the_open_shadow(piece))
 
+    area_found = cv2.countNonZero(mask)
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
         evidence = parallax[piece & seen]
         # A piece apart from the silhouette is not a face of it.
-        if not (piece & touching).any() or area <= _BAY * cv2.countNonZero(mask):
+        if not (piece & touching).any() or area <= _BAY * area_found:
             continue
         if _lit_above_its_surroundings(view, piece, mask):
             grown[piece] = 255
@@ -1882,7 +1898,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             if np.count_nonzero(alike[piece]) * 2 > area:
                 grown[piece] = 255
                 continue
-        stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > 1.0
+        stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > table_level()
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             if not stands and 2 * len(evidence) > area:
                 continue
@@ -1898,16 +1914,21 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             # that the other views see there.
             if stands or hides_the_mapped_grain(piece):
                 grown[piece] = 255
+            else:
+                # The cut may give a face and the table beside it one piece (a dark can's side in shade and
+                # its shadow on a dark mat): the part that stands out over the table's level, of a face's
+                # size, is the face.
+                grown[_standing_parts(piece & seen & (parallax > table_level()), touching, _BAY * area_found)] = 255
             continue
         elif hides_the_mapped_grain(piece):
             grown[piece] = 255
             continue
         # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
-        # over most of it.
+        # over most of it (over half of it with an empty workspace).
         if seen_alike is not None:
             if alike is None:
                 alike = seen_alike()
-            if np.count_nonzero(alike[piece]) * 2 > area:
+            if np.count_nonzero(alike[piece]) > (0.5 if view.background is not None else _MOSTLY) * area:
                 grown[piece] = 255
     # The colour models cannot tell a face of the table's colour turned from the lamp from the box's shadow
     # beside it, so the cut may give both to the table, or find one piece of the two. The table's grain (the
@@ -1926,6 +1947,19 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     if count <= 1 and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
+
+
+def _standing_parts(standing: np.ndarray, touching: np.ndarray, least: float) -> np.ndarray:
+    """(h, w) bool: the parts of ``standing`` (bool; closed, then opened by :data:`_SMALL`) that touch
+    ``touching`` (bool) and are over ``least`` pixels."""
+    found = cv2.morphologyEx(standing.astype(np.uint8), cv2.MORPH_CLOSE, _SMALL)
+    count, labels = cv2.connectedComponents(cv2.morphologyEx(found, cv2.MORPH_OPEN, _SMALL), connectivity=8)
+    kept = np.zeros(standing.shape, bool)
+    for label in range(1, count):
+        part = labels == label
+        if (part & touching).any() and part.sum() > least:
+            kept |= part
+    return kept
 
 
 def _split_by_lost_grain(view: _View, grown: np.ndarray, mask: np.ndarray, stretches: np.ndarray,
