@@ -123,8 +123,12 @@ class _View:
         # (:func:`_texture_change`).
         self.grain_sums: np.ndarray | None = None
         self.shadow_look: np.ndarray | None = None  # and where it has a shadow's look (_shadow_of_table)
-        # The open shadow's darkenings, all views' (_open_shadow), worked out when first asked.
+        # The open shadow's darkenings, all views' (_open_shadow), worked out when first asked; without an
+        # empty workspace, the other views' (their shadow_seen), for a view that sees none of its own.
         self.open_shadow: Callable[[], np.ndarray] | None = None
+        # Without an empty workspace: the brightness over the table's of the shadow that the view's first cut
+        # saw in the open (_graph_cut), None if it saw none.
+        self.shadow_seen: np.ndarray | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -883,6 +887,16 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
         cuts = _background_cuts(views, parallax, aim)
     else:
         cuts = [_first_cut(view, views, parallax, aim, standing) for view in views]
+        if parallax is not None:
+            # A view that sees none of its shadow in the open (a lamp behind a lying can, whose shadow the can
+            # hides from every other view) cannot tell the shadow hidden behind the object from its side in
+            # shade; the shadow's depth is the light's, the same from any view, and the others see it: it is
+            # cut again knowing theirs.
+            seen = [view.shadow_seen for view in views if view.background is None and view.shadow_seen is not None]
+            for i, view in enumerate(views):
+                if view.background is None and view.shadow_seen is None and seen:
+                    view.open_shadow = functools.partial(np.concatenate, seen)
+                    cuts[i] = _first_cut(view, views, parallax, aim, standing)
         if parallax is not None:
             # Once more with each view's silhouette hiding the table points behind it too: where another
             # view sees the object in front of the table point, it neither confirms nor denies it. The
@@ -2860,6 +2874,10 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             hidden = score[crop] == _HIDDEN
             seen = _shadow_seen(image, low, shadow, hidden)
             if seen is not None:
+                view.shadow_seen = seen[1][seen[0]] / max(float(_median_colour(image, low).sum()), 1.0)
+            elif view.open_shadow is not None:
+                seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
+            if seen is not None:
                 shadow, brightness, darker, off_table = seen
                 mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
@@ -2920,6 +2938,24 @@ def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
     return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
+
+
+def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,
+                           darkenings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """As :func:`_shadow_seen`, for a view that sees no shadow in the open: the shadow is where the ``hidden``
+    pixels have the colour of the table (the table the other views confirm, ``low``), darkened to no more
+    than the other views see their open shadow darkened to (``darkenings``, its brightness over its table's,
+    the :data:`_SHADOW_BRIGHTEST` quantile), a few together; None where this view sees none so."""
+    if not np.any(low):
+        return None
+    table_colour = _median_colour(image, low)
+    brightness = image.sum(axis=2)
+    darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
+    off_table = _off_colours(image, table_colour, darker & (hidden | low))
+    ceiling = float(np.quantile(darkenings, _SHADOW_BRIGHTEST)) * float(table_colour.sum())
+    shadow = cv2.morphologyEx((hidden & darker & (off_table < 1.0) & (brightness <= ceiling)).astype(np.uint8),
+                              cv2.MORPH_OPEN, _SMALL) > 0
+    return (shadow, brightness, darker, off_table) if np.any(shadow) else None
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
