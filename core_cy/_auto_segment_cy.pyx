@@ -298,3 +298,47 @@ def any_within(const float[:, ::1] points not None, const float[:, ::1] samples 
                             break
                     if found[i]:
                         break
+
+
+def add_relit_grain(const float[:, ::1] own not None, const float[:, ::1] own_light not None,
+                    const float[:, ::1] theirs not None, const float[:, ::1] their_light not None,
+                    const unsigned char[:, ::1] inside not None, const Py_ssize_t[::1] rows not None,
+                    const Py_ssize_t[::1] columns not None, float[:, :, ::1] sums not None,
+                    float[:, ::1] seeing not None):
+    """Add to ``sums`` ((h, w, 3) float32) and ``seeing`` ((h, w)) one other view's share of
+    :func:`auto_segment._plane_grain_sums`, at the fine pixels whose coarse pixel (``inside[rows[r],
+    columns[c]]``) that view sees: the view's grain ``own`` brought back to the other's light (``own_light``
+    and ``their_light``, each blurred), times the other's grain ``theirs``, ``theirs`` squared, the former
+    squared; and 1. All float32, in NumPy's order:
+
+        lit = maximum((own_light + 1) / (their_light + 1), 0.05)
+        relit = own / lit
+        sums[sees] += stack([relit * theirs, theirs * theirs, relit * relit])[sees]; seeing[sees] += 1"""
+    cdef Py_ssize_t height = own.shape[0], width = own.shape[1], r, c
+    cdef float one = 1.0, least = 0.05, lit, relit, grain
+    if not (_same_shape(own_light, height, width) and _same_shape(theirs, height, width)
+            and _same_shape(their_light, height, width) and _same_shape(seeing, height, width)
+            and sums.shape[0] == height and sums.shape[1] == width and sums.shape[2] == 3
+            and rows.shape[0] == height and columns.shape[0] == width):
+        raise ValueError("every array must have own's shape, rows and columns its sides")
+    for r in range(height):
+        if rows[r] < 0 or rows[r] >= inside.shape[0]:
+            raise IndexError("a row out of inside")
+    for c in range(width):
+        if columns[c] < 0 or columns[c] >= inside.shape[1]:
+            raise IndexError("a column out of inside")
+    with nogil:
+        for r in range(height):
+            for c in range(width):
+                if not inside[rows[r], columns[c]]:
+                    continue
+                lit = (own_light[r, c] + one) / (their_light[r, c] + one)
+                # NumPy's maximum keeps its first argument when the two compare equal, or when it is NaN.
+                if not (lit >= least or lit != lit):
+                    lit = least
+                relit = own[r, c] / lit
+                grain = theirs[r, c]
+                sums[r, c, 0] += relit * grain
+                sums[r, c, 1] += grain * grain
+                sums[r, c, 2] += relit * relit
+                seeing[r, c] += one

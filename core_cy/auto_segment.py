@@ -39,8 +39,8 @@ import cv2
 import numpy as np
 from scipy.special import erfinv
 
-from ._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps, project_into_mask,
-                               windowed_correlation)
+from ._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread, plane_homography_maps,
+                               project_into_mask, windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -137,6 +137,8 @@ class _View:
         self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
         self._warped: dict[tuple[int, bytes], np.ndarray] = {}
+        # Each other view's fine grey image mapped through a plane onto a window of this one's (_fine_warped).
+        self.fine_warped: dict[tuple[int, bytes, int, int, int, int], np.ndarray] = {}
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
@@ -408,9 +410,7 @@ def _texture_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
                                     cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
         key = _pair(other, plane)
         if key not in view.correlations:
-            fine_maps = _fine_window_maps(view, other, maps, fine_window)
-            warped = _remapped(_fine_grey(other), fine_maps, cv2.INTER_LINEAR,
-                               borderMode=cv2.BORDER_REPLICATE)
+            warped = _fine_warped(view, other, plane, maps, fine_window)
             if own is None:
                 own = _window_statistics(grey, _flat_below(view))
             view.correlations[key] = _local_correlation(own, warped, _flat_below(other))
@@ -441,14 +441,10 @@ def _plane_grain_sums(view: _View, others: Sequence[_View], plane: np.ndarray, s
     seeing = np.zeros(grey.shape, np.float32)
     for other, hidden in zip(others, standing):
         maps, inside, _ = view.sees(other, plane, cv2.dilate(hidden, _SMALL, iterations=_OCCLUSION_MARGIN))
-        warped = _remapped(_fine_grey(other), _fine_window_maps(view, other, maps, fine_window), cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
-        theirs = _grain(warped)
-        lit = np.maximum((own_light + 1.0) / (cv2.GaussianBlur(warped, (0, 0), _GRAIN_WINDOW) + 1.0), 0.05)
-        relit = own / lit
-        sees = inside[window_rows][:, window_columns]
-        sums[sees] += np.stack([relit * theirs, theirs * theirs, relit * relit], axis=-1)[sees]
-        seeing[sees] += 1.0
+        warped = _fine_warped(view, other, plane, maps, fine_window)
+        # Where the other view sees the table point: the view's grain brought back to its light, times its grain.
+        add_relit_grain(own, own_light, _grain(warped), cv2.GaussianBlur(warped, (0, 0), _GRAIN_WINDOW),
+                        inside.view(np.uint8), window_rows, window_columns, sums, seeing)
     coarse_seeing = _in_window(view, window, seeing)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(coarse_seeing[..., None] > 0.0, _in_window(view, window, sums) / coarse_seeing[..., None],
@@ -740,6 +736,19 @@ def _fine_window_maps(view: _View, other: _View, maps: np.ndarray, fine_window: 
     fine_maps[..., 0] = (fine_maps[..., 0] + 0.5) * (ofw / other.coarse_size[0]) - 0.5
     fine_maps[..., 1] = (fine_maps[..., 1] + 0.5) * (ofh / other.coarse_size[1]) - 0.5
     return fine_maps
+
+
+def _fine_warped(view: _View, other: _View, plane: np.ndarray, maps: np.ndarray,
+                 fine_window: tuple[slice, slice]) -> np.ndarray:
+    """``other``'s fine grey image mapped through ``plane`` onto ``view``'s ``fine_window`` (``maps``, the coarse
+    mapping: :meth:`_View.mapping`): the texture's parallax and the grain's compare the same mapped image, so
+    it is made once per pair of views and window."""
+    rows, columns = fine_window
+    key = (*_pair(other, plane), rows.start, rows.stop, columns.start, columns.stop)
+    if key not in view.fine_warped:
+        view.fine_warped[key] = _remapped(_fine_grey(other), _fine_window_maps(view, other, maps, fine_window),
+                                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return view.fine_warped[key]
 
 
 _CHROMA_OFFSET = 12.0

@@ -8,8 +8,8 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (any_within, median, median_and_spread, plane_homography_maps,
-                                               project_into_mask, windowed_correlation)
+from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread,
+                                               plane_homography_maps, project_into_mask, windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -150,6 +150,35 @@ def test_windowed_correlation_of_a_window_with_itself_is_one():
                          square_mean, 0.03, 9.0, correlation, textured)
     assert abs(float(correlation[0, 0]) - 1.0) < 1e-6
     assert textured[0, 0] == 1
+
+
+def test_add_relit_grain_is_the_numpy_formula_where_the_other_view_sees():
+    rng = np.random.default_rng(2)
+    floored = False
+    for _ in range(20):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)))
+        coarse = (int(rng.integers(1, 12)), int(rng.integers(1, 12)))
+        own, theirs = (rng.normal(0, 8, size=shape).astype(np.float32) for _ in range(2))
+        # Lights from black to bright, so that the ratio of lights falls under its floor of 0.05 somewhere.
+        own_light = rng.uniform(0, 255, size=shape).astype(np.float32)
+        their_light = (own_light * rng.uniform(0, 40, size=shape)).astype(np.float32)
+        inside = rng.random(coarse) < 0.6
+        rows = np.sort(rng.integers(0, coarse[0], shape[0])).astype(np.intp)
+        columns = np.sort(rng.integers(0, coarse[1], shape[1])).astype(np.intp)
+        sums = rng.normal(0, 50, size=shape + (3,)).astype(np.float32)
+        seeing = rng.integers(0, 3, size=shape).astype(np.float32)
+        expected_sums, expected_seeing = sums.copy(), seeing.copy()
+        # The formula as _plane_grain_sums wrote it in NumPy.
+        lit = np.maximum((own_light + 1.0) / (their_light + 1.0), 0.05)
+        relit = own / lit
+        sees = inside[rows][:, columns]
+        expected_sums[sees] += np.stack([relit * theirs, theirs * theirs, relit * relit], axis=-1)[sees]
+        expected_seeing[sees] += 1.0
+        add_relit_grain(own, own_light, theirs, their_light, inside.view(np.uint8), rows, columns, sums, seeing)
+        floored |= bool((lit[sees] == np.float32(0.05)).any())
+        np.testing.assert_array_equal(sums, expected_sums)
+        np.testing.assert_array_equal(seeing, expected_seeing)
+    assert floored, "the floor of the lights' ratio was never tried"
 
 
 def _looking_at_origin(position) -> Camera:
