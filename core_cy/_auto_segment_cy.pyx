@@ -3,7 +3,7 @@
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
-from libc.math cimport fabs, floor, isfinite, rint, sqrt, sqrtf
+from libc.math cimport fabs, floor, isfinite, rint, signbit, sqrt, sqrtf
 
 import numpy as np
 
@@ -60,11 +60,63 @@ cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogi
     return (lower + upper) / 2
 
 
+#: Whole numbers up to this are counted, not selected: a grey image filtered by an integer kernel holds them.
+cdef Py_ssize_t _COUNTED = 65535
+
+
+cdef Py_ssize_t _counted_integers_below(const floating[::1] values) noexcept nogil:
+    """One more than the largest of ``values`` if every one of them is a whole number from 0 to
+    :data:`_COUNTED`, else 0: such values' median is found by counting them."""
+    cdef Py_ssize_t k, whole, largest = 0
+    cdef floating value
+    for k in range(values.shape[0]):
+        value = values[k]
+        # A negative zero is left to the selection, which keeps it as it is.
+        if not (value >= 0 and value <= _COUNTED) or signbit(value):
+            return 0
+        whole = <Py_ssize_t>value
+        if value != whole:
+            return 0
+        if whole > largest:
+            largest = whole
+    return largest + 1
+
+
+cdef floating _counted_median(const floating[::1] values, Py_ssize_t[::1] counts) noexcept nogil:
+    """The median of whole ``values`` (at least one) under ``counts``'s length, found by counting them into
+    ``counts`` (zeros); of an even count, the mean of the two middle values, as NumPy's median gives it."""
+    cdef Py_ssize_t n = values.shape[0], k, value, below = 0, middle = n // 2
+    cdef floating upper = 0, lower = -1
+    for k in range(n):
+        counts[<Py_ssize_t>values[k]] += 1
+    # The values at sorted positions middle - 1 and middle.
+    for value in range(counts.shape[0]):
+        if lower < 0 and below + counts[value] > middle - 1:
+            lower = value
+        if below + counts[value] > middle:
+            upper = value
+            break
+        below += counts[value]
+    if n % 2:
+        return upper
+    return (lower + upper) / 2
+
+
 def median(floating[::1] values not None):
-    """NumPy's ``np.median`` of ``values`` (1-D, contiguous, finite, at least one), by selection in a copy."""
-    cdef Py_ssize_t n = values.shape[0]
+    """NumPy's ``np.median`` of ``values`` (1-D, contiguous, finite, at least one), by selection in a copy, or
+    by counting them where they are all small whole numbers (many alike, which selection sorts out slowly)."""
+    cdef Py_ssize_t n = values.shape[0], counted
     if n == 0:
         raise ValueError("the median of no values")
+    with nogil:
+        counted = _counted_integers_below(values)
+    cdef Py_ssize_t[::1] counts
+    cdef floating middle
+    if counted:
+        counts = np.zeros(counted, np.intp)
+        with nogil:
+            middle = _counted_median(values, counts)
+        return float(middle)
     buffer = np.array(values, copy=True)
     cdef floating[::1] copy = buffer
     cdef floating found
@@ -342,3 +394,4 @@ def add_relit_grain(const float[:, ::1] own not None, const float[:, ::1] own_li
                 sums[r, c, 1] += grain * grain
                 sums[r, c, 2] += relit * relit
                 seeing[r, c] += one
+

@@ -51,6 +51,24 @@ def test_median_is_numpys_and_leaves_its_input_alone(dtype):
         median(np.zeros(0))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_of_whole_numbers_is_numpys(dtype):
+    # Whole numbers (a grey image filtered by an integer kernel) are counted, not selected: many ties, odd and
+    # even counts, one value, a large one, and a fraction or a negative zero among them (selected again).
+    rng = np.random.default_rng(3)
+    for trial in range(500):
+        values = rng.integers(0, [3, 40, 5000][trial % 3], size=int(rng.integers(1, 80))).astype(dtype)
+        if trial % 7 == 0:
+            values[rng.integers(len(values))] = 65535.0
+        if trial % 11 == 0:
+            values[rng.integers(len(values))] = [0.5, -0.0, 65536.0][trial % 3]
+        before = values.copy()
+        found = median(values)
+        assert found == float(np.median(values))
+        assert np.signbit(found) == np.signbit(np.median(values))
+        np.testing.assert_array_equal(values, before)
+
+
 def test_median_and_spread_of_nothing_finite_is_none():
     assert median_and_spread(np.array([np.nan, np.inf, -np.inf], np.float32)) is None
     assert median_and_spread(np.zeros(0)) is None
