@@ -983,17 +983,19 @@ def unsure_pixels(image: np.ndarray, silhouette: np.ndarray, asked: np.ndarray |
     table = window[~near & (distance <= _TABLE_RING[1] * size)]
     if not len(table):
         return unsure
-    table_colour = np.median(table, axis=0).astype(np.float64)
+    # The medians of grey levels and of their sums, whole numbers, by counting (the kernel's median).
+    table_colour = np.array([median(np.ascontiguousarray(table[:, k], np.float64)) for k in range(3)])
     brightness = table.sum(axis=1, dtype=np.float64)
-    spread = np.median(np.abs(brightness - np.median(brightness)))
+    table_brightness = median(brightness)
+    spread = median(np.abs(brightness - table_brightness))
     rows, columns = np.nonzero(near if asked is None else near & asked[y0:y1, x0:x1])
     colours = window[rows, columns].astype(np.float64)
-    darker = colours.sum(axis=1) < np.median(brightness) - _SHADE_CLEAR * spread
+    darker = colours.sum(axis=1) < table_brightness - _SHADE_CLEAR * spread
     # Inside, darker than the deepest shadow the table takes (under the object's foot): no colour is left
     # there to tell a shadow from a face turned from the light.
     doubtful = darker & ((inside[y0:y1, x0:x1][rows, columns] == 0)
                          | (_unlike_table(colours[None], table_colour[None])[0] < _TABLE_FAR)
-                         | (colours.sum(axis=1) < _DEEPEST_SHADOW * np.median(brightness)))
+                         | (colours.sum(axis=1) < _DEEPEST_SHADOW * table_brightness))
     unsure[rows[doubtful] + y0, columns[doubtful] + x0] = True
     return unsure
 
