@@ -3,7 +3,7 @@
 median of their distances from it, each found by selection in one copy of the values, not by sorting."""
 
 from cython cimport floating
-from libc.math cimport fabs, floor, isfinite, rint, signbit, sqrt, sqrtf
+from libc.math cimport fabs, fabsf, floor, isfinite, rint, signbit, sqrt, sqrtf
 
 import numpy as np
 
@@ -395,3 +395,57 @@ def add_relit_grain(const float[:, ::1] own not None, const float[:, ::1] own_li
                 sums[r, c, 2] += relit * relit
                 seeing[r, c] += one
 
+
+
+def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[:, :] table not None,
+                       double dimmer, unsigned char[:, ::1] found not None):
+    """Set ``found`` ((h, w) uint8) to 1 at the ``table`` pixels of ``image`` ((h, w, 3) float32 BGR) whose
+    chromaticity lies near the table pixels' median one and whose brightness is under ``dimmer`` times their
+    median (:func:`auto_segment._shadow_like`); the rest are left alone. In float32, in NumPy's order:
+
+        pixels = image[table]; brightness = pixels.sum(axis=1) + 3; chroma = pixels / brightness[:, None]
+        found[table] = ((abs(chroma - median of each channel of chroma).sum(axis=1) * 3 < 0.12)
+                        & (brightness < dimmer * median(brightness)))"""
+    cdef Py_ssize_t height = image.shape[0], width = image.shape[1], r, c, k, n, count = 0
+    cdef float three = 3.0, near = 0.12, bright, limit, off
+    cdef float table_chroma[3]
+    if image.shape[2] != 3 or table.shape[0] != height or table.shape[1] != width:
+        raise ValueError("image must be (h, w, 3) and table (h, w)")
+    if found.shape[0] != height or found.shape[1] != width:
+        raise ValueError("found must be (h, w)")
+    for r in range(height):
+        for c in range(width):
+            count += table[r, c] != 0
+    if count == 0:
+        return
+    brightness_array = np.empty(count, np.float32)
+    chroma_array = np.empty((3, count), np.float32)
+    scratch_array = np.empty(count, np.float32)
+    cdef float[::1] brightness = brightness_array, scratch = scratch_array
+    cdef float[:, ::1] chroma = chroma_array
+    with nogil:
+        n = 0
+        for r in range(height):
+            for c in range(width):
+                if table[r, c]:
+                    bright = image[r, c, 0] + image[r, c, 1]
+                    bright = bright + image[r, c, 2]
+                    bright = bright + three
+                    brightness[n] = bright
+                    for k in range(3):
+                        chroma[k, n] = image[r, c, k] / bright
+                    n += 1
+        # The medians by selection in a scratch copy: the chromaticities are needed again below.
+        for k in range(3):
+            scratch[:] = chroma[k, :]
+            table_chroma[k] = _median_in_place(&scratch[0], count)
+        scratch[:] = brightness
+        limit = <float>(dimmer * <double>_median_in_place(&scratch[0], count))
+        n = 0
+        for r in range(height):
+            for c in range(width):
+                if table[r, c]:
+                    off = fabsf(chroma[0, n] - table_chroma[0]) + fabsf(chroma[1, n] - table_chroma[1])
+                    off = off + fabsf(chroma[2, n] - table_chroma[2])
+                    found[r, c] = off * three < near and brightness[n] < limit
+                    n += 1

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.special import erfinv
 
 from ._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread, plane_homography_maps,
-                               project_into_mask, windowed_correlation)
+                               project_into_mask, shadow_like_pixels, windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -2974,14 +2974,7 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     they are asked about (the graph cut marks a shadow among the pixels the other views confirm), so the
     rest of the image is not looked at."""
     found = np.zeros(table.shape, bool)
-    pixels = image[table]
-    if not len(pixels):
-        return found
-    brightness = pixels.sum(axis=1) + 3.0
-    chroma = pixels / brightness[:, None]
-    table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
-    table_brightness = median(brightness)
-    found[table] = (np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12) & (brightness < _SHADOW_DIMMER * table_brightness)
+    shadow_like_pixels(image, table.view(np.uint8), _SHADOW_DIMMER, found.view(np.uint8))
     return found
 
 

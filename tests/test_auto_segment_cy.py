@@ -9,7 +9,8 @@ from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
 from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread,
-                                               plane_homography_maps, project_into_mask, windowed_correlation)
+                                               plane_homography_maps, project_into_mask, shadow_like_pixels,
+                                               windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -251,6 +252,30 @@ def test_shadow_like_asks_only_the_table_pixels_what_the_whole_image_formula_say
             expected = ((np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12)
                         & (brightness < 0.92 * np.float32(np.median(brightness[table]))))
         assert np.array_equal(auto_segment._shadow_like(image, table), expected & table)
+
+
+def test_shadow_like_pixels_is_the_numpy_it_replaced_on_a_crop():
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        whole = (rng.random((50, 60, 3)) * 255).astype(np.float32)
+        shade = rng.random((50, 60)) < 0.5
+        whole[shade] *= rng.uniform(0.3, 1.0)  # darkened alike: a shadow's look
+        crop = (slice(int(rng.integers(0, 10)), int(rng.integers(20, 50))),
+                slice(int(rng.integers(0, 10)), int(rng.integers(20, 60))))
+        image = whole[crop]  # a strided view, as the graph cut's box of the coarse image is
+        table = rng.random(image.shape[:2]) < [0.0, 0.01, 0.5, 1.0][trial % 4]
+        # _shadow_like as it was written in NumPy, with the kernel's median.
+        expected = np.zeros(table.shape, bool)
+        pixels = image[table]
+        if len(pixels):
+            brightness = pixels.sum(axis=1) + 3.0
+            chroma = pixels / brightness[:, None]
+            table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
+            expected[table] = ((np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12)
+                               & (brightness < 0.92 * median(brightness)))
+        found = np.zeros(table.shape, bool)
+        shadow_like_pixels(image, table.view(np.uint8), 0.92, found.view(np.uint8))
+        np.testing.assert_array_equal(found, expected)
 
 
 def test_grown_by_colour_is_the_brute_force_distances():
