@@ -449,3 +449,34 @@ def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[
                     off = off + fabsf(chroma[2, n] - table_chroma[2])
                     found[r, c] = off * three < near and brightness[n] < limit
                     n += 1
+
+
+def ratio_disagreement(const float[:, :, ::1] own not None, const float[:, :, ::1] low not None,
+                       const float[:, :, ::1] high not None, float[:, ::1] disagreement not None):
+    """Fill ``disagreement`` ((h, w) float32) with how far each pixel's channels of ``own`` ((h, w, 3)) lie
+    outside another view's range ``low`` to ``high`` there, summed over the channels
+    (:func:`auto_segment._ratio_parallax`). In float32, in NumPy's order:
+
+        (maximum(low - own, 0) + maximum(own - high, 0)).sum(axis=2)"""
+    cdef Py_ssize_t height = own.shape[0], width = own.shape[1], r, c, k
+    cdef float below, above, total, zero = 0.0
+    if not (own.shape[2] == 3 and low.shape[0] == height and low.shape[1] == width and low.shape[2] == 3
+            and high.shape[0] == height and high.shape[1] == width and high.shape[2] == 3
+            and _same_shape(disagreement, height, width)):
+        raise ValueError("own, low and high must be (h, w, 3) and disagreement (h, w)")
+    with nogil:
+        for r in range(height):
+            for c in range(width):
+                for k in range(3):
+                    below = low[r, c, k] - own[r, c, k]
+                    # NumPy's maximum keeps its first argument when the two compare equal, or when it is NaN.
+                    if not (below >= zero or below != below):
+                        below = zero
+                    above = own[r, c, k] - high[r, c, k]
+                    if not (above >= zero or above != above):
+                        above = zero
+                    if k == 0:
+                        total = below + above
+                    else:
+                        total = total + (below + above)
+                disagreement[r, c] = total

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.special import erfinv
 
 from ._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread, plane_homography_maps,
-                               project_into_mask, shadow_like_pixels, windowed_correlation)
+                               project_into_mask, ratio_disagreement, shadow_like_pixels, windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -3270,7 +3270,9 @@ def _ratio_parallax(view: _View, others: Sequence[_View], plane: np.ndarray, rat
                                    borderMode=cv2.BORDER_REPLICATE)
             warped_high = _remapped(high, maps, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
-            view.differences[key] = (np.maximum(warped_low - own, 0) + np.maximum(own - warped_high, 0)).sum(axis=2)
+            disagreement = np.empty(own.shape[:2], np.float32)
+            ratio_disagreement(own, warped_low, warped_high, disagreement)
+            view.differences[key] = disagreement
         disagreement = view.differences[key]
         np.minimum(best, disagreement, out=best, where=inside)
         seen |= inside

@@ -9,8 +9,8 @@ from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
 from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread,
-                                               plane_homography_maps, project_into_mask, shadow_like_pixels,
-                                               windowed_correlation)
+                                               plane_homography_maps, project_into_mask, ratio_disagreement,
+                                               shadow_like_pixels, windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -276,6 +276,20 @@ def test_shadow_like_pixels_is_the_numpy_it_replaced_on_a_crop():
         found = np.zeros(table.shape, bool)
         shadow_like_pixels(image, table.view(np.uint8), 0.92, found.view(np.uint8))
         np.testing.assert_array_equal(found, expected)
+
+
+def test_ratio_disagreement_is_the_numpy_it_replaced():
+    rng = np.random.default_rng(6)
+    for _ in range(20):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)), 3)
+        # Log ratios over a wide range, the other view's range about them, some of it exactly on them.
+        own = (rng.normal(0, 1, size=shape) * np.exp(rng.normal(0, 3, size=shape))).astype(np.float32)
+        low = (own - np.abs(rng.normal(0, 1, size=shape)) * (rng.random(shape) < 0.7)
+               + rng.normal(0, 0.3, size=shape) * (rng.random(shape) < 0.3)).astype(np.float32)
+        high = (low + np.abs(rng.normal(0, 1, size=shape))).astype(np.float32)
+        found = np.empty(shape[:2], np.float32)
+        ratio_disagreement(own, low, high, found)
+        np.testing.assert_array_equal(found, (np.maximum(low - own, 0) + np.maximum(own - high, 0)).sum(axis=2))
 
 
 def test_grown_by_colour_is_the_brute_force_distances():
