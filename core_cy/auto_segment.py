@@ -483,25 +483,26 @@ def _texture_change(view: _View, centre: np.ndarray) -> tuple[np.ndarray, np.nda
     image, empty = _fine_grey(view)[fine_window], _fine_grey(view, background=True)[fine_window]
     image_grain, empty_grain = _grain(image), _grain(empty)
     # How much of the empty workspace's grain the image still holds (the local regression's slope), over
-    # how much the light there is dimmed.
-    strength = cv2.GaussianBlur(empty_grain * empty_grain, (0, 0), _GRAIN_WINDOW)
+    # how much the light there is dimmed. Each product and blur below is made once and used twice.
+    empty_power = empty_grain * empty_grain
+    strength = cv2.GaussianBlur(empty_power, (0, 0), _GRAIN_WINDOW)
     slope = cv2.GaussianBlur(image_grain * empty_grain, (0, 0), _GRAIN_WINDOW) / np.maximum(strength, 1e-6)
-    dimmed = ((cv2.GaussianBlur(image, (0, 0), _GRAIN_WINDOW) + 1.0)
-              / (cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW) + 1.0))
-    kept = slope / np.maximum(dimmed, 0.05)
+    empty_light = cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)
+    dimmed = (cv2.GaussianBlur(image, (0, 0), _GRAIN_WINDOW) + 1.0) / (empty_light + 1.0)
+    lit = np.maximum(dimmed, 0.05)
+    kept = slope / lit
     # The grain, dimmed as the image is, must stand clear of the noise (the two pictures' difference on
     # most of the table), and of what JPEG drops: it keeps no grain fainter than a few grey levels.
-    noise = float(np.median(cv2.GaussianBlur((image_grain - empty_grain) ** 2, (0, 0), _GRAIN_WINDOW)))
-    faint = (_GRAIN_FLOOR * cv2.GaussianBlur(empty, (0, 0), _GRAIN_WINDOW)) ** 2
+    noise = median(cv2.GaussianBlur((image_grain - empty_grain) ** 2, (0, 0), _GRAIN_WINDOW).ravel())
+    faint = (_GRAIN_FLOOR * empty_light) ** 2
     expected = strength * np.minimum(dimmed, 1.0) ** 2
     grained = (expected > np.maximum(_GRAIN_CLEAR ** 2 * noise, _GRAIN_VISIBLE ** 2)) & (strength > faint)
     lost = _in_window(view, window, np.where(grained, np.clip(1.0 - kept, 0.0, 1.0), 0.0).astype(np.float32))
     # Brought back to the light (the dimming over the grain's window: a shadow's soft edge dims it smoothly,
     # by no one factor), the image's grain in a shadow is the empty workspace's. Each picture's own noise is
     # about half of the two pictures' difference on the table, the image's scaled up with it.
-    lit = np.maximum(dimmed, 0.05)
     relit = image_grain / lit
-    planes = np.stack([relit * empty_grain, empty_grain * empty_grain, relit * relit,
+    planes = np.stack([relit * empty_grain, empty_power, relit * relit,
                        0.5 * noise * (1.0 / (lit * lit) + 1.0)], axis=-1).astype(np.float32)
     return lost, _in_window(view, window, (grained & (kept > _GRAIN_KEPT)).astype(np.float32)), \
         _in_window(view, window, planes)
@@ -3243,7 +3244,9 @@ def _change_noise(view: _View, change: np.ndarray) -> float:
     image = cv2.resize(view.image.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
     empty = cv2.resize(view.full_background.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
     unrounded = _noise_level(np.abs(_log_ratio_of(image, empty)).sum(axis=2))
-    table = np.median(view.background.reshape(-1, 3), axis=0)
+    # The empty workspace's grey levels are whole (unless the light was evened): the kernel's median counts them.
+    table = np.array([median(np.ascontiguousarray(view.background[..., k]).ravel()) for k in range(3)],
+                     view.background.dtype)
     step = float(np.log((table + 1.0 + _RATIO_OFFSET) / (table + _RATIO_OFFSET)).sum())
     return unrounded if rounded > unrounded + step else rounded
 
