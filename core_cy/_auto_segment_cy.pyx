@@ -480,3 +480,39 @@ def ratio_disagreement(const float[:, :, ::1] own not None, const float[:, :, ::
                     else:
                         total = total + (below + above)
                 disagreement[r, c] = total
+
+
+def shadow_look(const float[:, :, ::1] image not None, const float[:, :, ::1] empty not None, float offset,
+                float darkest, float lightest, float hue_shift, unsigned char[:, ::1] found not None):
+    """Fill ``found`` ((h, w) uint8) with 1 where ``image`` ((h, w, 3) float32 BGR) is darker than ``empty``
+    (its brightness over empty's, each with ``offset`` added to every channel, between ``darkest`` and
+    ``lightest``, exclusive) with about its chromaticity (each channel over the sum, ``offset`` added, the
+    differences' magnitudes summed under ``hue_shift``): :func:`auto_segment._shadow_of_table`. In float32,
+    in NumPy's order:
+
+        a, b = image + offset, empty + offset
+        hue = abs(a / a.sum(axis=2)[..., None] - b / b.sum(axis=2)[..., None]).sum(axis=2)
+        ratio = (image.sum(axis=2) + 3 * offset) / (empty.sum(axis=2) + 3 * offset)
+        found = (ratio < lightest) & (ratio > darkest) & (hue < hue_shift)"""
+    cdef Py_ssize_t height = image.shape[0], width = image.shape[1], r, c
+    cdef float a0, a1, a2, b0, b1, b2, sum_a, sum_b, hue, ratio, three_offsets = 3 * offset
+    if not (image.shape[2] == 3 and empty.shape[0] == height and empty.shape[1] == width and empty.shape[2] == 3
+            and found.shape[0] == height and found.shape[1] == width):
+        raise ValueError("image and empty must be (h, w, 3) and found (h, w)")
+    with nogil:
+        for r in range(height):
+            for c in range(width):
+                a0, a1, a2 = image[r, c, 0] + offset, image[r, c, 1] + offset, image[r, c, 2] + offset
+                b0, b1, b2 = empty[r, c, 0] + offset, empty[r, c, 1] + offset, empty[r, c, 2] + offset
+                sum_a = a0 + a1
+                sum_a = sum_a + a2
+                sum_b = b0 + b1
+                sum_b = sum_b + b2
+                hue = fabsf(a0 / sum_a - b0 / sum_b) + fabsf(a1 / sum_a - b1 / sum_b)
+                hue = hue + fabsf(a2 / sum_a - b2 / sum_b)
+                ratio = image[r, c, 0] + image[r, c, 1]
+                ratio = ratio + image[r, c, 2]
+                sum_b = empty[r, c, 0] + empty[r, c, 1]
+                sum_b = sum_b + empty[r, c, 2]
+                ratio = (ratio + three_offsets) / (sum_b + three_offsets)
+                found[r, c] = ratio < lightest and ratio > darkest and hue < hue_shift

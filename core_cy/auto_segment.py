@@ -40,7 +40,8 @@ import numpy as np
 from scipy.special import erfinv
 
 from ._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread, plane_homography_maps,
-                               project_into_mask, ratio_disagreement, shadow_like_pixels, windowed_correlation)
+                               project_into_mask, ratio_disagreement, shadow_like_pixels, shadow_look,
+                               windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -594,10 +595,10 @@ def _shadow_of_table(view: _View) -> np.ndarray:
     """Pixels darker than the empty workspace with about its chromaticity (a shadow's look; an object of the
     table's colour may look so too)."""
     assert view.background is not None
-    image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
-    hue_shift = np.abs(image / image.sum(axis=2)[..., None] - empty / empty.sum(axis=2)[..., None]).sum(axis=2)
-    ratio = _darkening(view)
-    return (ratio < 0.97) & (ratio > 0.1) & (hue_shift < _LAMP_HUE_SHIFT)
+    # The chromaticities and the darkening (:func:`_darkening`), in one pass.
+    found = np.empty(view.coarse.shape[:2], np.uint8)
+    shadow_look(view.coarse, view.background, _CHROMA_OFFSET, 0.1, 0.97, _LAMP_HUE_SHIFT, found)
+    return found.view(bool)
 
 
 #: How far two views' darkening of one table point may differ for both to be the same shadow: a shadow's

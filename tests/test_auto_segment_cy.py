@@ -10,7 +10,7 @@ from robocell.core_cy.camera import Camera
 
 from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread,
                                                plane_homography_maps, project_into_mask, ratio_disagreement,
-                                               shadow_like_pixels, windowed_correlation)
+                                               shadow_like_pixels, shadow_look, windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -290,6 +290,25 @@ def test_ratio_disagreement_is_the_numpy_it_replaced():
         found = np.empty(shape[:2], np.float32)
         ratio_disagreement(own, low, high, found)
         np.testing.assert_array_equal(found, (np.maximum(low - own, 0) + np.maximum(own - high, 0)).sum(axis=2))
+
+
+def test_shadow_look_is_the_numpy_it_replaced():
+    rng = np.random.default_rng(7)
+    for trial in range(50):
+        shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)), 3)
+        empty = rng.uniform(0, 255, size=shape).astype(np.float32)
+        # The empty workspace darkened alike (a shadow) or not, a tint added here and there, some black.
+        image = (empty * rng.uniform(0.0, 1.1, size=shape[:2])[..., None]
+                 + rng.normal(0, 8, size=shape) * (rng.random(shape[:2]) < 0.3)[..., None]).astype(np.float32)
+        image = np.maximum(image, 0).astype(np.float32)
+        # _shadow_of_table as it was written in NumPy (_darkening's ratio inside).
+        a, b = image + 12.0, empty + 12.0
+        hue_shift = np.abs(a / a.sum(axis=2)[..., None] - b / b.sum(axis=2)[..., None]).sum(axis=2)
+        ratio = (image.sum(axis=2) + 3 * 12.0) / (empty.sum(axis=2) + 3 * 12.0)
+        expected = (ratio < 0.97) & (ratio > 0.1) & (hue_shift < 0.12)
+        found = np.empty(shape[:2], np.uint8)
+        shadow_look(image, empty, 12.0, 0.1, 0.97, 0.12, found)
+        np.testing.assert_array_equal(found.view(bool), expected)
 
 
 def test_grown_by_colour_is_the_brute_force_distances():
