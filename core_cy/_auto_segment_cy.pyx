@@ -516,3 +516,16 @@ def shadow_look(const float[:, :, ::1] image not None, const float[:, :, ::1] em
                 sum_b = sum_b + empty[r, c, 2]
                 ratio = (ratio + three_offsets) / (sum_b + three_offsets)
                 found[r, c] = ratio < lightest and ratio > darkest and hue < hue_shift
+
+
+def channel_sum(const floating[:, :, :] image not None, floating[:, ::1] brightness not None):
+    """Fill ``brightness`` ((h, w)) with the sum of each pixel's three channels of ``image`` ((h, w, 3), of the
+    same type, any strides), left to right as NumPy's ``image.sum(axis=2)`` adds them."""
+    cdef Py_ssize_t height = image.shape[0], width = image.shape[1], r, c
+    if image.shape[2] != 3 or brightness.shape[0] != height or brightness.shape[1] != width:
+        raise ValueError("image must be (h, w, 3) and brightness (h, w)")
+    with nogil:
+        for r in range(height):
+            for c in range(width):
+                brightness[r, c] = image[r, c, 0] + image[r, c, 1]
+                brightness[r, c] = brightness[r, c] + image[r, c, 2]

@@ -39,9 +39,9 @@ import cv2
 import numpy as np
 from scipy.special import erfinv
 
-from ._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread, plane_homography_maps,
-                               project_into_mask, ratio_disagreement, shadow_like_pixels, shadow_look,
-                               windowed_correlation)
+from ._auto_segment_cy import (add_relit_grain, any_within, channel_sum, median, median_and_spread,
+                               plane_homography_maps, project_into_mask, ratio_disagreement, shadow_like_pixels,
+                               shadow_look, windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -2101,7 +2101,7 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     above = beyond & (score > level)
     ceiling = _lit_table_ceiling(view, cv2.bitwise_or(hull, mask))
     # Beyond the silhouette, brighter than the lit table round it (none where no table is round it).
-    brighter = (mask == 0) & (view.coarse.sum(axis=2) > ceiling) if ceiling is not None else None
+    brighter = (mask == 0) & (_brightness(view.coarse) > ceiling) if ceiling is not None else None
     if brighter is not None:
         # A top nearer the lamp than the table stands out by its light, whatever its parallax says.
         above |= (hull > 0) & brighter
@@ -2168,7 +2168,7 @@ def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarr
     open_shadow = shadow & _clear_of(known)
     if not open_shadow.any():
         return True
-    brightness = view.coarse.sum(axis=2)
+    brightness = _brightness(view.coarse)
     deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
     return float(np.median(brightness[piece])) < deepest
 
@@ -2187,7 +2187,7 @@ def _lit_above_its_surroundings(view: _View, piece: np.ndarray, mask: np.ndarray
     round_it = (cv2.dilate(piece.astype(np.uint8), _SMALL, iterations=2) > 0) & ~piece & beyond
     if not round_it.any():
         return False
-    brightness = view.coarse.sum(axis=2)
+    brightness = _brightness(view.coarse)
     darker = brightness[round_it] < (1.0 - _DARKER_ROUND) * float(np.median(brightness[piece]))
     return bool(np.count_nonzero(darker) > _MOSTLY * darker.size)
 
@@ -2213,7 +2213,7 @@ def _lit_table_ceiling(view: _View, known: np.ndarray) -> float | None:
     round_it = _table_round(known, known)
     if not round_it.any():
         return None
-    table = view.coarse.sum(axis=2)[round_it]
+    table = _brightness(view.coarse)[round_it]
     middle, bright = float(np.median(table)), float(np.quantile(table, _LIT_TABLE))
     return 2.0 * bright - middle
 
@@ -2618,7 +2618,11 @@ def _coarse_aim(view: _View, aim: np.ndarray) -> np.ndarray:
 
 
 def _brightness(image: np.ndarray) -> np.ndarray:
-    return image.sum(axis=2)
+    """(h, w) each pixel's channels summed, as ``image.sum(axis=2)`` (float32 or float64, any strides) adds
+    them, in one pass (NumPy's sum over so short an axis is slow)."""
+    brightness = np.empty(image.shape[:2], image.dtype)
+    channel_sum(image, brightness)
+    return brightness
 
 
 def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, aim: np.ndarray,
@@ -2861,7 +2865,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             # own side in shade (as without it, below), where the table's shadow is seen to keep its colour.
             image, empty = view.coarse[crop], view.background[crop]
             hidden = score[crop] == _HIDDEN
-            darker = image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2)
+            darker = _brightness(image) < _SHADOW_DIMMER * _brightness(empty)
             off = _off_colours(image, empty, darker & (hidden | low))
             if _shadow_keeps_colour(off, low & darker):
                 mask[hidden & sure & darker & (off > _NO_SHADOW)] = cv2.GC_FGD
@@ -2947,7 +2951,7 @@ def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
     if not np.any(shadow):
         return None
     table_colour = _median_colour(image, low)
-    brightness = image.sum(axis=2)
+    brightness = _brightness(image)
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
     return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
@@ -3025,7 +3029,7 @@ def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow
     if np.any(like_table):
         deepest = min(deepest, np.quantile(darkening[like_table], _DEEPEST))
     shaded_face = np.quantile(darkening[faces], _DEEPEST) * np.quantile(shadow, _DEEPEST)
-    told = (image.sum(axis=2) >= _told_from_table_above(image[faces], empty[faces])) | (darkening < shaded_face)
+    told = (_brightness(image) >= _told_from_table_above(image[faces], empty[faces])) | (darkening < shaded_face)
     return probable, kept & (darkening < deepest) & told
 
 
@@ -3066,7 +3070,7 @@ def _open_shadow(views: Sequence[_View], scores: dict[int, np.ndarray]) -> np.nd
 def _open_shadow_in(image: np.ndarray, empty: np.ndarray, confirmed: np.ndarray) -> np.ndarray:
     """(h, w) bool: the ``confirmed`` pixels (another view sees their change alike at the same table
     point) darker than the empty workspace and of its colour, a few together: the shadow in the open."""
-    candidates = confirmed & (image.sum(axis=2) < _SHADOW_DIMMER * empty.sum(axis=2))
+    candidates = confirmed & (_brightness(image) < _SHADOW_DIMMER * _brightness(empty))
     shadow = candidates & (_off_colours(image, empty, candidates) < 1.0)
     return cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
 

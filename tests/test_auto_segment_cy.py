@@ -8,7 +8,7 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, median, median_and_spread,
+from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, channel_sum, median, median_and_spread,
                                                plane_homography_maps, project_into_mask, ratio_disagreement,
                                                shadow_like_pixels, shadow_look, windowed_correlation)
 
@@ -309,6 +309,20 @@ def test_shadow_look_is_the_numpy_it_replaced():
         found = np.empty(shape[:2], np.uint8)
         shadow_look(image, empty, 12.0, 0.1, 0.97, 0.12, found)
         np.testing.assert_array_equal(found.view(bool), expected)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_channel_sum_is_numpys_sum_over_the_channels(dtype):
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        # Values of many magnitudes, so that the order of the additions shows in the last bit.
+        whole = (rng.normal(size=(40, 50, 3)) * np.exp(rng.normal(0, 4, size=(40, 50, 3)))).astype(dtype)
+        rows = slice(int(rng.integers(0, 10)), int(rng.integers(10, 40)))
+        image = whole[rows, int(rng.integers(0, 10)):int(rng.integers(10, 50))]
+        brightness = np.empty(image.shape[:2], dtype)
+        channel_sum(image, brightness)
+        np.testing.assert_array_equal(brightness, image.sum(axis=2))
+        np.testing.assert_array_equal(auto_segment._brightness(image), image.sum(axis=2))
 
 
 def test_grown_by_colour_is_the_brute_force_distances():
