@@ -1,10 +1,21 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Kernel of the Levenberg-Marquardt step: the damped normal equations solved by Cholesky, within bounds."""
 
-from libc.math cimport sqrt
+from libc.math cimport INFINITY, fabs, sqrt
 
 cdef enum:
     MAX_PARAMETERS = 66  # six parts of a union, 11 each
+
+# A parameter this near a bound (relative to 1 + the bound's size) is on it: a step shortened to end on
+# a bound, x + step (bound - x) / step, lands on it only to within rounding, and a parameter left a
+# rounding error inside its bound, not held there, would cut every later step that pushes it out to
+# nothing (the descent then stops as if converged, or not, as the platform's last bit falls).
+cdef double ON_BOUND = 1e-12
+
+
+cdef inline bint _on(double value, double bound) noexcept nogil:
+    """Whether ``value`` lies on a finite ``bound`` to within rounding."""
+    return value == bound or (fabs(bound) < INFINITY and fabs(value - bound) <= ON_BOUND * (1.0 + fabs(bound)))
 
 
 cdef bint _cholesky_array(double A[MAX_PARAMETERS][MAX_PARAMETERS], double damping, Py_ssize_t n,
@@ -34,9 +45,10 @@ def bounded_step(const double[:, ::1] JtJ not None, const double[::1] Jtr not No
     """One damped Gauss-Newton step from x within [low, high]: writes ``trial`` and returns the
     decrease the quadratic model of the cost promises, or -1 if the damped matrix is singular.
 
-    A parameter on a bound that the step would push beyond it is held there (the system is solved
-    without it); the step is then shortened to end on the first bound it meets, along which the
-    model only falls, so the promise stays a fair test of convergence.
+    A parameter on a bound (to within rounding) that the step would push beyond it is held there (the
+    system is solved without it); the step is then shortened to end on the first bound it meets, along
+    which the model only falls, so the promise stays a fair test of convergence, and a parameter that
+    ends within rounding of a bound is set on it.
     """
     cdef Py_ssize_t n = Jtr.shape[0]
     cdef double promise
@@ -82,7 +94,8 @@ cdef double _bounded_step(const double[:, ::1] JtJ, const double[::1] Jtr, doubl
             step[i] = total / L[i][i]
         any_held = False
         for i in range(n):
-            if not held[i] and ((x[i] <= low[i] and step[i] < 0) or (x[i] >= high[i] and step[i] > 0)):
+            if not held[i] and (((x[i] <= low[i] or _on(x[i], low[i])) and step[i] < 0)
+                                or ((x[i] >= high[i] or _on(x[i], high[i])) and step[i] > 0)):
                 held[i] = True
                 any_held = True
         if not any_held:
@@ -101,9 +114,9 @@ cdef double _bounded_step(const double[:, ::1] JtJ, const double[::1] Jtr, doubl
     for i in range(n):
         step[i] *= fraction
         trial[i] = x[i] + step[i]
-        if trial[i] < low[i]:
+        if trial[i] < low[i] or _on(trial[i], low[i]):
             trial[i] = low[i]
-        elif trial[i] > high[i]:
+        elif trial[i] > high[i] or _on(trial[i], high[i]):
             trial[i] = high[i]
         promise -= Jtr[i] * step[i]
         for j in range(n):

@@ -482,9 +482,15 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
 
 
 def _bodies(parts, single: Superquadric, fitter: _Fitter, rasters: _Rasters, plane):
-    """The union with its sheets (:func:`_sheet`) made bodies or dropped: a sheet floating over the table
-    is the face of a body standing on it (resting on a face, taken down to the table), any other
-    sheet no body at all; the parts that then do not pay dropped; ``single`` if nothing is left."""
+    """The union with its sheets (:func:`_sheet`) made bodies or dropped. A sheet is the outline of a
+    body seen from one side only: a rod as thick as it is wide (a dumbbell's bar, which the views see
+    from above, drawn flat), kept if every part then pays; else a sheet floating over the table is the
+    face of a body standing on it (resting on a face, taken down to the table), any other sheet no body
+    at all; the parts that then do not pay dropped; ``single`` if nothing is left."""
+    rods = tuple(_as_thick_as_wide(part) if _sheet(part, rasters.cameras) else part for part in parts)
+    paying, ious = _paying(rods, fitter, rasters, plane)
+    if len(paying) == len(rods):
+        return paying, ious
     bodies = []
     for part in parts:
         if not _sheet(part, rasters.cameras):
@@ -496,6 +502,13 @@ def _bodies(parts, single: Superquadric, fitter: _Fitter, rasters: _Rasters, pla
     if not bodies:
         return (single,), rasters.ious((single,))[0]
     return _paying(tuple(bodies), fitter, rasters, plane)
+
+
+def _as_thick_as_wide(part: Superquadric) -> Superquadric:
+    """The part with its thinnest semi-axis made as long as its middle one."""
+    size = part.size.copy()
+    size[int(np.argmin(size))] = np.sort(size)[1]
+    return Superquadric(size, part.shape, part.T_world_object)
 
 
 def _sheet(part: Superquadric, cameras) -> bool:

@@ -342,6 +342,18 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
                     superquadric, ious = restart.superquadric, other_ious
+            if min(ious) < _DISAGREE and any(doubt is not None and np.any(doubt) for doubt in doubtful):
+                # Still in clear disagreement: the doubt may be its cause. A fit that lets the samples on
+                # unsure pixels go is held only by the rest, and where most are unsure (a box of its
+                # table's colour) the rest may run along a shadow or a strip of table, which a slab
+                # floating over the table follows from every start. So the starts are fitted again with
+                # every sample sure, and that model is kept if it agrees better with the silhouettes
+                # themselves; the steps after it still doubt what auto could not confirm.
+                sure = fit_to_silhouettes(starts, cameras, edges, support_plane=plane)
+                evaluations["fit"] += sure.evaluations
+                sure_ious, _ = union_ious((sure.superquadric,), cameras, silhouettes, boxes)
+                if np.mean(sure_ious) > np.mean(ious):
+                    superquadric, ious = sure.superquadric, sure_ious
             lap("fit")
     else:
         superquadric = fit_superquadric(points[::stride], inside_weight=options.inside_weight,

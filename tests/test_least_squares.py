@@ -32,9 +32,33 @@ def test_the_step_solves_the_damped_normal_equations_within_bounds():
     low[:] = np.where(free < 0, free / 2, -1e9)
     bounded_step(JtJ, Jtr, 0.1, x, low, high, trial)
     np.testing.assert_allclose(trial, free / 2, rtol=1e-10)
+    assert trial[k] == (high[k] if free[k] > 0 else low[k])  # the bound that cut it short, to the bit
     assert bounded_step(-np.eye(11), Jtr, 0.1, x, low, high, trial) == -1.0  # not positive definite
     with pytest.raises(ValueError, match="n <= 66"):  # six parts of a union, 11 parameters each
         bounded_step(np.eye(67), np.zeros(67), 0.1, np.zeros(67), np.zeros(67), np.zeros(67), np.empty(67))
+
+
+def test_a_parameter_a_rounding_error_inside_its_bound_is_on_it():
+    """A step shortened to end on a bound lands on it only to within rounding: a parameter left a bit
+    inside its bound, pushed out again, is held as one on it is, and does not cut the step to nothing
+    (the descent would stop there, or go on, as the platform's last bit fell)."""
+    rng = np.random.default_rng(1)
+    J = rng.normal(size=(30, 11))
+    JtJ, Jtr = J.T @ J, J.T @ rng.normal(size=30)
+    free = np.linalg.solve(JtJ + 0.1 * np.diag(np.diag(JtJ) + 1e-12), -Jtr)
+    k = int(np.argmax(np.abs(free)))
+    low, high = np.full(11, -1e9), np.full(11, 1e9)
+    x = np.zeros(11)
+    bound = low if free[k] < 0 else high  # the one the free step pushes it beyond
+    bound[k] = x[k] = 0.1
+    on, on_promise = np.empty(11), bounded_step(JtJ, Jtr, 0.1, x, low, high, np.empty(11))
+    bounded_step(JtJ, Jtr, 0.1, x, low, high, on)
+    x[k] = np.nextafter(0.1, np.sign(-free[k]) * np.inf)  # one bit inside
+    inside = np.empty(11)
+    inside_promise = bounded_step(JtJ, Jtr, 0.1, x, low, high, inside)
+    assert inside_promise == pytest.approx(on_promise, rel=1e-9) and on_promise > 0
+    np.testing.assert_allclose(inside, on, rtol=1e-12, atol=1e-15)
+    assert inside[k] == 0.1  # set on the bound
 
 
 class _Circle:

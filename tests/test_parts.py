@@ -466,19 +466,15 @@ def test_a_part_whose_thickness_no_view_sees_is_a_sheet():
     assert not _sheet(plate(0.004, standing=True), cameras)
 
 
-@pytest.mark.xfail(np.lib.NumpyVersion(np.__version__) >= "2.5.0", strict=True,
-                   reason="a known defect: from the same silhouettes to the pixel, three parts (0.56) with numpy 2.5 "
-                          "on Python 3.13, one (0.95) with numpy 2.4 on 3.11. No near tie in what a part pays: the one "
-                          "superquadric is a slab floating over the table from every start (0.01), and one of the parts "
-                          "search's descents stops where a shape exponent ends one bit inside its bound (3.13) or goes on "
-                          "where it ends on it (3.11); which, the last bit of numpy.linalg.eigh's axes decides")
 def test_a_box_the_colour_of_its_table_is_no_two_sheets(tmp_path):
     """A box of the oak table's own colour and grain: one view's silhouette takes in its shadow, another a
-    stretch of table. Two sheets, its top face and one over the shadow, explained them better than any
-    body (2 parts, 0.004 before). A sheet is no body: the top face becomes the box beneath it, standing
-    on the table, and the model is a body where the box is."""
+    stretch of table, and most of its outline is on pixels auto cannot confirm. Held only by the samples
+    left, along the shadow and the table, the fit made it a slab floating over the table from every start
+    (0.01; two sheets once, 0.004), right or not as the last bit of a descent fell (0.95 on one platform,
+    0.56 on another). Fitted with every sample sure, it agrees the better with the silhouettes: the
+    model is a body where the box is, on any platform."""
     parts, iou = _printed_parts(tmp_path, 5, "oak-table-colour-box")
-    assert iou > 0.75
+    assert iou > 0.9
 
 
 def test_a_stretch_of_outline_that_the_other_views_contradict_does_not_drag_the_model(tmp_path):
