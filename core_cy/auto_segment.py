@@ -118,6 +118,11 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        # With the empty workspace: both coarse images before their rounding to whole grey levels (float32 BGR,
+        # the light not evened), whose change's noise the rounding does not hide (_change_noise).
+        self.unrounded: tuple[np.ndarray, np.ndarray] | None = None if background is None else (
+            cv2.resize(image.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA),
+            cv2.resize(background.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA))
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
         # With the empty workspace: per coarse pixel, the sums its grain is told by over a region
@@ -3245,10 +3250,8 @@ def _change_noise(view: _View, change: np.ndarray) -> float:
     more pass as changed, and the look through the plane that follows still tells the table; it is kept
     (read before the rounding there too, two dark cans' views lost 0.12 and 0.18)."""
     rounded = _noise_level(change)
-    assert view.background is not None and view.full_background is not None
-    image = cv2.resize(view.image.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
-    empty = cv2.resize(view.full_background.astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
-    unrounded = _noise_level(np.abs(_log_ratio_of(image, empty)).sum(axis=2))
+    assert view.background is not None and view.unrounded is not None
+    unrounded = _noise_level(np.abs(_log_ratio_of(*view.unrounded)).sum(axis=2))
     # The empty workspace's grey levels are whole (unless the light was evened): the kernel's median counts them.
     table = np.array([median(np.ascontiguousarray(view.background[..., k]).ravel()) for k in range(3)],
                      view.background.dtype)
