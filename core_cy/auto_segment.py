@@ -133,7 +133,7 @@ class _View:
         # empty workspace, the other views' (their shadow_seen), for a view that sees none of its own.
         self.open_shadow: Callable[[], np.ndarray] | None = None
         # Without an empty workspace: the brightness over the table's of the shadow that the view's first cut
-        # saw in the open (_graph_cut), None if it saw none.
+        # saw in the open (_open_shadow_seen), None if it saw none.
         self.shadow_seen: np.ndarray | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
@@ -2732,6 +2732,12 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # beside it, and leaves its inside (table-coloured against table-coloured) out: a silhouette has
         # no holes, so what the evidence encloses is the object's too.
         region = _holes_filled(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING))
+    if view.background is None:
+        # What this cut sees of the shadow in the open, for the views that see none of their own
+        # (auto_silhouettes); a later look keeps what an earlier one saw.
+        shadow_seen = _open_shadow_seen(view, region, score)
+        if shadow_seen is not None:
+            view.shadow_seen = shadow_seen
     try:
         # Only this cut, of the view's own evidence, asks the shadow hidden from the other views: a view cut
         # again within their hull, or into its bays, is to drop or add only what the hull says, and a face
@@ -2895,9 +2901,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             image = view.coarse[crop]
             hidden = score[crop] == _HIDDEN
             seen = _shadow_seen(image, low, shadow, hidden)
-            if seen is not None:
-                view.shadow_seen = seen[1][seen[0]] / max(float(_median_colour(image, low).sum()), 1.0)
-            elif view.open_shadow is not None:
+            if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
                 shadow, brightness, darker, off_table = seen
@@ -2960,6 +2964,18 @@ def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
     return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
+
+
+def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.ndarray | None:
+    """Without an empty workspace: the brightness over the table's of the shadow that the view sees in the
+    open (:func:`_shadow_seen`, within the graph cut's box round ``region``, of the table the other views
+    confirm: ``score`` under 1), None where it sees none."""
+    x0, y0, x1, y1 = _cut_box(view, region)
+    crop = (slice(y0, y1), slice(x0, x1))
+    image = view.coarse[crop]
+    low = score[crop] < 1.0
+    seen = _shadow_seen(image, low, low & _shadow_like(image, low), score[crop] == _HIDDEN)
+    return None if seen is None else seen[1][seen[0]] / max(float(_median_colour(image, low).sum()), 1.0)
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,
