@@ -1785,6 +1785,117 @@ _ALIKE = 0.08
 _ALIKE_ABOVE = 1.5
 
 
+class _BeyondOutline:
+    """What every question about a piece beyond a view's silhouette asks of (:func:`_faces_beyond_outline`):
+    the view, its silhouette ``mask``, its evidence ``score`` and ``parallax``, the other views' ``hull``, and
+    what is worked out once, when first asked (the table's level, the open shadow, the grain mapped from the
+    other views, the other views' likeness)."""
+
+    def __init__(self, view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
+                 parallax: np.ndarray | None, seen_alike: Callable[[], np.ndarray] | None,
+                 plane_grain: Callable[[], np.ndarray] | None) -> None:
+        self.view, self.mask, self.score, self.hull = view, mask, score, hull
+        self.parallax = score if parallax is None else parallax
+        # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
+        self.seen = self.parallax != _HIDDEN
+        self.known = cv2.bitwise_or(hull, mask)
+        x0, y0, x1, y1 = _cut_box(view, mask)
+        self.crop = (slice(y0, y1), slice(x0, x1))
+        self.low = score[self.crop] < 1.0
+        self._seen_alike = seen_alike
+        self._plane_grain = plane_grain
+
+    @functools.cached_property
+    def table_level(self) -> float:
+        """What the table round the hull stands out by (its :data:`_TABLE_LEVEL` quantile, 1 at least), as for
+        the faces standing out (:func:`_faces_standing_out`): beside the object's foot, in its shadow or over a
+        coarse grain, the parallax is not all noise, and a stretch of table there stands out over 1 as a face
+        does (a stretch of lit oak beside a mustard bottle stood out by 1.2, the oak round the hull by 1.8)."""
+        round_it = _table_round(self.hull, self.hull) & self.seen
+        return max(1.0, float(np.quantile(self.parallax[round_it], _TABLE_LEVEL))) if round_it.any() else 1.0
+
+    @functools.cached_property
+    def lit_table_ceiling(self) -> float | None:
+        """:func:`_lit_table_ceiling` of the table round the silhouette and the other views' hull."""
+        return _lit_table_ceiling(self.view, self.known)
+
+    @functools.cached_property
+    def open_shadow(self) -> np.ndarray:
+        """The open shadow the view's evidence confirms round the object (:func:`_confirmed_shadow_round`)."""
+        return _confirmed_shadow_round(self.view, self.score, self.crop)
+
+    @functools.cached_property
+    def alike(self) -> np.ndarray:
+        """Where the other views see the view's pixels alike (``seen_alike``: :func:`_seen_alike`)."""
+        assert self._seen_alike is not None
+        return self._seen_alike()
+
+    @functools.cached_property
+    def mapped_grain(self) -> np.ndarray:
+        """The table's grain the other views see at each pixel's table point (``plane_grain``)."""
+        assert self._plane_grain is not None
+        return self._plane_grain()
+
+    def stands_out(self, piece: np.ndarray) -> bool:
+        """Whether the other views see the table points behind over half of ``piece`` and its parallax's
+        median there is over the table's level: where another view confirms the table point behind a piece
+        within the table's own noise over most of it, the piece is table. The parallax against a white top
+        on a white table is faint, yet above the table's noise over most of the face (the tint and the light
+        of a face above the plane are not quite those of the table point behind it)."""
+        evidence = self.parallax[piece & self.seen]
+        return bool(2 * len(evidence) > np.count_nonzero(piece)
+                    and median(np.ascontiguousarray(evidence, np.float32)) > self.table_level)
+
+    def seen_alike_over(self, piece: np.ndarray, share: float) -> bool:
+        """Whether the other views see over ``share`` of ``piece`` alike. Where the object hides the table
+        points behind most of a piece from the other views (a tall box's white top, whose table points lie
+        behind the box from the others), the view has no evidence there, and their likeness speaks for it."""
+        return bool(self._seen_alike is not None
+                    and np.count_nonzero(self.alike[piece]) > share * np.count_nonzero(piece))
+
+    def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
+        """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
+        return _darker_than_the_open_shadow(self.view, piece, self.known, self.open_shadow)
+
+    def hides_the_mapped_grain(self, piece: np.ndarray) -> bool:
+        """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
+        confirm round the object, of its chromaticity), hides the grain the other views see at its table
+        points, and is no darker than the open shadow unless the other views see most of its table points.
+
+        Without an empty workspace, a face of the table's colour turned from the lamp matches the table in the
+        object's shadow behind it, which the other views see, so the parallax of its colour says table. But
+        they see the table's grain there, which a shadow on the table carries and a face above it does not
+        (:func:`_grain_hidden`, told over the part of the piece whose table points the others see, however
+        small: its standard error says how sure). The table under the object's overhang is hidden from the
+        other views by the object above it, so the grain they show is told there from a few points only; a
+        face in shade stands in front of the table points behind it, which they see: its darkness beside the
+        open shadow says nothing (a face turned from the lamp sees half of the sky, the shadow round the
+        object most of it)."""
+        if self._plane_grain is None:
+            return False
+        looks = np.zeros(self.mask.shape, bool)
+        looks[self.crop] = _shadow_like(self.view.coarse[self.crop], self.low | piece[self.crop])
+        if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
+            return False
+        if not _grain_hidden(self.view, piece, self.known, self.mapped_grain):
+            return False
+        others_see_behind = bool(2 * np.count_nonzero(self.seen[piece]) > np.count_nonzero(piece))
+        return others_see_behind or not self.darker_than_the_open_shadow(piece)
+
+    def hides_the_empty_workspace_grain(self, piece: np.ndarray) -> bool:
+        """Whether ``piece`` hides the grain the empty workspace shows and is no darker than the open shadow:
+        a shadow keeps the table's grain, a face in shade hides it whatever the other views see (they may see
+        a lit face where it stands, which looks nothing like it); but so does the dark under the object's
+        overhang, where the object hides the sky too and the grain fades under JPEG's floor."""
+        return (self.view.grain_sums is not None and _grain_hidden(self.view, piece, self.known)
+                and not self.darker_than_the_open_shadow(piece))
+
+    def keeps_the_empty_workspace_grain(self, piece: np.ndarray) -> bool:
+        """Whether ``piece`` keeps the empty workspace's grain as the table round it does: a shadow, whatever
+        the other views see above it (the object beside it may look as dark from them)."""
+        return self.view.grain_sums is not None and _grain_kept(self.view, piece, self.known)
+
+
 def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
                           seen_alike: Callable[[], np.ndarray] | None = None,
                           parallax: np.ndarray | None = None, shadow: np.ndarray | None = None,
@@ -1797,47 +1908,19 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     enough to hold a box with or without its top. Cut again within the hull, by the colour models its own
     seeds trained, the view finds such a face by its edges and its shade. But the hull holds a band of
     table around the object too, which the colour models may take (a print of the table's colour, a
-    shadow): what the view's evidence says there decides. The plane's parallax against a white top on a
-    white table is faint, yet above the table's noise over most of the face (the tint and the light of a
-    face above the plane are not quite those of the table point behind it); where another view confirms
-    the table point behind a piece within the table's own noise over most of it, the piece is table. A
-    piece stands out where its median is over what the table round the hull stands out by (beside the
-    object's foot the parallax of the table is not all noise: a stretch of lit oak beside a mustard bottle
-    stood out by 1.2, the oak round the hull by 1.8); where the piece as a whole does not, the part of it
-    that does, of a face's size, is a face (a dark can's side in shade that the cut gave one piece with
-    its shadow).
+    shadow): each piece the cut adds, of a face's size (:data:`_BAY` of the silhouette) and touching it, is
+    asked in turn what the view's evidence says of it (:class:`_BeyondOutline`'s questions).
 
     Without an empty workspace, only in a scan of three views, where the hull is of two and cannot show a
     face missing. With one, in a scan of any number: the hull of three views or more forgives one view's
-    miss (:meth:`_Hulls.into`), so :func:`_agreed` does not see a face that one view alone missed either,
-    and here the evidence decides each piece. A piece counts when it is of a face's size (:data:`_BAY` of
-    the silhouette). Where the object hides the table points behind most of it from the other views (a
-    tall box's white top, whose table points lie behind the box from the others), the view has no
-    evidence there; such a piece is kept where the other views see it alike (``seen_alike``, called only
-    then: :func:`_seen_alike`) over most of it (:data:`_MOSTLY`; over half of it with an empty workspace).
-    Without one their likeness is all that speaks for it, and the table beside a lying can, which the can
-    hides from them, is seen alike over half of it where the can behind it has the table's colour.
+    miss (:meth:`_Hulls.into`), so :func:`_agreed` does not see a face that one view alone missed either.
 
-    ``parallax``, the plane's parallax in units of its noise (:data:`_HIDDEN` where hidden) where ``score``
-    is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a shadow's look
-    against the empty workspace, if it has one. A piece with a shadow's look over half of it may be the
-    shadow beside the object, whose table points the other views' feet hide from them here and there: it
-    is kept only where both the parallax and the other views seeing it alike say a face. Where the object
-    hides the table points behind most of it (a white box's face turned from the lamp on white laminate,
-    which looks like the shadow beside it), the parallax says nothing, and the other views seeing it alike
-    decide, as for any hidden piece. Unless the parallax says table, such a piece that hides the grain the
-    table round it keeps (:func:`_grain_hidden`) is a face in shade whatever the other views see (they may
-    see a lit face where it stands, which looks nothing like it), where it is no darker than the shadow
-    cast in the open (:func:`_darker_than_the_open_shadow`).
-
-    Without an empty workspace, a face of the table's colour turned from the lamp matches the table in the
-    object's shadow behind it, which the other views see, so the parallax of its colour says table. But the
-    other views see the table's grain there (``plane_grain``, :func:`_plane_grain_sums`, called only then),
-    which a shadow on the table carries and a face above it does not: a piece with a shadow's look over half
-    of it, that hides that grain (:func:`_grain_hidden`, told over the part of it whose table points the
-    others see, however small: its standard error says how sure) and is no darker than the open shadow, is
-    a face in shade, whether the colour's parallax says table or nothing. Where the cut gave such a face to
-    the shadow beside it, the grain (the other views' or the empty workspace's) splits the two
+    ``seen_alike`` (:func:`_seen_alike`, called only when asked) gives where the other views see the view's
+    pixels alike; ``parallax``, the plane's parallax in units of its noise (:data:`_HIDDEN` where hidden)
+    where ``score`` is other evidence (against the empty workspace); ``shadow`` (bool), where the view has a
+    shadow's look against the empty workspace, if it has one; ``plane_grain``, without one, the table's
+    grain the other views see (:func:`_plane_grain_sums`, called only when asked). Where the cut gave a face
+    in shade to the shadow beside it, the grain (the other views' or the empty workspace's) splits the two
     (:func:`_split_by_lost_grain`)."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
@@ -1847,121 +1930,57 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     count, labels = cv2.connectedComponents(added, connectivity=8)
     if count <= 1 and plane_grain is None and (shadow is None or view.grain_sums is None):
         return mask
+    ask = _BeyondOutline(view, mask, score, hull, parallax, seen_alike, plane_grain)
     touching = cv2.dilate(mask, _SMALL) > 0
-    if parallax is None:
-        parallax = score
-    # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
-    seen = parallax != _HIDDEN
     grown = mask.copy()
-    alike = None
-    known = cv2.bitwise_or(hull, mask)
-    sums, open_shadow = None, None
-    x0, y0, x1, y1 = _cut_box(view, mask)
-    crop = (slice(y0, y1), slice(x0, x1))
-    low = score[crop] < 1.0
-
-    def darker_than_the_open_shadow(piece: np.ndarray) -> bool:
-        nonlocal open_shadow
-        if open_shadow is None:
-            open_shadow = _confirmed_shadow_round(view, score, crop)
-        return _darker_than_the_open_shadow(view, piece, known, open_shadow)
-
-    @functools.cache
-    def table_level() -> float:
-        # What the table round the hull stands out by (its _TABLE_LEVEL quantile, 1 at least), as for the faces
-        # standing out (_faces_standing_out): beside the object's foot, in its shadow or over a coarse grain
-        # the parallax is not all noise, and a stretch of table there stands out over 1 as a face does.
-        round_it = _table_round(hull, hull) & seen
-        return max(1.0, float(np.quantile(parallax[round_it], _TABLE_LEVEL))) if round_it.any() else 1.0
-
-    @functools.cache
-    def lit_table_ceiling() -> float | None:
-        # The same for every piece: the table round the silhouette and the other views' hull.
-        return _lit_table_ceiling(view, known)
-
-    def mapped_grain() -> np.ndarray:
-        nonlocal sums
-        assert plane_grain is not None
-        if sums is None:
-            sums = plane_grain()
-        return sums
-
-    def hides_the_mapped_grain(piece: np.ndarray) -> bool:
-        """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
-        confirm round the object, of its chromaticity), hides the grain the other views see at its table
-        points, and is no darker than the open shadow unless the other views see most of its table points.
-        The table under the object's overhang is hidden from the other views by the object above it, so
-        the grain they show is told there from a few points only; a face in shade stands in front of the
-        table points behind it, which they see: its darkness beside the open shadow says nothing (a face
-        turned from the lamp sees half of the sky, the shadow round the object most of it)."""
-        if plane_grain is None:
-            return False
-        looks = np.zeros(mask.shape, bool)
-        looks[crop] = _shadow_like(view.coarse[crop], low | piece[crop])
-        if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
-            return False
-        if not _grain_hidden(view, piece, known, mapped_grain()):
-            return False
-        others_see_behind = bool(2 * np.count_nonzero(seen[piece]) > np.count_nonzero(piece))
-        return others_see_behind or not darker_than_the_open_shadow(piece)
-
-    def hides_the_empty_workspace_grain(piece: np.ndarray) -> bool:
-        """Whether ``piece`` hides the grain the empty workspace shows and is no darker than the open shadow:
-        a shadow keeps the table's grain, a face in shade hides it; but so does the dark under the object's
-        overhang, where the object hides the sky too and the grain fades under JPEG's floor."""
-        return (view.grain_sums is not None and _grain_hidden(view, piece, known)
-                and not darker_than_the_open_shadow(piece))
-
     area_found = cv2.countNonZero(mask)
     for label in range(1, count):
         piece = labels == label
         area = int(piece.sum())
-        evidence = parallax[piece & seen]
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * area_found:
             continue
         if _lit_above_its_surroundings(view, piece, mask):
             grown[piece] = 255
             continue
-        if seen_alike is not None and _nearer_the_lamp_than_the_table(view, piece, lit_table_ceiling()):
-            # The parallax of a top of the table's colour says nothing: its table point looks as it does.
-            if alike is None:
-                alike = seen_alike()
-            if np.count_nonzero(alike[piece]) * 2 > area:
-                grown[piece] = 255
-                continue
-        stands = 2 * len(evidence) > area and median(np.ascontiguousarray(evidence, np.float32)) > table_level()
+        # The parallax of a top of the table's colour says nothing: its table point looks as it does.
+        if (seen_alike is not None and _nearer_the_lamp_than_the_table(view, piece, ask.lit_table_ceiling)
+                and ask.seen_alike_over(piece, 0.5)):
+            grown[piece] = 255
+            continue
+        mostly_seen = 2 * np.count_nonzero(ask.seen[piece]) > area
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
-            if not stands and 2 * len(evidence) > area:
+            # A piece with a shadow's look against the empty workspace over half of it may be the shadow
+            # beside the object, whose table points the other views' feet hide from them here and there: the
+            # parallax must say a face where it can, and the other views see it alike.
+            if not ask.stands_out(piece) and mostly_seen:
                 continue
-            if hides_the_empty_workspace_grain(piece):
+            if ask.hides_the_empty_workspace_grain(piece):
                 grown[piece] = 255
                 continue
-            # One that keeps the empty workspace's grain as the table round it does is the shadow, whatever
-            # the other views see above it (the object beside it may look as dark from them).
-            if view.grain_sums is not None and _grain_kept(view, piece, known):
+            if ask.keeps_the_empty_workspace_grain(piece):
                 continue
-        elif 2 * len(evidence) > area:
+        elif mostly_seen:
             # A face in shade may match the colour of the shadow behind it, but not carry the table's grain
             # that the other views see there.
-            if stands or hides_the_mapped_grain(piece):
+            if ask.stands_out(piece) or ask.hides_the_mapped_grain(piece):
                 grown[piece] = 255
             else:
                 # The cut may give a face and the table beside it one piece (a dark can's side in shade and
                 # its shadow on a dark mat): the part that stands out over the table's level, of a face's
                 # size, is the face.
-                grown[_standing_parts(piece & seen & (parallax > table_level()), touching, _BAY * area_found)] = 255
+                standing = piece & ask.seen & (ask.parallax > ask.table_level)
+                grown[_standing_parts(standing, touching, _BAY * area_found)] = 255
             continue
-        elif hides_the_mapped_grain(piece):
+        elif ask.hides_the_mapped_grain(piece):
             grown[piece] = 255
             continue
         # Mostly hidden from the other views' table (or a shadow's look): a face the others see, alike,
-        # over most of it (over half of it with an empty workspace).
-        if seen_alike is not None:
-            if alike is None:
-                alike = seen_alike()
-            if np.count_nonzero(alike[piece]) > (0.5 if view.background is not None else _MOSTLY) * area:
-                grown[piece] = 255
+        # over most of it (over half of it with an empty workspace; without one their likeness is all that
+        # speaks for it, and the table beside a lying can, which the can hides from them, is seen alike
+        # over half of it where the can behind it has the table's colour).
+        if ask.seen_alike_over(piece, 0.5 if view.background is not None else _MOSTLY):
+            grown[piece] = 255
     # The colour models cannot tell a face of the table's colour turned from the lamp from the box's shadow
     # beside it, so the cut may give both to the table, or find one piece of the two. The table's grain (the
     # other views' mapped through the plane, or the empty workspace's) tells them apart pixel by pixel: the
@@ -1970,12 +1989,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     beyond = (hull > 0) & (grown == 0)
     if plane_grain is not None:
         looks = np.zeros(mask.shape, bool)
-        looks[crop] = _shadow_like(view.coarse[crop], low | beyond[crop]) & beyond[crop]
-        grown = _split_by_lost_grain(view, grown, mask, looks, mapped_grain, None, known, hides_the_mapped_grain)
+        looks[ask.crop] = _shadow_like(view.coarse[ask.crop], ask.low | beyond[ask.crop]) & beyond[ask.crop]
+        grown = _split_by_lost_grain(view, grown, mask, looks, lambda: ask.mapped_grain, None, ask.known,
+                                     ask.hides_the_mapped_grain)
     elif shadow is not None and view.grain_sums is not None:
         empty_workspace_grain = view.grain_sums
         grown = _split_by_lost_grain(view, grown, mask, beyond & shadow, lambda: empty_workspace_grain,
-                                     view.shadow_look, known, hides_the_empty_workspace_grain)
+                                     view.shadow_look, ask.known, ask.hides_the_empty_workspace_grain)
     if count <= 1 and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
