@@ -1342,17 +1342,15 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     the shadow behind it as well, so the evidence alone does not tell; but such a face is lit by the sky
     and no darker than the open shadow, while the table by the foot, whose sky the object hides in part,
     is. A face that looks like the table (a dark can's top on its mat) has no shadow's look."""
-    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(added, connectivity=8)
-    if count <= 1:
+    pieces = _pieces_added(found, before)
+    if not pieces:
         return found
     x0, y0, x1, y1 = _cut_box(view, found)
     crop = (slice(y0, y1), slice(x0, x1))
     confirmed = score[crop] < 1.0
     open_shadow = None
     kept = found.copy()
-    for label in range(1, count):
-        piece = labels == label
+    for piece in pieces:
         area = int(piece.sum())
         evidence = score[piece & (score != _HIDDEN)]
         if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
@@ -1367,6 +1365,14 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     return kept
 
 
+def _pieces_added(found: np.ndarray, before: np.ndarray) -> list[np.ndarray]:
+    """The pieces (bool, each 8-connected) that a view's cut again, ``found`` (0/255), adds to ``before``
+    (0/255), opened by :data:`_SMALL`: a sliver along ``before``'s edge is no piece."""
+    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(added, connectivity=8)
+    return [labels == label for label in range(1, count)]
+
+
 def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: np.ndarray,
                                         hull: np.ndarray) -> np.ndarray:
     """``found`` (0/255), a view's cut again within the others' ``hull`` with its empty workspace, without the
@@ -1377,12 +1383,9 @@ def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: 
     table's colour, whose face in shade is of its shadow's colour); a face in shade hides the grain."""
     if view.shadow_look is None or view.grain_sums is None:
         return found
-    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(added, connectivity=8)
     known = cv2.bitwise_or(hull, before)
     kept = found.copy()
-    for label in range(1, count):
-        piece = labels == label
+    for piece in _pieces_added(found, before):
         if np.count_nonzero(view.shadow_look[piece]) <= _MOSTLY * np.count_nonzero(piece):
             continue
         # The cut may join a face in shade to the shadow beside it.
@@ -1926,16 +1929,14 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
         return mask
-    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(mask)), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(added, connectivity=8)
-    if count <= 1 and plane_grain is None and (shadow is None or view.grain_sums is None):
+    pieces = _pieces_added(found, mask)
+    if not pieces and plane_grain is None and (shadow is None or view.grain_sums is None):
         return mask
     ask = _BeyondOutline(view, mask, score, hull, parallax, seen_alike, plane_grain)
     touching = cv2.dilate(mask, _SMALL) > 0
     grown = mask.copy()
     area_found = cv2.countNonZero(mask)
-    for label in range(1, count):
-        piece = labels == label
+    for piece in pieces:
         area = int(piece.sum())
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * area_found:
@@ -1996,7 +1997,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         empty_workspace_grain = view.grain_sums
         grown = _split_by_lost_grain(view, grown, mask, beyond & shadow, lambda: empty_workspace_grain,
                                      view.shadow_look, ask.known, ask.hides_the_empty_workspace_grain)
-    if count <= 1 and np.array_equal(grown, mask):
+    if not pieces and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
 
