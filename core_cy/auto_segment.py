@@ -1621,12 +1621,12 @@ def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
         return mask
     assert view.shadow_look is not None  # set with the grain's sums (_background_cuts)
     touching = cv2.dilate(mask, _SMALL) > 0
+    known = cv2.bitwise_or(hull, mask)
     grown = mask.copy()
     for label in range(1, count):
         piece = labels == label
         if not (piece & touching).any() or piece.sum() <= _BAY * area or view.shadow_look[piece].mean() >= 0.5:
             continue
-        known = cv2.bitwise_or(hull, mask)
         if _grain_hidden(view, piece, known):
             # Told whole, a face joined to the lit table beside it hides the grain as well.
             grown[piece & ~_parts_keeping_the_grain(view, piece, known, in_shade=False)] = 255
@@ -1647,11 +1647,8 @@ def _grain_hidden(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.nd
     if sums is None:
         assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
         sums, shade = view.grain_sums, view.shadow_look
-    table = _table_grain_round(view, piece, known, sums, shade)
-    if table is None:
-        return False
-    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), _fine_per_coarse(view))
-    return found is not None and found[0] + 3.0 * found[1] < 0.5 * table[0]
+    told = _piece_and_table_grain(view, piece, known, sums, shade)
+    return told is not None and told[0] + 3.0 * told[1] < 0.5 * told[2]
 
 
 def _grain_kept(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
@@ -1659,12 +1656,20 @@ def _grain_kept(view: _View, piece: np.ndarray, known: np.ndarray) -> bool:
     converse of :func:`_grain_hidden`, its slope over half the table's by 3 standard errors. A shadow keeps
     the grain; a face in shade hides it, and a piece that is both holds less than half of it."""
     assert view.grain_sums is not None and view.shadow_look is not None  # set together (_background_cuts)
-    table = _table_grain_round(view, piece, known, view.grain_sums, view.shadow_look)
+    told = _piece_and_table_grain(view, piece, known, view.grain_sums, view.shadow_look)
+    return told is not None and told[0] - 3.0 * told[1] > 0.5 * told[2]
+
+
+def _piece_and_table_grain(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray,
+                           shade: np.ndarray | None) -> tuple[float, float, float] | None:
+    """The slope of the grain over ``piece``'s inner pixels, its standard error, and the slope the table round
+    it keeps (:func:`_table_grain_round`), as :func:`_grain_hidden` and :func:`_grain_kept` weigh them; None
+    where the table keeps no grain clear of its uncertainty, or the piece's is not known."""
+    table = _table_grain_round(view, piece, known, sums, shade)
     if table is None:
-        return False
-    found = _pooled_grain(view.grain_sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0),
-                          _fine_per_coarse(view))
-    return found is not None and found[0] - 3.0 * found[1] > 0.5 * table[0]
+        return None
+    found = _pooled_grain(sums, piece & (cv2.erode(piece.astype(np.uint8), _SMALL) > 0), _fine_per_coarse(view))
+    return None if found is None else (found[0], found[1], table[0])
 
 
 def _table_grain_round(view: _View, piece: np.ndarray, known: np.ndarray, sums: np.ndarray,
