@@ -244,20 +244,26 @@ for i in range(100_000):
 """
 
 
-def _read_lines(proc, until, timeout):
-    """Lines from ``proc.stdout`` until ``until(lines)`` holds or the pipe closes; fails on timeout."""
-    lines, buffer, deadline = [], b"", time.monotonic() + timeout
-    while not until(lines):
-        ready, _, _ = select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
-        if not ready:
-            pytest.fail(f"no output within {timeout} s; got {len(lines)} lines")
-        chunk = os.read(proc.stdout.fileno(), 65536)
-        if not chunk:
-            break
-        buffer += chunk
-        *complete, buffer = buffer.split(b"\n")
-        lines += [line.decode() for line in complete]
-    return lines
+class _PrintedLines:
+    """The whole lines a process prints, read as they come. What follows the last newline waits in ``partial``
+    for the rest of its line: a print may reach the pipe in two writes (the text, then its newline), so a read
+    can end inside a line, and a line cut short by the kill is never a whole one."""
+
+    def __init__(self, stream):
+        self.stream, self.lines, self.partial = stream, [], b""
+
+    def read_until(self, until, timeout):
+        """Reads until ``until(self.lines)`` holds or the pipe closes; fails on timeout."""
+        deadline = time.monotonic() + timeout
+        while not until(self.lines):
+            ready, _, _ = select.select([self.stream], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                pytest.fail(f"no output within {timeout} s; got {len(self.lines)} lines")
+            chunk = os.read(self.stream.fileno(), 65536)
+            if not chunk:
+                return
+            *complete, self.partial = (self.partial + chunk).split(b"\n")
+            self.lines += [line.decode() for line in complete]
 
 
 @pytest.mark.parametrize("kill_after", [1, 40])
@@ -265,23 +271,24 @@ def test_every_acknowledged_add_survives_kill_9(tmp_path, kill_after):
     path = tmp_path / "jobs.sqlite"
     proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(path)], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    printed = _PrintedLines(proc.stdout)
     try:
-        printed = _read_lines(proc, lambda lines: len(lines) >= kill_after, timeout=60)
+        printed.read_until(lambda lines: len(lines) >= kill_after, timeout=60)
         proc.send_signal(signal.SIGKILL)  # mid-stream: the writer is busy adding the next jobs
         assert proc.wait(timeout=10) == -signal.SIGKILL, proc.stderr.read().decode()
-        printed += _read_lines(proc, lambda lines: False, timeout=10)  # whatever it printed before dying
+        printed.read_until(lambda lines: False, timeout=10)  # whatever it printed before dying
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
         proc.stdout.close()
         proc.stderr.close()
-    assert len(printed) >= kill_after
+    assert len(printed.lines) >= kill_after
     with JobStore(path) as store:
-        for job_id in printed:
+        for job_id in printed.lines:
             assert store.get(job_id) is not None, job_id
         count = store.count(set(JobState))
-        assert len(printed) <= count <= len(printed) + 1  # at most one committed but not yet printed
+        assert len(printed.lines) <= count <= len(printed.lines) + 1  # at most one committed but not yet printed
         assert [s.request.request_id for s in store.unfinished()] == [f"r{i}" for i in range(count)]
 
 
