@@ -1,6 +1,6 @@
 """Benchmark of finding the object without being told its colour: printed objects on real-looking tables.
 
-    .venv/bin/python bench/bench_segment.py [--seeds 0 1] [--keep DIR] [--no-timing]
+    .venv/bin/python bench/bench_segment.py [--seeds 0 1] [--keep DIR] [--no-timing] [--ways ...] [--record FILE]
 
 Over `robocell sim scans --set printed` (workers.sim.scans.printed_set, for each seed: 16 grocery-like
 printed objects on oak, a rubber mat, white laminate, a cutting mat, and the classic wood and fabric, lit
@@ -23,7 +23,9 @@ segmentation, so the reconstruction uses its default), three ways:
     beside it for reference.
 
 A reconstruction that fails scores 0 and is counted. Prints tables; asserts nothing. Rendering takes a few
-minutes: --keep DIR keeps the bundles (and reuses them when DIR already holds them).
+minutes: --keep DIR keeps the bundles (and reuses them when DIR already holds them). --record FILE writes
+each scan's scores (per way: volumetric IoU, silhouette IoU per view, grasp verdict, error) as JSON, so
+that two runs can be compared scan by scan and view by view.
 """
 
 from __future__ import annotations
@@ -92,13 +94,13 @@ def best_grasp_holds(result, obj, plane) -> bool:
     return bool(verdict.holds)
 
 
-def score(spec, plain: Path, with_bg: Path) -> dict:
-    """{way: {"iou", "views" (silhouette IoU per view), "holds", "error"}} for one scan."""
+def score(spec, plain: Path, with_bg: Path, ways=WAYS) -> dict:
+    """{way: {"iou", "views" (silhouette IoU per view), "holds", "error"}} for one scan, each of ``ways``."""
     obj = spec.objects[0]
     truths = [cv2.imread(str(plain / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) > 0
               for i in range(len(spec.cameras))]
     out = {}
-    for way in WAYS:
+    for way in ways:
         entry: dict = {"iou": 0.0, "views": [0.0] * len(truths), "holds": False, "error": None}
         try:
             bundle = load_bundle(with_bg if way == "+ background" else plain)
@@ -122,31 +124,32 @@ def _cells(values) -> str:
     return f"{np.mean(values):>9.3f}{np.min(values):>8.3f}" if len(values) else f"{'-':>9}{'-':>8}"
 
 
-def tables(records: list[tuple]) -> None:
-    """records: (spec, scores)."""
+def tables(records: list[tuple], ways=WAYS) -> None:
+    """records: (spec, scores), the scores of each of ``ways``."""
+    seeing = [way for way in ways if way in SEEING]
     by_table, by_object = defaultdict(list), defaultdict(list)
     for spec, s in records:
         by_table[spec.table_kind].append(s)
         by_object[spec.object_kind].append(s)
     n_views = sum(len(spec.cameras) for spec, _ in records)
     print(f"\n(a) silhouette IoU per view against the true silhouette, {n_views} views of {len(records)} scans")
-    print(f"{'table':<16}" + "".join(f"{way:>17}" for way in SEEING))
-    print(f"{'':<16}" + "".join(f"{'mean':>9}{'worst':>8}" for _ in SEEING))
+    print(f"{'table':<16}" + "".join(f"{way:>17}" for way in seeing))
+    print(f"{'':<16}" + "".join(f"{'mean':>9}{'worst':>8}" for _ in seeing))
     for group, scans in [*sorted(by_table.items()), ("all", [s for _, s in records])]:
-        print(f"{group:<16}" + "".join(_cells([v for s in scans for v in s[way]["views"]]) for way in SEEING))
+        print(f"{group:<16}" + "".join(_cells([v for s in scans for v in s[way]["views"]]) for way in seeing))
     for title, groups in (("table", by_table), ("object", by_object)):
         print(f"\n(b) volumetric IoU against the true object, per {title} kind (failed reconstructions score 0)")
-        print(f"{title:<16}{'scans':>6}" + "".join(f"{way:>17}" for way in WAYS))
-        print(f"{'':<22}" + "".join(f"{'mean':>9}{'worst':>8}" for _ in WAYS))
+        print(f"{title:<16}{'scans':>6}" + "".join(f"{way:>17}" for way in ways))
+        print(f"{'':<22}" + "".join(f"{'mean':>9}{'worst':>8}" for _ in ways))
         for group, scans in [*sorted(groups.items()), ("all", [s for _, s in records])]:
-            print(f"{group:<16}{len(scans):>6}" + "".join(_cells([s[way]["iou"] for s in scans]) for way in WAYS))
-    print(f"\n{'':<22}" + "".join(f"{way:>17}" for way in WAYS))
-    print(f"{'failed':<22}" + "".join(f"{sum(s[way]['error'] is not None for _, s in records):>17}" for way in WAYS))
-    held = [f"{sum(s[way]['holds'] for _, s in records)} of {len(records)}" for way in WAYS]
+            print(f"{group:<16}{len(scans):>6}" + "".join(_cells([s[way]["iou"] for s in scans]) for way in ways))
+    print(f"\n{'':<22}" + "".join(f"{way:>17}" for way in ways))
+    print(f"{'failed':<22}" + "".join(f"{sum(s[way]['error'] is not None for _, s in records):>17}" for way in ways))
+    held = [f"{sum(s[way]['holds'] for _, s in records)} of {len(records)}" for way in ways]
     print(f"{'best grasp holds':<22}" + "".join(f"{h:>17}" for h in held))
     errors = defaultdict(list)
     for spec, s in records:
-        for way in WAYS:
+        for way in ways:
             if s[way]["error"] is not None:
                 errors[s[way]["error"][:100]].append(f"{spec.name} ({way})")
     if errors:
@@ -211,20 +214,28 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="printed_set seeds (default 0 1)")
     parser.add_argument("--keep", type=Path, metavar="DIR", help="keep the bundles here (reused when present)")
     parser.add_argument("--no-timing", action="store_true", help="skip the speed table")
+    parser.add_argument("--ways", nargs="+", choices=("default", "background", "masks"),
+                        default=["default", "background", "masks"], help="which ways to score (default all three)")
+    parser.add_argument("--record", type=Path, metavar="FILE", help="write each scan's scores here, as JSON")
     args = parser.parse_args()
+    ways = [way for way, short in zip(WAYS, ("default", "background", "masks")) if short in args.ways]
     cv2.setNumThreads(1)
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_segment_"))
     try:
-        records, pairs = [], []
+        records, pairs, seeds_of_records = [], [], []
         for seed in args.seeds:
             for spec, plain, with_bg in write_bundles(printed_set(seed), work / f"printed-{seed}"):
                 pairs.append((spec, plain, with_bg))
-                records.append((spec, score(spec, plain, with_bg)))
+                seeds_of_records.append(seed)
+                records.append((spec, score(spec, plain, with_bg, ways)))
         default = load_bundle(pairs[0][1]).segmentation
         print(f"printed_set seeds {args.seeds}: {len(records)} scans; the bundles' default segmentation here is "
               f"{default.method!r}")
-        tables(records)
-        if not args.no_timing:
+        tables(records, ways)
+        if args.record:
+            args.record.write_text(json.dumps({f"{seed}/{spec.name}": scores for seed, (spec, scores)
+                                               in zip(seeds_of_records, records)}, indent=1))
+        if not args.no_timing and set(SEEING) <= set(ways):
             # Bundles that reconstruct: a failing one stops early and would flatter the time.
             def timed(way: str, column: int) -> list[Path]:
                 return [pair[column] for pair, (_, s) in zip(pairs, records)
