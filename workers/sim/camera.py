@@ -11,8 +11,6 @@ from __future__ import annotations
 import asyncio
 import threading
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass, fields
-from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -22,7 +20,7 @@ from robocell.wire.errors import CameraError
 from robocell.workers.camera.backend import Camera, Snapshot
 
 from .objects import SimObject
-from .render import TableScene, render
+from .render import remembered, render
 from .scene import surroundings
 
 __all__ = ["SceneCamera", "SimCamera", "scaled_K"]
@@ -44,30 +42,6 @@ def scaled_K(K: ArrayLike, image_size: tuple[int, int], size: tuple[int, int]) -
     return K2
 
 
-@dataclass(frozen=True)
-class _RememberedTable(TableScene):
-    """The table, whose trace from each of the last few camera poses is kept (read-only): a cell's
-    poses repeat (a target's planned views, its backgrounds, a snapshot tried again), and the
-    table's texture is much of a printed scene's cost."""
-
-    def trace(self, T_world_cam: ArrayLike, K: ArrayLike, dist: ArrayLike | None,
-              image_size: tuple[int, int]) -> tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.float32]]:
-        T = np.ascontiguousarray(T_world_cam, dtype=np.float64)
-        K = np.ascontiguousarray(K, dtype=np.float64)
-        coefficients = None if dist is None else np.ascontiguousarray(dist, dtype=np.float64).tobytes()
-        return _traced(self, T.tobytes(), K.tobytes(), coefficients, (int(image_size[0]), int(image_size[1])))
-
-
-@lru_cache(maxsize=6)   # about 6 MB each at 640x480
-def _traced(table: _RememberedTable, T: bytes, K: bytes, dist: bytes | None,
-            image_size: tuple[int, int]) -> tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.float32]]:
-    traced = TableScene.trace(table, np.frombuffer(T).reshape(4, 4), np.frombuffer(K).reshape(3, 3),
-                              None if dist is None else np.frombuffer(dist), image_size)
-    for array in traced:
-        array.flags.writeable = False
-    return traced
-
-
 class SceneCamera:
     """Renders ``scene_objects`` on the table as a camera at a pose sees them; thread-safe.
 
@@ -86,7 +60,7 @@ class SceneCamera:
         self._dist = None if dist is None else np.asarray(dist, dtype=np.float64)
         self._seed, self.jpeg_quality = int(seed), int(jpeg_quality)
         table, self._light = surroundings(self._objects, self._seed)
-        self._table = _RememberedTable(**{f.name: getattr(table, f.name) for f in fields(table)})
+        self._table = remembered(table)
         self._lock = threading.Lock()  # one render at a time bounds memory
         self._count = 0
         #: Whether the object stands on the table; False: pictures of the empty workspace.

@@ -22,7 +22,7 @@ convention bug on one side then shows up in tests instead of cancelling out.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Sequence
 
@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from .objects import SimObject, vertex_normals
 from .textures import TABLE_KINDS, PrintedObject, table_pattern
 
-__all__ = ["Layers", "Light", "TableScene", "project", "render", "render_layers"]
+__all__ = ["Layers", "Light", "TableScene", "project", "remembered", "render", "render_layers"]
 
 #: Object base colour, BGR, before shading: red for the HSV segmentation.
 OBJECT_BGR = np.array([30.0, 30.0, 200.0])
@@ -276,6 +276,35 @@ class TableScene:
         tiles = (np.floor((t[0] + s_floor * dx[floor]) / 0.3) + np.floor((t[1] + s_floor * dy[floor]) / 0.3)) % 2
         out[floor] = np.array([70.0, 72.0, 75.0], dtype=np.float32) * (0.85 + 0.1 * tiles)[:, None]
         return out, on_table, table_xy
+
+
+@dataclass(frozen=True)
+class _RememberedTable(TableScene):
+    """The table, whose trace from each of the last few camera poses is kept (read-only): poses repeat
+    (a view and its background, a cell's planned views and its snapshots tried again), and the table's
+    texture is much of a printed scene's cost."""
+
+    def trace(self, T_world_cam: ArrayLike, K: ArrayLike, dist: ArrayLike | None,
+              image_size: tuple[int, int]) -> tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.float32]]:
+        T = np.ascontiguousarray(T_world_cam, dtype=np.float64)
+        K = np.ascontiguousarray(K, dtype=np.float64)
+        coefficients = None if dist is None else np.ascontiguousarray(dist, dtype=np.float64).tobytes()
+        return _traced(self, T.tobytes(), K.tobytes(), coefficients, (int(image_size[0]), int(image_size[1])))
+
+
+@lru_cache(maxsize=6)   # about 6 MB each at 640x480
+def _traced(table: _RememberedTable, T: bytes, K: bytes, dist: bytes | None,
+            image_size: tuple[int, int]) -> tuple[NDArray[np.float32], NDArray[np.bool_], NDArray[np.float32]]:
+    traced = TableScene.trace(table, np.frombuffer(T).reshape(4, 4), np.frombuffer(K).reshape(3, 3),
+                              None if dist is None else np.frombuffer(dist), image_size)
+    for array in traced:
+        array.flags.writeable = False
+    return traced
+
+
+def remembered(table: TableScene) -> TableScene:
+    """``table`` as it is, its trace from each of the last few camera poses kept: the same pictures."""
+    return _RememberedTable(**{f.name: getattr(table, f.name) for f in fields(table)})
 
 
 def _rasterise(

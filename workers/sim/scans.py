@@ -19,7 +19,7 @@ from robocell.core_cy.plan import look_at  # the one look_at: camera-to-world, O
 from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
-from .render import AMBIENT, Light, TableScene, render
+from .render import AMBIENT, Light, TableScene, remembered, render
 from .textures import PrintedObject, product_look, table_look
 
 __all__ = [
@@ -158,7 +158,8 @@ def write_scan(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     K = np.asarray(K, dtype=np.float64)
-    table = TableScene.from_seed(seed) if table is None else table
+    # Each view's background sees the table from the view's own pose: it is traced once for both.
+    table = remembered(TableScene.from_seed(seed) if table is None else table)
     look = dict(noise_sigma=noise_sigma, table=table, ambient=ambient, light=light, blur_sigma=blur_sigma)
 
     def write_jpeg(name: str, bgr: NDArray[np.uint8]) -> None:
