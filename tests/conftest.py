@@ -28,6 +28,27 @@ def sphere_bundle(sphere_bundle_template, tmp_path):
     return shutil.copytree(sphere_bundle_template, tmp_path / "sphere")
 
 
+@pytest.fixture(scope="session")
+def printed_scene(tmp_path_factory):
+    """The simulator's printed scenes (``printed_set(seed)``) rendered once each for the whole run: a call
+    ``printed_scene(seed, name)`` gives the scene's spec and its bundle's directory, written with its
+    empty workspace (``background{i}.jpg``). Many tests segment or fit the same scene, some from its
+    images alone and some with the backgrounds; the images, true masks and poses are the same bytes
+    either way (each view and each background has its own noise), so one rendering serves both, and a
+    test from the images alone leaves the backgrounds out."""
+    from robocell.workers.sim.scans import printed_set
+
+    written: dict[tuple[int, str], tuple[object, object]] = {}
+
+    def scene(seed: int, name: str):
+        if (seed, name) not in written:
+            spec = {spec.name: spec for spec in printed_set(seed)}[name]
+            written[seed, name] = spec, spec.write(tmp_path_factory.mktemp(f"printed-{seed}"), backgrounds=True)
+        return written[seed, name]
+
+    return scene
+
+
 # --- cells that several test modules share ---------------------------------------------------------
 # A cell's start is seconds of six processes' imports, and an idle cell still takes the CPU of its
 # heartbeats: a shared cell starts for the first module that uses it and stops after the last.

@@ -249,33 +249,30 @@ def test_reconstruct_defaults_to_auto(scans):
     assert min(_iou(s, t) for s, t in zip(result.silhouettes, truths)) > 0.9
 
 
-def test_a_background_keeps_what_only_looks_like_a_shadow(tmp_path):
+def test_a_background_keeps_what_only_looks_like_a_shadow(printed_scene):
     """A yellow bottle, a white-and-blue box and a white box on white laminate under one lamp (the
     simulator's printed scenes): their faces turned from the lamp are darker than the empty laminate with
     about its chromaticity, as a shadow is. Another view that sees the same table point unhidden does not
     see it darkened alike, so they stand above the table and are kept; the cast shadow is left out."""
     for name, least in (("laminate-mustard-bottle", 0.95), ("laminate-sugar-box-tall-box", 0.88),
                         ("laminate-white-box", 0.78)):
-        ious = _printed_scene_ious(tmp_path, 0, name, backgrounds=True)
+        ious = _printed_scene_ious(printed_scene, 0, name, backgrounds=True)
         assert np.mean(ious) > least, (name, ious)
 
 
-def _printed_scene_ious(directory, seed, name, *, backgrounds, jpeg_again=None):
+def _printed_scene_ious(printed_scene, seed, name, *, backgrounds, jpeg_again=None):
     """Silhouette IoU per view of one of the simulator's printed scenes (``printed_set(seed)``, its true masks
-    rendered with it), segmented by ``auto`` from its images alone or with its empty workspace's; with
-    ``jpeg_again``, its images compressed once more at that JPEG quality."""
-    from robocell.workers.sim.scans import printed_set
-
-    spec = {spec.name: spec for spec in printed_set(seed)}[name]
-    spec.write(directory, backgrounds=backgrounds)
-    bundle = load_bundle(directory / name)
+    rendered with it; the ``printed_scene`` fixture), segmented by ``auto`` from its images alone or with its
+    empty workspace's; with ``jpeg_again``, its images compressed once more at that JPEG quality."""
+    _, directory = printed_scene(seed, name)
+    bundle = load_bundle(directory)
     images = [cv2.imdecode(np.frombuffer(view.image, np.uint8), cv2.IMREAD_COLOR) for view in bundle.views]
     if jpeg_again is not None:
         images = [cv2.imdecode(cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, jpeg_again])[1], cv2.IMREAD_COLOR)
                   for image in images]
     empty = [cv2.imdecode(np.frombuffer(view.background, np.uint8), cv2.IMREAD_COLOR)
              for view in bundle.views] if backgrounds else None
-    truths = [cv2.imread(str(directory / name / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE)
+    truths = [cv2.imread(str(directory / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE)
               for i in range(len(images))]
     found = auto_silhouettes(images, [view.camera for view in bundle.views], support_plane=bundle.support_plane,
                              backgrounds=empty)
@@ -292,38 +289,38 @@ def _jpeg_scene_ious(scene, seed):
     return [_iou(silhouette, truth) for (silhouette, _), truth in zip(found, truths)]
 
 
-def test_a_view_that_misses_what_the_others_agree_on_is_cut_again(tmp_path):
+def test_a_view_that_misses_what_the_others_agree_on_is_cut_again(printed_scene):
     """A dark can on a dark rubber mat: from one view its top is of the mat's colour and light, and the
     other views see the mat there through the plane, so that view's own evidence leaves the top out (0.57
     before). The two others agree on the can; without that view none of them reaches out of the others'
     hull, with it they do: it holds too little, and is cut again with the others' hull added to its own."""
-    ious = _printed_scene_ious(tmp_path, 2, "rubber-mat-dark-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 2, "rubber-mat-dark-can", backgrounds=False)
     assert min(ious) > 0.88, ious
 
 
-def test_a_shadow_that_no_other_view_sees_is_table_where_it_keeps_the_grain(tmp_path):
+def test_a_shadow_that_no_other_view_sees_is_table_where_it_keeps_the_grain(printed_scene):
     """The strip of shadow under a lying can on a cutting mat: the can hides it from every other view, so
     no view can confirm it as a shadow on the table, and it was taken for the can's foot (0.84 before).
     Against the empty workspace it is darker, of the mat's colour, and keeps the mat's grid: table."""
-    ious = _printed_scene_ious(tmp_path, 2, "cutting-mat-printed-lying-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 2, "cutting-mat-printed-lying-can", backgrounds=True)
     assert min(ious) > 0.9, ious
 
 
-def test_a_top_of_the_table_s_colour_that_one_view_missed_is_looked_for_between_its_faces(tmp_path):
+def test_a_top_of_the_table_s_colour_that_one_view_missed_is_looked_for_between_its_faces(printed_scene):
     """A white box on white laminate, with the empty workspace: from one view its top is as bright as the
     laminate and of its tint, and that view's evidence finds only the sides (0.81 before). The top leaves a
     bay in that silhouette's convex outline, inside the other views' hull: the graph cut looks for the
     object there too."""
-    ious = _printed_scene_ious(tmp_path, 3, "laminate-white-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 3, "laminate-white-box", backgrounds=True)
     assert min(ious) > 0.87, ious
 
 
-def test_a_white_top_that_two_of_three_views_miss_is_found_within_the_others_hull(tmp_path):
+def test_a_white_top_that_two_of_three_views_miss_is_found_within_the_others_hull(printed_scene):
     """A white box on white laminate: the two side views' evidence leaves its top out (0.68 and 0.60
     before), and three views' hull holds a box with or without its top, so no view reaches out of the
     others'. Cut again within the other views' hull, each side view finds the top, and its own evidence
     there, faint but over the table's noise across most of the face, keeps it."""
-    ious = _printed_scene_ious(tmp_path, 3, "laminate-white-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 3, "laminate-white-box", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
@@ -395,81 +392,81 @@ def test_a_noisy_camera_s_noise_is_no_grain(tmp_path):
     assert min(ious) > 0.88, ious
 
 
-def test_a_face_of_the_table_s_own_grain_that_the_colour_models_drop_is_kept(tmp_path):
+def test_a_face_of_the_table_s_own_grain_that_the_colour_models_drop_is_kept(printed_scene):
     """A box printed with its oak table's own pattern: from one view its top is of the table's colour and
     light, and stands out through the plane by its grain alone (another stretch of the oak than the table
     point behind it). The colour models give it to the table, and the view lost its top (0.665 before). A
     piece that the grain alone carries, wider than the band the grain's window leaves along any edge and
     touching the silhouette, is a face: kept."""
-    ious = _printed_scene_ious(tmp_path, 1, "oak-table-colour-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 1, "oak-table-colour-box", backgrounds=False)
     assert ious[0] > 0.85 and min(ious) > 0.78, ious
 
 
-def test_a_shadow_that_no_other_view_sees_keeps_a_grain_too_faint_for_one_pixel(tmp_path):
+def test_a_shadow_that_no_other_view_sees_keeps_a_grain_too_faint_for_one_pixel(printed_scene):
     """The strip of shadow under a lying tin on wood, with the empty workspace: the tin hides it from every
     other view, and the wood's weave, dimmed in the shadow, is too faint against the sensor's noise for any
     pixel's own window to say that it is kept, so the strip was taken for the tin's foot (0.73 before).
     Told over the strip whole, the image is the empty workspace's grain dimmed, and nothing else: table."""
-    ious = _printed_scene_ious(tmp_path, 2, "wood-tin-lying-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 2, "wood-tin-lying-can", backgrounds=True)
     assert min(ious) > 0.9, ious
 
 
-def test_a_shadow_that_no_other_view_sees_is_table_from_the_images_alone(tmp_path):
+def test_a_shadow_that_no_other_view_sees_is_table_from_the_images_alone(printed_scene):
     """The strip of shadow under a lying tin on wood, from the images alone: the tin hides it from every
     other view, so only its look tells it from the tin, and the graph cut, seeded with it as the tin, kept
     it for the tin's dark foot (0.83 before). It is of the wood's colour darkened, and no brighter than the
     shadow the other views see beside the tin: seeded as table, the colour models leave it there."""
-    ious = _printed_scene_ious(tmp_path, 2, "wood-tin-lying-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 2, "wood-tin-lying-can", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_the_table_under_a_lying_tin_darker_than_any_shadow_in_the_open_is_dropped(tmp_path):
+def test_the_table_under_a_lying_tin_darker_than_any_shadow_in_the_open_is_dropped(printed_scene):
     """The table under a lying navy tin on wood, from the images alone: the tin hides it from every other
     view, and the graph cut kept it for the tin's shaded underside, whose dark navy a colour model cannot
     tell from dark grey, though it was seeded as probably table (0.775 before). The tin hides the sky from it
     as well as the lamp, so it is darker than the deepest shadow the other views see in the open: dropped."""
-    ious = _printed_scene_ious(tmp_path, 1, "wood-tin-lying-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 1, "wood-tin-lying-can", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_the_table_under_a_lying_tin_is_dropped_with_the_empty_workspace_too(tmp_path):
+def test_the_table_under_a_lying_tin_is_dropped_with_the_empty_workspace_too(printed_scene):
     """The same lying navy tin on wood, with the empty workspace: the strip under the tin changed as a
     shadow does, but the graph cut kept it for the tin's dark underside (0.759 before)."""
-    ious = _printed_scene_ious(tmp_path, 1, "wood-tin-lying-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 1, "wood-tin-lying-can", backgrounds=True)
     assert min(ious) > 0.9, ious
 
 
-def test_a_dark_can_whose_foot_is_its_mat_s_shadow_s_colour_keeps_it(tmp_path):
+def test_a_dark_can_whose_foot_is_its_mat_s_shadow_s_colour_keeps_it(printed_scene):
     """A grey can on a dark rubber mat, from the images alone: its lower body, in its own shade, is of the
     mat's shadow's colour and as dark as the table under a lying can, and hidden from the other views too.
     But a point of the other views' hull on its ray, above the table, looks alike from another view: the
     can, kept (0.72 when the darkness alone decided)."""
-    ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-dark-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 3, "rubber-mat-dark-can", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_a_view_cut_back_to_the_others_hull_still_finds_the_face_it_missed(tmp_path):
+def test_a_view_cut_back_to_the_others_hull_still_finds_the_face_it_missed(printed_scene):
     """A grey can on a dark rubber mat, from the images alone: in one view the can's top is of the mat's
     colour and light, so its evidence missed it, and its silhouette reached out of the other views' hull
     beside the can's foot; cut back to the hull, it kept no top (0.61 before). The others' hull holds the
     top: looked for there, as in a view not corrected, it is found."""
-    ious = _printed_scene_ious(tmp_path, 7, "rubber-mat-dark-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 7, "rubber-mat-dark-can", backgrounds=False)
     assert ious[1] > 0.9 and min(ious) > 0.85, ious
 
 
-def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_from_the_images_alone(tmp_path):
+def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_from_the_images_alone(printed_scene):
     """A blue tin on a dark rubber mat, from the images alone: its lower band, in its own shade, stands in
     front of table points that the tin hides from the other views, and the graph cut gave it to the mat,
     whose colour model holds the tin's dark shadow (0.83 before). It is darker than the mat, but dark blue,
     far from the grey of the mat's shadow: no shadow, the tin."""
-    ious = _printed_scene_ious(tmp_path, 0, "rubber-mat-tin-tin", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 0, "rubber-mat-tin-tin", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_with_the_empty_workspace(tmp_path):
+def test_a_dark_band_of_another_colour_than_the_shadow_is_kept_with_the_empty_workspace(printed_scene):
     """The same with the empty workspace: a blue tin's lower band on a dark rubber mat, darker than the
     empty mat at its pixels but dark blue, far from the mat's colour darkened (0.92 before)."""
-    ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-tin-tin", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 3, "rubber-mat-tin-tin", backgrounds=True)
     assert min(ious) > 0.94, ious
 
 
@@ -484,90 +481,90 @@ def test_a_shadow_of_another_colour_than_the_table_is_not_taken_for_a_dark_face(
     assert min(ious) > 0.8, ious
 
 
-def test_a_foot_that_two_views_took_for_the_shadow_is_looked_for_below_the_floating_hull(tmp_path):
+def test_a_foot_that_two_views_took_for_the_shadow_is_looked_for_below_the_floating_hull(printed_scene):
     """A dark can on a dark rubber mat, with the empty workspace: in two views its lower body in the shade
     is of the shadow's darkness and tint beside it, and each view's table point behind it is darkened
     alike in the other, so both left it out (0.655 and 0.669 before). The hull of the three silhouettes
     then stops short of the table, which what stands on it cannot: each view is looked into again down
     to the plane below the hull."""
-    ious = _printed_scene_ious(tmp_path, 1, "rubber-mat-dark-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 1, "rubber-mat-dark-can", backgrounds=True)
     assert min(ious) > 0.78, ious
 
 
-def test_a_top_hidden_from_the_other_views_table_is_kept_where_they_see_it_alike(tmp_path):
+def test_a_top_hidden_from_the_other_views_table_is_kept_where_they_see_it_alike(printed_scene):
     """A tall white-and-blue box on white laminate: from one view its white top is of the laminate's colour
     and light, and its table points lie behind the box from the other views, so the view has no evidence
     there and its graph cut gave the top to the table (0.81 before). The other views see the top, and a
     point of it looks alike from them and from this view: the piece is the box's."""
-    ious = _printed_scene_ious(tmp_path, 3, "laminate-sugar-box-tall-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 3, "laminate-sugar-box-tall-box", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_a_top_of_the_table_s_colour_brighter_than_the_lit_table_is_kept(tmp_path):
+def test_a_top_of_the_table_s_colour_brighter_than_the_lit_table_is_kept(printed_scene):
     """A white box on white laminate: from one view its top is of the laminate's colour, and the table
     point behind it, which the other views see, looks as it does, so the parallax says table there and the
     view left the top out (0.64 before). But the top stands nearer the lamp than the table and sees all of
     the sky: it is brighter than the lit laminate round the box, beyond the laminate's own spread, and the
     other views see a point of the box there alike."""
-    ious = _printed_scene_ious(tmp_path, 10, "laminate-white-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 10, "laminate-white-box", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_a_top_that_the_cut_gives_the_table_stands_out_by_its_light(tmp_path):
+def test_a_top_that_the_cut_gives_the_table_stands_out_by_its_light(printed_scene):
     """A tall white-and-blue box on white laminate: from one view its white top is of the laminate's colour
     and the graph cut within the other views' hull gives it to the table, nor does its parallax stand out
     (0.81 before). Its pixels are brighter than the lit laminate round the box beyond the laminate's own
     spread, and the other views see a point of the box there alike over all of it."""
-    ious = _printed_scene_ious(tmp_path, 5, "laminate-sugar-box-tall-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 5, "laminate-sugar-box-tall-box", backgrounds=False)
     assert min(ious) > 0.9, ious
 
 
-def test_a_lit_top_that_the_others_missed_too_stands_out_by_its_light_where_they_see_most_of_it_alike(tmp_path):
+def test_a_lit_top_that_the_others_missed_too_stands_out_by_its_light_where_they_see_most_of_it_alike(printed_scene):
     """A tall white-and-blue box on white laminate, with the empty workspace: from one view its white top
     changes hardly at all against it and the cut gives it to the table (0.83 before). It is brighter than
     the lit laminate round the box, but the other views' hull, carved by a view that missed its own view of
     the top, holds only the near part of it, so they see it alike over most of it, not all but its rim."""
-    ious = _printed_scene_ious(tmp_path, 5, "laminate-sugar-box-tall-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 5, "laminate-sugar-box-tall-box", backgrounds=True)
     assert ious[2] > 0.93 and min(ious) > 0.9, ious
 
 
-def test_a_lit_top_that_two_side_views_miss_stands_out_in_both_even_the_one_cut_again(tmp_path):
+def test_a_lit_top_that_two_side_views_miss_stands_out_in_both_even_the_one_cut_again(printed_scene):
     """A tall white-and-blue box on white laminate seen low from two sides: each side view's top is of the
     laminate's colour, a little brighter than the lit laminate, and both leave it out (0.51 and 0.62
     before). One of them, blamed for holding too little, was cut again within the others' hull, by colour
     models that cannot tell the top from the table, and no more was looked for there; the top's light
     stands out in both."""
-    ious = _printed_scene_ious(tmp_path, 18, "laminate-sugar-box-tall-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 18, "laminate-sugar-box-tall-box", backgrounds=False)
     assert min(ious[1], ious[2]) > 0.8 and ious[0] > 0.93, ious
 
 
-def test_the_shadow_by_the_foot_that_a_view_cut_again_took_in_is_left_out(tmp_path):
+def test_the_shadow_by_the_foot_that_a_view_cut_again_took_in_is_left_out(printed_scene):
     """A white box on white laminate, from the images alone: one view, blamed for holding too little, is cut
     again within the other views' hull, and the colour models of its seeds, whose faces in shade are of the
     shadow's colour, take the shadow by the box's foot that the loose hull holds (0.78 before). That piece
     looks like a shadow, the other views confirm the table behind it, and it is darker than the shadow
     cast in the open, as a face lit by the sky is not: left out."""
-    ious = _printed_scene_ious(tmp_path, 18, "laminate-white-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 18, "laminate-white-box", backgrounds=False)
     assert ious[0] > 0.93 and min(ious) > 0.83, ious
 
 
-def test_a_top_of_the_mat_s_colour_is_found_by_the_grain_it_hides(tmp_path):
+def test_a_top_of_the_mat_s_colour_is_found_by_the_grain_it_hides(printed_scene):
     """A dark can on a dark rubber mat, with the empty workspace: from one view its top is of the mat's
     colour and light, changed against the empty workspace in nothing but the mat's speckle, too faint for
     a pixel's window (0.60 before). The other views see the top, alike, within their hull beyond this
     view's silhouette; told over the piece whole, the image there has lost the grain that the mat round it
     keeps: the can's top."""
-    ious = _printed_scene_ious(tmp_path, 2, "rubber-mat-dark-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 2, "rubber-mat-dark-can", backgrounds=True)
     assert min(ious) > 0.9, ious
 
 
-def test_a_tint_that_one_view_alone_puts_on_the_table_is_cut_away(tmp_path):
+def test_a_tint_that_one_view_alone_puts_on_the_table_is_cut_away(printed_scene):
     """A white-and-blue box on white laminate, each picture compressed once more by JPEG (quality 75, as a
     camera's stream re-encoded): in one view a patch of the laminate behind the box took a tint, which
     stands out against the other views' laminate through the plane (0.63 before). That view alone reaches
     out of the others' hull there, and the two others agree with each other and with it elsewhere: what
     lies outside their hull is table."""
-    ious = _printed_scene_ious(tmp_path, 0, "laminate-sugar-box-tall-box", backgrounds=False, jpeg_again=75)
+    ious = _printed_scene_ious(printed_scene, 0, "laminate-sugar-box-tall-box", backgrounds=False, jpeg_again=75)
     assert min(ious) > 0.9, ious
 
 
@@ -634,239 +631,239 @@ def test_a_shadow_darker_than_the_table_s_deepest_taken_in_is_unsure():
     np.testing.assert_array_equal(unsure_pixels(image, silhouette, asked), unsure & asked)
 
 
-def test_a_top_of_the_table_s_colour_and_light_is_found_with_the_empty_workspace_too(tmp_path):
+def test_a_top_of_the_table_s_colour_and_light_is_found_with_the_empty_workspace_too(printed_scene):
     """A tall white-and-blue box on white laminate, with the empty workspace: from one view the box's white
     top changed hardly at all against the empty laminate, and the view left it out (0.88 before; 0.97 from
     its images alone). The two other views' hull holds the top; the graph cut finds it there, and the
     plane's parallax, as without the empty workspace, says it is no table (issue 20)."""
-    ious = _printed_scene_ious(tmp_path, 0, "laminate-sugar-box-tall-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 0, "laminate-sugar-box-tall-box", backgrounds=True)
     assert min(ious) > 0.93, ious
 
 
-def test_a_dark_face_that_changed_like_its_shadow_stands_out_by_its_colour(tmp_path):
+def test_a_dark_face_that_changed_like_its_shadow_stands_out_by_its_colour(printed_scene):
     """A printed box on wood, with the empty workspace: from one view the box's lower band in the shade
     changed against the empty workspace as the shadow beside it did, and another view sees that shadow at
     the band's table point, so the band was taken for the shadow (0.89 before; 0.96 from the images alone).
     Its colour is not that of the shadowed table point: the plane's parallax shows it clearly standing
     above the table (issue 20)."""
-    ious = _printed_scene_ious(tmp_path, 1, "wood-printed-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 1, "wood-printed-box", backgrounds=True)
     assert ious[0] > 0.93 and min(ious) > 0.85, ious
 
 
-def test_a_face_that_one_view_of_six_missed_is_looked_for_beyond_its_outline(tmp_path):
+def test_a_face_that_one_view_of_six_missed_is_looked_for_beyond_its_outline(printed_scene):
     """A printed ellipsoid on a dark rubber mat, six views with the empty workspace: from two views its dark
     lower band in the shade changed as its shadow did and was left out (0.83 and 0.89 before). The hull of
     five views forgives one view's miss, so no other view reaches out of it; but it holds the band beyond
     the view's outline, where the graph cut finds it, the plane's parallax says it stands, and the other
     views see it alike (issue 20)."""
-    ious = _printed_scene_ious(tmp_path, 3, "rubber-mat-printed-ellipsoid", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 3, "rubber-mat-printed-ellipsoid", backgrounds=True)
     assert min(ious) > 0.9, ious
 
 
-def test_a_shadow_under_a_lying_tin_darker_than_the_open_shadow_is_table_with_the_empty_workspace(tmp_path):
+def test_a_shadow_under_a_lying_tin_darker_than_the_open_shadow_is_table_with_the_empty_workspace(printed_scene):
     """A lying tin on wood, with the empty workspace: the strip of shadow under it, hidden from the other
     views by the tin, was seeded as the tin, and the graph cut kept it for the tin's dark blue foot (0.76
     and 0.85 before in two views; the images alone do no better). Against its own empty workspace it is
     the wood darkened with its colour kept, and darker than the darkest of the open shadow: the table.
     The open shadow is every view's where the lamp behind the tin hides all of it in one (seed 5)."""
     for seed in (1, 5):
-        ious = _printed_scene_ious(tmp_path / str(seed), seed, "wood-tin-lying-can", backgrounds=True)
+        ious = _printed_scene_ious(printed_scene, seed, "wood-tin-lying-can", backgrounds=True)
         assert min(ious) > 0.95, (seed, ious)
 
 
-def test_the_shadow_under_an_ellipsoid_s_belly_is_table_with_the_empty_workspace(tmp_path):
+def test_the_shadow_under_an_ellipsoid_s_belly_is_table_with_the_empty_workspace(printed_scene):
     """A printed ellipsoid on fabric, with the empty workspace: the shadow under its belly, hidden from the
     other views, stayed in two views' silhouettes (0.75 and 0.85 before; 0.99 and 0.97 from the images
     alone). It is the fabric darkened as the open shadow, its colour kept: seeded as table."""
-    ious = _printed_scene_ious(tmp_path, 5, "fabric-printed-ellipsoid", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 5, "fabric-printed-ellipsoid", backgrounds=True)
     assert min(ious) > 0.93, ious
 
 
-def test_a_near_black_can_s_lower_body_is_not_taken_for_the_table_it_hides_with_the_empty_workspace(tmp_path):
+def test_a_near_black_can_s_lower_body_is_not_taken_for_the_table_it_hides_with_the_empty_workspace(printed_scene):
     """A grey can on a dark rubber mat, with the empty workspace: from one view its near-black lower body is
     hidden from the other views, darker than the darkest of the open shadow, and of the mat's colour
     darkened within the colour test's floor (a few grey levels a channel: noise), so it was seeded as the
     table the can hides from the sky, for sure (0.58 before). So dark, the can's own faces pass that test
     too, and a face in shade, lit by the sky, is no darker than the can's darkest face in sight dimmed as
     the open shadow is: nothing tells it for table, and the colour models keep it for the can."""
-    ious = _printed_scene_ious(tmp_path, 9, "rubber-mat-dark-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 9, "rubber-mat-dark-can", backgrounds=True)
     assert min(ious) > 0.95, ious
 
 
-def test_a_dark_can_a_little_darker_than_its_near_black_mat_is_found_with_the_empty_workspace(tmp_path):
+def test_a_dark_can_a_little_darker_than_its_near_black_mat_is_found_with_the_empty_workspace(printed_scene):
     """A dark grey can on a near-black rubber mat (24 grey levels a channel), with the empty workspace: its
     lit side and top are 0.85 of the mat, four grey levels a channel. The coarse change against the empty
     workspace is 0 or one grey level over most of the mat, and the noise read from so few values was
     twice the sensor's, so only the can's stripes and shaded side changed, and the views kept a third to a
     half of it (0.47, 0.50, 0.29 before). The noise is read before the rounding where the rounding made it."""
-    ious = _printed_scene_ious(tmp_path, 11, "rubber-mat-dark-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 11, "rubber-mat-dark-can", backgrounds=True)
     assert min(ious) > 0.85, ious
 
 
-def test_a_white_box_s_face_turned_from_the_lamp_is_kept_with_the_empty_workspace(tmp_path):
+def test_a_white_box_s_face_turned_from_the_lamp_is_kept_with_the_empty_workspace(printed_scene):
     """A white box on white laminate, with the empty workspace: from one view its two faces turned from the
     lamp look like the shadow beside them and hide their table points from the other views, so the
     parallax says nothing of them, and the view lost them (0.61 before; 0.94 from the images alone). The
     other views see them alike: they are kept, as without the empty workspace; nor are they taken for the
     table in the box's shadow, the box's faces having the table's colour."""
-    ious = _printed_scene_ious(tmp_path, 5, "laminate-white-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 5, "laminate-white-box", backgrounds=True)
     assert min(ious) > 0.93, ious
 
 
-def test_a_white_box_s_face_in_shade_over_its_shadow_is_kept_from_the_images_alone(tmp_path):
+def test_a_white_box_s_face_in_shade_over_its_shadow_is_kept_from_the_images_alone(printed_scene):
     """A white box on white laminate, from the images alone: in one view the cut within the other views'
     hull finds the box's shaded front face, but its grey matches the table in the shadow behind it, so the
     colour evidence called it table (0.70 before). The face stands over the box's shadow and the dark rim
     round its foot, so most of what lies round it beyond the silhouette is darker than it, which a shadow
     on the table never is: kept."""
-    ious = _printed_scene_ious(tmp_path, 7, "laminate-white-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 7, "laminate-white-box", backgrounds=False)
     assert ious[2] > 0.77 and min(ious) > 0.77, ious
 
 
-def test_a_view_whose_excess_its_own_evidence_puts_on_the_plane_is_the_one_cut_back(tmp_path):
+def test_a_view_whose_excess_its_own_evidence_puts_on_the_plane_is_the_one_cut_back(printed_scene):
     """A box of its table's colour, from the images alone: one view's first cut took in the box's shadow and
     reaches out of the others' hull. With three views, leaving any one out of the carving clears the others'
     excess, so another view was blamed for holding too little and cut again within the others' hull, shadow
     and all (0.60 before). The reaching view's own evidence puts all of its excess on the plane: it is the
     one cut back."""
-    ious = _printed_scene_ious(tmp_path, 5, "oak-table-colour-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 5, "oak-table-colour-box", backgrounds=False)
     assert ious[1] > 0.68 and min(ious[0], ious[2]) > 0.78, ious
 
 
-def test_a_lit_top_of_the_table_s_colour_is_kept_where_it_stands_out_and_the_others_see_it_alike(tmp_path):
+def test_a_lit_top_of_the_table_s_colour_is_kept_where_it_stands_out_and_the_others_see_it_alike(printed_scene):
     """A white box on white laminate, from the images alone: from one view its lit top has the laminate's
     colour and light, so the cut within the other views' hull gives it to the table (0.65 before). The
     plane's parallax stands out over the top above what the table round the hull shows, and the other
     views see the top alike there: kept."""
-    ious = _printed_scene_ious(tmp_path, 6, "laminate-white-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 6, "laminate-white-box", backgrounds=False)
     assert ious[0] > 0.93 and min(ious) > 0.88, ious
 
 
-def test_a_lit_top_of_the_table_s_colour_is_kept_where_it_stands_out_with_the_empty_workspace_too(tmp_path):
+def test_a_lit_top_of_the_table_s_colour_is_kept_where_it_stands_out_with_the_empty_workspace_too(printed_scene):
     """The same white box, with the empty workspace: the top of another view changes hardly at all against
     it (0.85 before); the plane's parallax, standing out over the top, and the other views seeing it alike
     keep it."""
-    ious = _printed_scene_ious(tmp_path, 6, "laminate-white-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 6, "laminate-white-box", backgrounds=True)
     assert ious[1] > 0.93 and min(ious) > 0.82, ious
 
 
-def test_a_face_in_shade_that_hides_the_table_s_grain_is_kept_against_the_empty_workspace(tmp_path):
+def test_a_face_in_shade_that_hides_the_table_s_grain_is_kept_against_the_empty_workspace(printed_scene):
     """A box of its table's colour with its empty workspace: one view's face turned from the lamp is as dark
     as the cast shadow and of its chromaticity, so it has a shadow's look, the other views' feet hide the
     table behind most of it, and they see the lit face there, not alike (0.65 before). The oak's grain,
     which a shadow keeps and the table round the piece keeps, is gone from it: a face, kept."""
-    ious = _printed_scene_ious(tmp_path, 5, "oak-table-colour-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 5, "oak-table-colour-box", backgrounds=True)
     assert ious[2] > 0.95 and min(ious) > 0.85, ious
 
 
-def test_a_face_in_shade_that_hides_the_grain_the_other_views_see_is_kept_from_the_images_alone(tmp_path):
+def test_a_face_in_shade_that_hides_the_grain_the_other_views_see_is_kept_from_the_images_alone(printed_scene):
     """A box of its table's colour, from the images alone: in one view the cut within the other views' hull
     finds the box's faces turned from the lamp, bordered by lit table, but their colour matches the table
     in the box's shadow behind them, which the other views see, so the colour evidence called them table
     (0.63 before). The other views see the oak's grain at those table points; mapped through the plane it
     is gone from the faces, which a shadow on the table keeps: faces, kept."""
-    ious = _printed_scene_ious(tmp_path, 4, "oak-table-colour-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 4, "oak-table-colour-box", backgrounds=False)
     assert ious[1] > 0.88 and min(ious) > 0.9, ious
 
 
-def test_a_face_in_shade_as_dark_as_the_shadow_is_kept_where_the_others_see_the_table_behind_it(tmp_path):
+def test_a_face_in_shade_as_dark_as_the_shadow_is_kept_where_the_others_see_the_table_behind_it(printed_scene):
     """A box of its table's colour, from the images alone: in one view only its lit top was found (0.51
     before). The cut within the other views' hull finds its two faces turned from the lamp, which hide the
     oak's grain the other views see at the table points behind them, but they are as dark as the box's
     shadow, most of which lies within that hull too, so the open shadow left beside it was a strip of its
     soft edge, and the faces were taken for the table under an overhang. That table is hidden from the
     other views by the object above it; the table behind these faces is not: kept."""
-    ious = _printed_scene_ious(tmp_path, 14, "oak-table-colour-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 14, "oak-table-colour-box", backgrounds=False)
     assert ious[0] > 0.75 and min(ious[1:]) > 0.8, ious
 
 
-def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_beside_it_is_split_off_by_the_grain(tmp_path):
+def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_beside_it_is_split_off_by_the_grain(printed_scene):
     """A box of its table's colour, from the images alone: in one view its large face turned from the lamp
     is of the colour and darkness of the box's shadow beside it, and the cut within the other views' hull
     gave both to the table, so no piece of the cut held the face (0.56 before). The grain the other views
     see at the table points tells them apart pixel by pixel: the shadow keeps it, the face hides it."""
-    ious = _printed_scene_ious(tmp_path, 18, "oak-table-colour-box", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 18, "oak-table-colour-box", backgrounds=False)
     assert ious[0] > 0.75 and min(ious) > 0.8, ious
 
 
-def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_is_split_off_by_the_empty_workspace_s_grain(tmp_path):
+def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_is_split_off_by_the_empty_workspace_s_grain(printed_scene):
     """The same with the empty workspace: in one view of a box of its table's colour the face turned from
     the lamp is as dark as the box's shadow beside it and changes against the empty workspace as the shadow
     does, so the cut gave the two to the table (0.57 before). The empty workspace's grain, which the shadow
     keeps and the face hides, tells them apart pixel by pixel."""
-    ious = _printed_scene_ious(tmp_path, 12, "oak-table-colour-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 12, "oak-table-colour-box", backgrounds=True)
     assert ious[2] > 0.85 and min(ious) > 0.8, ious
 
 
-def test_a_lit_face_of_the_table_s_colour_that_hides_the_grain_whole_is_kept_with_the_empty_workspace(tmp_path):
+def test_a_lit_face_of_the_table_s_colour_that_hides_the_grain_whole_is_kept_with_the_empty_workspace(printed_scene):
     """A box of its table's colour with its empty workspace: in one view its lit face is the oak's colour and
     light, and changes against the empty workspace only by the grain it hides. It hides all of it, but on a
     table whose grain the noise blurs that reads under a sure change, so the graph cut's colour models, which
     cannot tell the face from the table, gave it to the table (0.57 before). A grain lost whole is no shadow
     and no noise: the face is seeded as the object for sure."""
-    ious = _printed_scene_ious(tmp_path, 9, "oak-table-colour-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 9, "oak-table-colour-box", backgrounds=True)
     assert ious[1] > 0.85 and min(ious) > 0.85, ious
 
 
-def test_a_shadow_beside_a_lying_can_that_keeps_the_grain_is_left_out_with_the_empty_workspace(tmp_path):
+def test_a_shadow_beside_a_lying_can_that_keeps_the_grain_is_left_out_with_the_empty_workspace(printed_scene):
     """A lying can on a cutting mat with its empty workspace: in one view the cut within the other views'
     hull took in the can's shadow beside it, whose table points the can hides from the other views, and
     which they see alike with the can above it (0.78 before). Against the empty workspace it keeps the
     mat's grain as the mat round it does, as a shadow does and a face does not: left out."""
-    ious = _printed_scene_ious(tmp_path, 15, "cutting-mat-printed-lying-can", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 15, "cutting-mat-printed-lying-can", backgrounds=True)
     assert ious[0] > 0.92 and min(ious) > 0.92, ious
 
 
-def test_the_shadow_a_view_cut_again_took_in_with_its_face_in_shade_is_left_out_by_the_grain(tmp_path):
+def test_the_shadow_a_view_cut_again_took_in_with_its_face_in_shade_is_left_out_by_the_grain(printed_scene):
     """A box of its table's colour with its empty workspace: one view missed the box's face in shade, and cut
     again within the other views' hull it found the face joined to the box's shadow by the foot, of the same
     colour (0.84 before). Split where each pixel's window has lost the grain, the part that keeps it as the
     table round it does is the shadow: left out, the face kept."""
-    ious = _printed_scene_ious(tmp_path, 4, "oak-table-colour-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 4, "oak-table-colour-box", backgrounds=True)
     assert ious[1] > 0.92 and min(ious) > 0.9, ious
 
 
-def test_a_face_that_hides_the_grain_is_kept_without_the_lit_table_joined_to_it(tmp_path):
+def test_a_face_that_hides_the_grain_is_kept_without_the_lit_table_joined_to_it(printed_scene):
     """A box of its table's colour with its empty workspace: beyond one view's silhouette, within the other
     views' hull, a piece that hides the grain told whole was the box's face and the lit table beside it, of
     the same colour and light (0.84 before, 1400 px of table taken in). The pixels whose own window keeps
     the grain as the table round it does, a part that keeps it told whole, are the table: left out."""
-    ious = _printed_scene_ious(tmp_path, 14, "oak-table-colour-box", backgrounds=True)
+    ious = _printed_scene_ious(printed_scene, 14, "oak-table-colour-box", backgrounds=True)
     assert ious[1] > 0.9 and min(ious) > 0.9, ious
 
 
-def test_lit_table_that_stands_out_no_more_than_the_table_round_the_hull_is_left_out(tmp_path):
+def test_lit_table_that_stands_out_no_more_than_the_table_round_the_hull_is_left_out(printed_scene):
     """A mustard bottle on oak, from the images alone: the cut within the other views' hull took a stretch of
     lit oak beside the bottle, and its plane parallax (1.2 times its noise over the stretch, the median) was
     over 1, so it was kept for a face (0.78 before). The oak round the hull stands out by as much there (1.8,
     its 0.9 quantile): a piece is a face where it stands out over what the table round it does."""
-    ious = _printed_scene_ious(tmp_path, 13, "oak-mustard-bottle", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 13, "oak-mustard-bottle", backgrounds=False)
     assert ious[1] > 0.9, ious
 
 
-def test_the_table_beside_a_lying_can_that_the_others_see_alike_over_half_of_it_is_left_out(tmp_path):
+def test_the_table_beside_a_lying_can_that_the_others_see_alike_over_half_of_it_is_left_out(printed_scene):
     """A printed can lying on a cutting mat, from the images alone: the cut within the other views' hull took
     a stretch of the mat beside the can, which the can hides from the other views, and they saw it alike over
     0.56 of it (where the can behind it is green), so it was kept for a face (0.79 before). Their likeness is
     all that speaks for such a piece without an empty workspace: it must hold over most of it."""
-    ious = _printed_scene_ious(tmp_path, 15, "cutting-mat-printed-lying-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 15, "cutting-mat-printed-lying-can", backgrounds=False)
     assert ious[0] > 0.9, ious
 
 
-def test_the_part_of_a_piece_that_stands_out_is_kept_where_the_piece_as_a_whole_does_not(tmp_path):
+def test_the_part_of_a_piece_that_stands_out_is_kept_where_the_piece_as_a_whole_does_not(printed_scene):
     """A dark can on a dark rubber mat, from the images alone: the cut within the other views' hull gave the
     can's side in shade and its shadow beside it as one piece, whose parallax stands out over the mat's
     (the table round the hull) on the side and not on the shadow. Weighed whole it was all kept (0.933) or,
     against the mat's level, all dropped (0.912); the part over the mat's level is the can's side."""
-    ious = _printed_scene_ious(tmp_path, 8, "rubber-mat-dark-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 8, "rubber-mat-dark-can", backgrounds=False)
     assert ious[2] > 0.945, ious
 
 
-def test_a_lying_can_s_shadow_that_every_other_view_sees_behind_it_is_table_from_the_images_alone(tmp_path):
+def test_a_lying_can_s_shadow_that_every_other_view_sees_behind_it_is_table_from_the_images_alone(printed_scene):
     """A printed can lying on a cutting mat, the lamp behind it from one view: that view's share of the
     can's shadow lies all in front of the can, where the can hides the mat from every other view, so it
     saw no shadow in the open to tell the hidden one by, and the cut kept it for the can's side in shade
     (0.73 before). The shadow's depth is the light's, the same from any view: cut again knowing how deep
     the other views see theirs, the view leaves the mat's colour darkened so to the table."""
-    ious = _printed_scene_ious(tmp_path, 6, "cutting-mat-printed-lying-can", backgrounds=False)
+    ious = _printed_scene_ious(printed_scene, 6, "cutting-mat-printed-lying-can", backgrounds=False)
     assert ious[1] > 0.9, ious

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 
@@ -313,66 +314,64 @@ def test_a_flat_hammer_lying_on_the_table_is_not_put_under_it(tmp_path):
     assert plane[:3] @ np.asarray(result.centre) + plane[3] > 0
 
 
-def _printed_parts(directory, seed: int, name: str, backgrounds: bool = False) -> tuple[int, float]:
-    """How many parts ``auto``'s model of one of the simulator's printed scenes has (its images alone,
-    a single-superquadric object with its cast shadow; ``backgrounds``: with a photograph of the empty
-    table beside each view), and its volumetric IoU with the truth."""
-    from robocell.workers.sim.scans import printed_set
-
-    spec = {spec.name: spec for spec in printed_set(seed)}[name]
-    spec.write(directory, backgrounds=backgrounds)
-    bundle = load_bundle(directory / name)
-    result = reconstruct(bundle.views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
+def _printed_parts(printed_scene, seed: int, name: str, backgrounds: bool = False) -> tuple[int, float]:
+    """How many parts ``auto``'s model of one of the simulator's printed scenes (the ``printed_scene``
+    fixture) has (its images alone, a single-superquadric object with its cast shadow; ``backgrounds``:
+    with a photograph of the empty table beside each view), and its volumetric IoU with the truth."""
+    spec, directory = printed_scene(seed, name)
+    bundle = load_bundle(directory)
+    views = bundle.views if backgrounds else [dataclasses.replace(view, background=None) for view in bundle.views]
+    result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
     model = [Part.from_dict(part.to_dict()) for part in result.parts]
     return len(result.parts), union_iou(model, parts_from_truth(spec.objects[0].truth()))
 
 
-def test_a_shadow_that_one_view_took_in_is_no_slab(tmp_path):
+def test_a_shadow_that_one_view_took_in_is_no_slab(printed_scene):
     """A tin lying on wood: one view's silhouette takes in the strip of shadow beside its foot. Three slabs,
     one held edge-on to the other views, explained that view the better with less volume than the tin,
     which passed for carving away what the view shows empty (3 parts, 0.515 before). It covers more of
     that view, not less, and the shadow's pixels are the table's shade: the tin stays one part."""
-    parts, iou = _printed_parts(tmp_path, 2, "wood-tin-lying-can")
+    parts, iou = _printed_parts(printed_scene, 2, "wood-tin-lying-can")
     assert parts == 1
     assert iou > 0.83
 
 
-def test_a_dark_face_that_one_view_left_out_is_no_second_part(tmp_path):
+def test_a_dark_face_that_one_view_left_out_is_no_second_part(printed_scene):
     """A box of the oak table's own colour and grain, lit from one side: one view's silhouette leaves out
     its face turned from the lamp, as dark as the shadow beside it. A slab on a lower box explained that
     and the other views' small errors by a little more than a part pays (2 parts, 0.589 before); on the
     pixels whose colour says which side they are on, it does not pay, and the box stays one part."""
-    parts, iou = _printed_parts(tmp_path, 1, "oak-table-colour-box")
+    parts, iou = _printed_parts(printed_scene, 1, "oak-table-colour-box")
     assert parts == 1
     assert iou > 0.85
 
 
-def test_a_box_that_one_view_sees_wrong_rests_on_a_face(tmp_path):
+def test_a_box_that_one_view_sees_wrong_rests_on_a_face(printed_scene):
     """A box of the oak table's own colour, a background photographed: the third view's silhouette leaves
     out much of the box (0.70 against the truth, the others 0.91 and 0.90). One superquadric tilted 21
     degrees, balanced on an edge as no box rests, followed it (0.587 before); held at rest on a face it
     explains the silhouettes as well, and the tilt pays in no two views."""
-    parts, iou = _printed_parts(tmp_path, 8, "oak-table-colour-box", backgrounds=True)
+    parts, iou = _printed_parts(printed_scene, 8, "oak-table-colour-box", backgrounds=True)
     assert parts == 1
     assert iou > 0.75
 
 
-def test_a_top_that_two_views_left_out_is_no_slab(tmp_path):
+def test_a_top_that_two_views_left_out_is_no_slab(printed_scene):
     """A tall sugar box on white laminate: two views' silhouettes leave out its white top, lit as the table
     is; the third sees the box whole. A box cut short with a slab 9 mm thick along one end, as tall as the
     third view says, explained the first two the better by covering less beyond their silhouettes' convex
     hulls, where a face left out explains them as well (2 parts, 0.790 before): it stays one box."""
-    parts, iou = _printed_parts(tmp_path, 10, "laminate-sugar-box-tall-box")
+    parts, iou = _printed_parts(printed_scene, 10, "laminate-sugar-box-tall-box")
     assert parts == 1
     assert iou > 0.9
 
 
-def test_which_samples_a_resting_box_contradicts_its_own_outline_says(tmp_path):
+def test_which_samples_a_resting_box_contradicts_its_own_outline_says(printed_scene):
     """A box of the oak table's own colour, its images alone: two views' silhouettes are far off (0.54 and
     0.52 against the truth), the third near (0.95). The one superquadric stood tilted 33 degrees; held at rest,
     it was fitted with the samples that the tilted model's outline contradicted set doubtful (0.470); with
     those its own outline contradicts instead, 0.70."""
-    parts, iou = _printed_parts(tmp_path, 9, "oak-table-colour-box")
+    parts, iou = _printed_parts(printed_scene, 9, "oak-table-colour-box")
     assert parts == 1
     assert iou > 0.65
 
@@ -409,13 +408,13 @@ def test_a_tilt_that_every_view_sees_is_kept():
     assert _union_iou(result.parts, _truth_parts(obj)) > 0.9
 
 
-def test_a_shadow_on_the_table_that_the_views_took_in_is_no_part(tmp_path):
+def test_a_shadow_on_the_table_that_the_views_took_in_is_no_part(printed_scene):
     """A dark can on a dark rubber mat: two views' silhouettes take in its shadow, which lies on the table
     in every view alike (2 parts before: the can and a sheet on the shadow). The model is the can alone.
     How well it fits depends on the search's path: with Python 3.11's numpy a sheet on the table is
     found, keeps the shadow off the can's outline and leaves the model (0.98); with 3.13's the sheet is
     never tried and the can is fitted round the shadow (0.745)."""
-    parts, iou = _printed_parts(tmp_path, 1, "rubber-mat-dark-can")
+    parts, iou = _printed_parts(printed_scene, 1, "rubber-mat-dark-can")
     assert parts == 1
     assert iou > 0.7
 
@@ -440,23 +439,23 @@ def test_a_part_that_no_view_sees_rise_off_the_table_is_flat_on_it():
     assert not _flat_on_table(at(0.02, 0.0004), cameras, plane)
 
 
-def test_a_part_that_one_view_pays_for_at_another_views_cost_is_not_kept(tmp_path):
+def test_a_part_that_one_view_pays_for_at_another_views_cost_is_not_kept(printed_scene):
     """A box of the oak table's own colour: one view's silhouette leaves out much of it (0.64 IoU with the
     box). A second part, the union thinner, explained that view by 0.08 more and carved away what it shows
     empty, but explained another view by 0.05 less (2 parts, 0.634 before): that moves one view's error to
     another, and the box stays one part."""
-    parts, iou = _printed_parts(tmp_path, 4, "oak-table-colour-box")
+    parts, iou = _printed_parts(printed_scene, 4, "oak-table-colour-box")
     assert parts == 1
     assert iou > 0.85
 
 
-def test_a_view_that_left_out_a_face_is_not_carved_into_slabs(tmp_path):
+def test_a_view_that_left_out_a_face_is_not_carved_into_slabs(printed_scene):
     """A tall printed box on white laminate, its empty table photographed: one view's silhouette leaves
     out the box's white top face (0.84 IoU with the one box). Three slabs round a column covered less
     of it and passed for carving away what that view shows empty (3 parts, 0.640 before), but what
     they left out lies beyond the silhouette's convex hull, where a face left out explains it as well
     as table seen through the object: the box stays one part."""
-    parts, iou = _printed_parts(tmp_path, 5, "laminate-sugar-box-tall-box", backgrounds=True)
+    parts, iou = _printed_parts(printed_scene, 5, "laminate-sugar-box-tall-box", backgrounds=True)
     assert parts == 1
     assert iou > 0.95
 
@@ -483,22 +482,22 @@ def test_a_part_whose_thickness_no_view_sees_is_a_sheet():
     assert not _sheet(plate(0.004, standing=True), cameras)
 
 
-def test_a_box_the_colour_of_its_table_is_no_two_sheets(tmp_path):
+def test_a_box_the_colour_of_its_table_is_no_two_sheets(printed_scene):
     """A box of the oak table's own colour and grain: one view's silhouette takes in its shadow, another a
     stretch of table, and most of its outline is on pixels auto cannot confirm. Held only by the samples
     left, along the shadow and the table, the fit made it a slab floating over the table from every start
     (0.01; two sheets once, 0.004), right or not as the last bit of a descent fell (0.95 on one platform,
     0.56 on another). Fitted with every sample sure, it agrees the better with the silhouettes: the
     model is a body where the box is, on any platform."""
-    parts, iou = _printed_parts(tmp_path, 5, "oak-table-colour-box")
+    parts, iou = _printed_parts(printed_scene, 5, "oak-table-colour-box")
     assert iou > 0.9
 
 
-def test_a_stretch_of_outline_that_the_other_views_contradict_does_not_drag_the_model(tmp_path):
+def test_a_stretch_of_outline_that_the_other_views_contradict_does_not_drag_the_model(printed_scene):
     """A box of the oak table's own colour: the views' silhouettes each take in or leave out a stretch
     that their colours cannot tell (0.888 / 0.879 / 0.899 IoU with the truth), and the one superquadric
     followed them (0.866). The samples of those stretches, far from the outline the views hold it to,
     are doubtful, and the fit goes on without their pull."""
-    parts, iou = _printed_parts(tmp_path, 3, "oak-table-colour-box")
+    parts, iou = _printed_parts(printed_scene, 3, "oak-table-colour-box")
     assert parts == 1
     assert iou > 0.89
