@@ -118,8 +118,8 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
-        # With the empty workspace: both coarse images before their rounding to whole grey levels (float32 BGR,
-        # the light not evened), whose change's noise the rounding does not hide (_change_noise).
+        # With the empty workspace: both coarse images before their rounding to whole grey levels (float32 BGR),
+        # whose change against each other the rounding does not hide in its steps (_log_ratio).
         self.unrounded: tuple[np.ndarray, np.ndarray] | None = None if background is None else (
             cv2.resize(image.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA),
             cv2.resize(background.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA))
@@ -1164,6 +1164,8 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
         view.coarse = view.coarse / field
         if view.background is not None:
             view.background = view.background / field
+        if view.unrounded is not None:
+            view.unrounded = (view.unrounded[0] / field, view.unrounded[1] / field)
 
 
 def _light_basis(view: _View, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -3289,9 +3291,16 @@ _RATIO_OFFSET = 8.0
 
 def _log_ratio(view: _View) -> np.ndarray:
     """(h, w, 3) float32: the log of each channel of the image over the empty workspace. The table's own
-    texture divides out; a shadow is a smooth darkening, the same seen from any view."""
-    assert view.background is not None
-    return _log_ratio_of(view.coarse, view.background)
+    texture divides out; a shadow is a smooth darkening, the same seen from any view.
+
+    Of both pictures before their rounding to whole grey levels: a coarse pixel averages many of the lens's,
+    so its value is known to a fraction of a grey level, and the rounding's half a grey level is a large step
+    in the log of a dark pixel. On a dark mat, a can's lower body in shade and the shadow beside it (a dozen
+    grey levels a channel) then changed alike within that step, and the other views' view of the shadow at
+    the body's table points took the body for the table (seed 17's rubber mat: a view 0.78 before, 0.85).
+    The noise of the change that first tells what changed at all is :func:`_change_noise`'s."""
+    assert view.unrounded is not None
+    return _log_ratio_of(*view.unrounded)
 
 
 def _log_ratio_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
@@ -3299,10 +3308,10 @@ def _log_ratio_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
     return np.log((image + _RATIO_OFFSET) / (empty + _RATIO_OFFSET)).astype(np.float32)
 
 
-def _change_noise(view: _View, change: np.ndarray) -> float:
-    """The noise of the view's ``change`` against the empty workspace (:func:`_log_ratio`'s magnitudes summed
-    over the channels) on the table: its :func:`_noise_level`, unless the coarse images' rounding to whole
-    grey levels made that estimate; then the noise of the same change before the rounding.
+def _change_noise(view: _View) -> float:
+    """The noise of the view's change against the empty workspace (:func:`_log_ratio`'s magnitudes summed
+    over the channels) on the table, as the coarse pictures rounded to whole grey levels give it, unless
+    their rounding made that estimate too high; then as the pictures before the rounding give it.
 
     Rounding moves each channel of either image by half a grey level at most, so the rounded change lies
     within a grey level's step of the unrounded one, and so would its noise. On a dark, flat table it does
@@ -3311,10 +3320,10 @@ def _change_noise(view: _View, change: np.ndarray) -> float:
     little darker than its mat (0.85 of it, four grey levels) then fell within that false noise and was
     left out. An estimate that rounding made too low (over half the pixels unchanged: none at all) lets
     more pass as changed, and the look through the plane that follows still tells the table; it is kept
-    (read before the rounding there too, two dark cans' views lost 0.12 and 0.18)."""
-    rounded = _noise_level(change)
-    assert view.background is not None and view.unrounded is not None
-    unrounded = _noise_level(np.abs(_log_ratio_of(*view.unrounded)).sum(axis=2))
+    (read before the rounding there too, two dark cans' views lost 0.12 and 0.18, and a third its top)."""
+    assert view.background is not None
+    rounded = _noise_level(np.abs(_log_ratio_of(view.coarse, view.background)).sum(axis=2))
+    unrounded = _noise_level(np.abs(_log_ratio(view)).sum(axis=2))
     # The empty workspace's grey levels are whole (unless the light was evened): the kernel's median counts them.
     table = np.array([median(np.ascontiguousarray(view.background[..., k]).ravel()) for k in range(3)],
                      view.background.dtype)
@@ -3377,7 +3386,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # under _SURE of its noise: the graph cut's colour models would give a face of the table's colour
         # (a box of its table's wood) to the table, and are not to be asked there.
         textures[view.index][np.nan_to_num(texture) >= _GRAIN_LOST_WHOLE] = _GRAIN_LOST_WHOLE_SCORE
-        score = np.maximum(change / max(_change_noise(view, change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
+        score = np.maximum(change / max(_change_noise(view), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         # A face as bright as the table changed its tint only (the other views judge whether the table
         # itself took that tint: the glow of a coloured object beside it).
         score = np.maximum(score, _tint_change(view))
