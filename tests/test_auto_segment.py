@@ -608,6 +608,25 @@ def test_unsure_pixels_are_the_table_s_shade_about_the_silhouette():
         unsure_pixels(image[:, :, 0], silhouette)
 
 
+def test_an_outline_across_which_the_image_shows_no_step_is_unsure():
+    """A grained table and a face of its own colour, brighter (lit from above), with a strip of the table
+    beside it taken in: the strip's false edge has table on both sides, and is unsure; the face's own
+    edges, a step from the table, are sure, the face's inside too (issue 20)."""
+    from robocell.core_cy.auto_segment import unsure_pixels
+
+    table = np.array([150, 140, 120], np.float64)
+    grain = np.random.default_rng(0).normal(1.0, 0.04, (200, 300, 1))
+    image = np.clip(np.round(table * grain), 0, 255).astype(np.uint8)
+    image[60:140, 60:140] = np.clip(np.round(1.25 * table * grain[60:140, 60:140]), 0, 255).astype(np.uint8)
+    silhouette = np.zeros((200, 300), np.uint8)
+    silhouette[60:140, 60:170] = 255  # the face and a strip of table 30 px wide
+    unsure = unsure_pixels(image, silhouette)
+    assert unsure[70:130, 167:173].all()  # the strip's false edge, either side
+    # The face's true edge, either side, and the face: sure but for the grain's darkest few hundredths,
+    # which lie as far below the table's median as a shadow does (as in the test above).
+    assert unsure[60:140, 54:66].mean() < 0.05 and unsure[60:140, 60:140].mean() < 0.05
+
+
 def test_a_shadow_darker_than_the_table_s_deepest_taken_in_is_unsure():
     """Under a lying can's side the table gets almost no light: a band there darker than any shadow the
     table's colour is kept in (nearly black) that the silhouette took in is unsure, as a dark face would be
