@@ -1623,7 +1623,8 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             plane_grain = None if plane is None else functools.cache(functools.partial(
                 _plane_grain_sums, views[i], others, plane, [masks[view.index] for view in others],
                 _coarse_aim(views[i], aim)))
-            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, plane_grain=plane_grain)
+            looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, plane_grain=plane_grain,
+                                              plane=plane)
             looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
             if plane_grain is not None:
                 looked[i] = _lit_faces_hiding_the_grain(views[i], looked[i], score, hull, seen_alike, plane_grain)
@@ -1843,8 +1844,8 @@ class _BeyondOutline:
 
     def __init__(self, view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
                  parallax: np.ndarray | None, seen_alike: Callable[[], np.ndarray] | None,
-                 plane_grain: Callable[[], np.ndarray] | None) -> None:
-        self.view, self.mask, self.score, self.hull = view, mask, score, hull
+                 plane_grain: Callable[[], np.ndarray] | None, plane: np.ndarray | None = None) -> None:
+        self.view, self.mask, self.score, self.hull, self.plane = view, mask, score, hull, plane
         self.parallax = score if parallax is None else parallax
         # The first cut gives the pixels whose table point no other view sees the score _HIDDEN.
         self.seen = self.parallax != _HIDDEN
@@ -1903,16 +1904,31 @@ class _BeyondOutline:
         return bool(self._seen_alike is not None
                     and np.count_nonzero(self.alike[piece]) > share * np.count_nonzero(piece))
 
+    @functools.cached_property
+    def lit_table(self) -> float | None:
+        """The median brightness of the table round the silhouette and the other views' hull (None where
+        none is clear of them)."""
+        round_it = _table_round(self.known, self.known)
+        return float(np.median(_brightness(self.view.coarse)[round_it])) if round_it.any() else None
+
     def lit_as_the_table(self, piece: np.ndarray) -> bool:
         """Whether ``piece``'s median brightness is within the light's spread over a table
         (:data:`_LIGHT_FIELD_BEYOND`) of the table's round the silhouette and the other views' hull, or above
         it: a face turned up is lit as the table is, a stretch of the object's shadow is not."""
-        round_it = _table_round(self.known, self.known)
-        if not round_it.any():
+        return self.lit_table is not None and float(np.median(_brightness(self.view.coarse)[piece])) >= np.exp(
+            -_LIGHT_FIELD_BEYOND) * self.lit_table
+
+    def on_a_side(self, piece: np.ndarray) -> bool:
+        """Whether the silhouette just below ``piece`` (within :data:`_SIDE_BELOW` of it, down the plane's
+        normal as the view sees it) is darker than the lit table beyond the light's spread over a table
+        (:data:`_LIGHT_FIELD_BEYOND`): a top seen from above the object's side sits on that side, which the
+        lamp above lights less than a face turned up. Where the silhouette below is lit as the table, it
+        already holds the face turned up (a box's top), and what lies beyond it is the table behind."""
+        if self.plane is None or self.lit_table is None:
             return False
-        brightness = _brightness(self.view.coarse)
-        return float(np.median(brightness[piece])) >= np.exp(-_LIGHT_FIELD_BEYOND) * float(
-            np.median(brightness[round_it]))
+        below = _just_below(self.view, self.plane, piece) & (self.mask > 0) & ~piece
+        return bool(below.any()) and float(np.median(_brightness(self.view.coarse)[below])) < np.exp(
+            -_LIGHT_FIELD_BEYOND) * self.lit_table
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
@@ -1957,10 +1973,32 @@ class _BeyondOutline:
         return self.view.grain_sums is not None and _grain_kept(self.view, piece, self.known)
 
 
+def _just_below(view: _View, plane: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(h, w) bool: where ``region`` (bool) lands moved down the plane's normal, as the view sees it at the
+    region's centre, by each whole coarse pixel up to :data:`_SIDE_BELOW`."""
+    ys, xs = np.nonzero(region)
+    centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
+    ray = view.rays(centre)[0]
+    normal = np.asarray(plane[:3], np.float64)
+    height = float(normal @ view.camera.center + plane[3])
+    on_plane = view.camera.center - height / float(ray @ normal) * ray
+    # Up is toward the camera's side of the plane; a step of a hundredth of the camera's height only sets
+    # the direction.
+    ends = view.to_coarse(view.project(np.array([on_plane, on_plane + 0.01 * height * normal]))[0])
+    up = (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-9)
+    source = region.astype(np.uint8)
+    below = np.zeros(region.shape, bool)
+    for step in range(1, _SIDE_BELOW + 1):
+        shift = np.array([[1.0, 0.0, -step * up[0]], [0.0, 1.0, -step * up[1]]], np.float32)
+        below |= cv2.warpAffine(source, shift, (source.shape[1], source.shape[0]), flags=cv2.INTER_NEAREST) > 0
+    return below
+
+
 def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull: np.ndarray,
                           seen_alike: Callable[[], np.ndarray] | None = None,
                           parallax: np.ndarray | None = None, shadow: np.ndarray | None = None,
-                          plane_grain: Callable[[], np.ndarray] | None = None) -> np.ndarray:
+                          plane_grain: Callable[[], np.ndarray] | None = None,
+                          plane: np.ndarray | None = None) -> np.ndarray:
     """``mask`` with the faces that the graph cut finds within the other views' ``hull`` beyond it, where
     the view's own evidence there is not contrary.
 
@@ -1990,7 +2028,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     pieces = _pieces_added(found, mask)
     if not pieces and plane_grain is None and (shadow is None or view.grain_sums is None):
         return mask
-    ask = _BeyondOutline(view, mask, score, hull, parallax, seen_alike, plane_grain)
+    ask = _BeyondOutline(view, mask, score, hull, parallax, seen_alike, plane_grain, plane)
     touching = cv2.dilate(mask, _SMALL) > 0
     grown = mask.copy()
     area_found = cv2.countNonZero(mask)
@@ -2025,14 +2063,17 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             if ask.stands_out(piece) or ask.hides_the_mapped_grain(piece):
                 grown[piece] = 255
             elif (view.background is None and ask.lit_as_the_table(piece)
-                  and ask.seen_alike_over(piece, _ALL_BUT_RIM)):
+                  and ask.seen_alike_over(piece, _ALL_BUT_RIM) and ask.on_a_side(piece)):
                 # A top of the table's colour and light (a dark can's on its dark mat) looks as the table point
                 # behind it does, so its parallax says nothing either way; but the other views see it alike,
                 # over all of it but its rim, where their hull holds it. The shadow beside the foot is seen
                 # alike too where the object behind it is as dark (the can's side), but it is darker than the
                 # lit table, which a face turned up to the lamp is not. From the images alone only: with the
                 # empty workspace, pieces so taken lost more than they gained on the printed set (nine views
-                # down by over 0.02, one up), and the empty workspace's own cues decide there.
+                # down by over 0.02, one up), and the empty workspace's own cues decide there. The top sits
+                # on the object's side, darker than a face turned up; a stretch of table lit alike beyond a
+                # box's own top does not (oak behind an oak-coloured box, which the others see alike because
+                # the box behind it has the oak's colour).
                 grown[piece] = 255
             else:
                 # The cut may give a face and the table beside it one piece (a dark can's side in shade and
@@ -2238,6 +2279,9 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
 _TABLE_LEVEL = 0.9
 #: A face the other views see is seen alike by them over all of it but its rim: over this share of it.
 _ALL_BUT_RIM = 0.85
+#: The silhouette just below a piece (the side under a top) is looked at over this many coarse pixels down
+#: the plane's normal: a few, within the side of the smallest can the coarse image shows.
+_SIDE_BELOW = 6
 
 
 def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
