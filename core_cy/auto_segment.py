@@ -1887,6 +1887,16 @@ class _BeyondOutline:
         assert self._plane_grain is not None
         return self._plane_grain()
 
+    @functools.cached_property
+    def seen_behind(self) -> np.ndarray:
+        """Where the other views see the table point behind each pixel as their silhouettes stand now. The
+        evidence's ``seen`` is of their first look, which may have missed the faces that now hide those table
+        points from them; the grain mapped from them (``plane_grain``, given without an empty workspace) is
+        of their silhouettes as they are."""
+        if self._plane_grain is None:
+            return self.seen
+        return self.seen & np.isfinite(self.mapped_grain[..., 0])
+
     def stands_out(self, piece: np.ndarray) -> bool:
         """Whether the other views see the table points behind over half of ``piece`` and its parallax's
         median there is over the table's level: where another view confirms the table point behind a piece
@@ -2045,7 +2055,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 and ask.seen_alike_over(piece, 0.5)):
             grown[piece] = 255
             continue
-        mostly_seen = 2 * np.count_nonzero(ask.seen[piece]) > area
+        mostly_seen = 2 * np.count_nonzero(ask.seen_behind[piece]) > area
         if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
             # A piece with a shadow's look against the empty workspace over half of it may be the shadow
             # beside the object, whose table points the other views' feet hide from them here and there: the
@@ -2102,6 +2112,8 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         looks[ask.crop] = _shadow_like(view.coarse[ask.crop], ask.low | beyond[ask.crop]) & beyond[ask.crop]
         grown = _split_by_lost_grain(view, grown, mask, looks, lambda: ask.mapped_grain, None, ask.known,
                                      ask.hides_the_mapped_grain)
+        if seen_alike is not None:
+            grown = _hidden_faces_in_shade(ask, grown)
     elif shadow is not None and view.grain_sums is not None:
         empty_workspace_grain = view.grain_sums
         grown = _split_by_lost_grain(view, grown, mask, beyond & shadow, lambda: empty_workspace_grain,
@@ -2109,6 +2121,48 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     if not pieces and np.array_equal(grown, mask):
         return mask
     return _filled_region(grown, view)
+
+
+def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray:
+    """``grown`` with the parts beyond it, within the other views' hull, whose table points the other views'
+    silhouettes hide from them, that touch it, are of a face's size (:data:`_BAY` of the silhouette), are
+    as dark as the shadow cast in the open and that the other views see alike over
+    :data:`_HIDDEN_FACE_ALIKE` of them.
+
+    A face in shade of the table's colour looks as a shadow on the table does, and the table points behind
+    it lie behind the object from the other views, so neither the plane's parallax nor the grain they map
+    says anything there. But a shadow on the table lies at its own table point: where the others'
+    silhouettes hide that point from them, the points of their hull on its ray stand in the air before the
+    object, and they see there the object's other faces, mostly unlike it; a face stands on the object's
+    surface, which they see alike (over 0.61 to 0.67 of each such face of the printed set's oak boxes, the
+    table beside a lying can or an ellipsoid over 0.50 to 0.52). A face turned from the lamp is lit by the
+    sky alone, as the open shadow is (:data:`_LIGHT_FIELD_BEYOND`), and no darker than it
+    (:func:`_darker_than_the_open_shadow`); the shadow's soft edge is lighter, the table under the
+    object's overhang darker."""
+    beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
+    open_shadow = ask.open_shadow & _clear_of(ask.known)
+    if not open_shadow.any():
+        return grown
+    brightness = _brightness(ask.view.coarse)
+    shade = float(np.median(brightness[open_shadow])) * np.exp(_LIGHT_FIELD_BEYOND)
+    grown = grown.copy()
+    count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                            connectivity=8)
+    near = cv2.dilate(grown, _SMALL) > 0
+    least = _BAY * cv2.countNonZero(ask.mask)
+    for label in range(1, count):
+        part = labels == label
+        if not (part & near).any() or part.sum() <= least or float(np.median(brightness[part])) > shade:
+            continue
+        if (np.count_nonzero(ask.alike[part]) > _HIDDEN_FACE_ALIKE * part.sum()
+                and not ask.darker_than_the_open_shadow(part)):
+            grown[part] = 255
+    return grown
+
+
+#: A face in shade whose table points the object hides from the other views is seen alike by them over
+#: this share of it.
+_HIDDEN_FACE_ALIKE = 0.6
 
 
 def _standing_parts(standing: np.ndarray, touching: np.ndarray, least: float) -> np.ndarray:
