@@ -1944,6 +1944,13 @@ class _BeyondOutline:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
         return _darker_than_the_open_shadow(self.view, piece, self.known, self.open_shadow)
 
+    def looks_a_shadow(self, piece: np.ndarray) -> bool:
+        """Whether ``piece`` has a shadow's look over half of it: darker than the table the view's evidence
+        confirms round the object, of its chromaticity (:func:`_shadow_like`)."""
+        looks = np.zeros(self.mask.shape, bool)
+        looks[self.crop] = _shadow_like(self.view.coarse[self.crop], self.low | piece[self.crop])
+        return bool(2 * np.count_nonzero(looks[piece]) >= np.count_nonzero(piece))
+
     def hides_the_mapped_grain(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
         confirm round the object, of its chromaticity), hides the grain the other views see at its table
@@ -1958,11 +1965,7 @@ class _BeyondOutline:
         face in shade stands in front of the table points behind it, which they see: its darkness beside the
         open shadow says nothing (a face turned from the lamp sees half of the sky, the shadow round the
         object most of it)."""
-        if self._plane_grain is None:
-            return False
-        looks = np.zeros(self.mask.shape, bool)
-        looks[self.crop] = _shadow_like(self.view.coarse[self.crop], self.low | piece[self.crop])
-        if 2 * np.count_nonzero(looks[piece]) < np.count_nonzero(piece):
+        if self._plane_grain is None or not self.looks_a_shadow(piece):
             return False
         if not _grain_hidden(self.view, piece, self.known, self.mapped_grain):
             return False
@@ -2125,8 +2128,8 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
 
 def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray:
     """``grown`` with the parts beyond it, within the other views' hull, whose table points the other views'
-    silhouettes hide from them, that touch it, are of a face's size (:data:`_BAY` of the silhouette), are
-    as dark as the shadow cast in the open and that the other views see alike over
+    silhouettes hide from them, that touch it, are of a face's size (:data:`_BAY` of the silhouette), have a
+    shadow's look and are as dark as the shadow cast in the open, and that the other views see alike over
     :data:`_HIDDEN_FACE_ALIKE` of them.
 
     A face in shade of the table's colour looks as a shadow on the table does, and the table points behind
@@ -2144,7 +2147,13 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
     if not open_shadow.any():
         return grown
     brightness = _brightness(ask.view.coarse)
+    # As dark as the open shadow within the light's spread over a table, and darker than the lit table by
+    # that spread both ways: the shade of a face turned from the lamp, not the light varied over a table
+    # where the object's shadow is faint (on fabric, the shadow is 0.74 of the lit table, the oak's 0.36).
     shade = float(np.median(brightness[open_shadow])) * np.exp(_LIGHT_FIELD_BEYOND)
+    if ask.lit_table is None:
+        return grown
+    shade = min(shade, np.exp(-2.0 * _LIGHT_FIELD_BEYOND) * ask.lit_table)
     grown = grown.copy()
     count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
                                             connectivity=8)
@@ -2154,7 +2163,7 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
         part = labels == label
         if not (part & near).any() or part.sum() <= least or float(np.median(brightness[part])) > shade:
             continue
-        if (np.count_nonzero(ask.alike[part]) > _HIDDEN_FACE_ALIKE * part.sum()
+        if (np.count_nonzero(ask.alike[part]) > _HIDDEN_FACE_ALIKE * part.sum() and ask.looks_a_shadow(part)
                 and not ask.darker_than_the_open_shadow(part)):
             grown[part] = 255
     return grown
