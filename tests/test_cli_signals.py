@@ -33,12 +33,14 @@ EXIT_S = 60.0
 class Foreground:
     """A robocell command run as a shell's foreground job, its output gathered as it comes."""
 
-    def __init__(self, argv: list[str], *, cwd: Path) -> None:
+    def __init__(self, argv: list[str], *, cwd: Path, sigint_ignored: bool = False) -> None:
+        """``sigint_ignored``: the command starts with SIGINT ignored, as a script's background job does."""
         self.tag = uuid.uuid4().hex
         env = {**os.environ, "ROBOCELL_TEST_TAG": self.tag}
+        ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None
         self.process = subprocess.Popen([sys.executable, "-m", "robocell", *argv], cwd=cwd, env=env,
                                         stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                        start_new_session=True)
+                                        start_new_session=True, preexec_fn=ignore)
         self._lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -123,8 +125,8 @@ def _cell_toml(tmp_path: Path) -> Path:
 def foreground(tmp_path):
     started: list[Foreground] = []
 
-    def start(*argv: str) -> Foreground:
-        command = Foreground(list(argv), cwd=tmp_path)
+    def start(*argv: str, sigint_ignored: bool = False) -> Foreground:
+        command = Foreground(list(argv), cwd=tmp_path, sigint_ignored=sigint_ignored)
         started.append(command)
         return command
 
@@ -199,8 +201,10 @@ def test_ctrl_c_on_replay_web_ends_the_viewer(foreground, tmp_path):
         recording.log_text("moving")
     config = tmp_path / "replay.toml"
     config.write_text(f"run_dir = '{run_dir}'\n")
+    # Started with SIGINT ignored, as a script's background job is (CI's, once): Python then installs no
+    # Ctrl-C handler of its own, and the command once went on serving for good.
     replay = foreground("--config", str(config), "replay", "j1", "--web", "--web-port", str(free_port()),
-                        "--grpc-port", str(free_port()))
+                        "--grpc-port", str(free_port()), sigint_ignored=True)
     replay.wait_for("serving")
     wait_until(lambda: len(replay.left_behind()) >= 2, timeout=30, what="the viewer to start")
     replay.ctrl_c()

@@ -85,18 +85,20 @@ def _replay(args: argparse.Namespace) -> int:
                 raise ConfigError(f"port {port} on {args.bind} is in use by {holder}: give {option} another port")
         print(f"serving {path}: open {web_viewer_address(args.bind, args.web_port, args.grpc_port)} "
               f"(Ctrl-C stops)", flush=True)
-    # A `kill` of this command stops the viewer too, as a Ctrl-C does (which reaches both). Either may come
-    # while the viewer is being started: it is a stop then too, not an error.
+    # A `kill` of this command stops the viewer too, as a Ctrl-C does. Either may come while the viewer is
+    # being started: it is a stop then too, not an error. Ctrl-C is caught here rather than left to Python's
+    # default, which a process started with SIGINT ignored (a script's background job) never installs: such
+    # a command, and the viewer it starts, would not hear a Ctrl-C sent to them.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, _terminated)
     viewer: subprocess.Popen[bytes] | None = None
     try:
         viewer = subprocess.Popen(argv)
         return viewer.wait()
-    except (KeyboardInterrupt, _Terminated) as stop:
+    except (KeyboardInterrupt, _Terminated):
         if viewer is None:  # a Ctrl-C reached the viewer's process group as well
             return 0
-        if isinstance(stop, _Terminated):
-            viewer.terminate()
+        viewer.terminate()  # whether or not the Ctrl-C reached it
         try:
             viewer.wait(_STOP_WAIT_S)
         except subprocess.TimeoutExpired:
