@@ -344,6 +344,7 @@ class CellDaemon(RequestHandlers):
         self.record(job, "log_text", f"{Lifecycle.SUCCEEDED.value}: {message}", "INFO")
         return await self._recorder.verdict(job.job_id, self.run_dir / f"{job.job_id}.rrd", RECORDING_VERDICT_S)
 
+
 def _label(job: Job) -> str:
     """What the job was doing, in its error: "<what>: <reason>"."""
     return job.progress.doing if job.progress is not None else "starting"

@@ -189,8 +189,6 @@ def reduced_silhouettes(jpegs: Sequence[bytes], segmentation: Segmentation,
     return silhouettes
 
 
-
-
 def check_model(parts: Sequence[CoreSuperquadric], cameras: Sequence[Camera], silhouettes: Sequence[np.ndarray],
                 min_iou: float = MIN_VIEW_IOU) -> Verdict:
     """Whether the model's projection covers the daemon's own silhouette in every view."""
@@ -208,7 +206,6 @@ def check_grasp(grasp: Grasp, parts: Sequence[CoreSuperquadric], gripper: Grippe
     (:func:`robocell.core_cy.model_check.grasp_problem`)."""
     return grasp_problem(np.asarray(grasp.T_world_grasp, dtype=np.float64), grasp.width, parts, gripper,
                          support_plane)
-
 
 
 def verify_reconstruction(result: Reconstruction, jpegs: Sequence[bytes], cameras: Sequence[Camera],

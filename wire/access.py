@@ -209,7 +209,6 @@ def access_control(users: Mapping[str, Mapping[str, Iterable[str]]]) -> dict[str
     }
 
 
-
 #: What each part of a cell does under its role, for the one line that says it may not.
 PARTS = {"daemon": "run the cell daemon", "robot": "run the robot worker", "camera": "run the camera worker",
          "reconstruct": "run a reconstruction worker"}

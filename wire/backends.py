@@ -57,6 +57,7 @@ def load_backend(part: str, name: str) -> Callable[..., Any]:
     module, _, function = where.partition(":")
     return getattr(importlib.import_module(module), function)
 
+
 #: The OPC server name the simulated gateway answers to.
 SIM_OPC_SERVER = "robocell.KukaSim"
 

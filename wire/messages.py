@@ -39,6 +39,8 @@ MAX_VIEWS = 16
 #: is 0.8 mm across and 0.1 degree turns the image by 1 px). A robot returns to a taught pose
 #: far closer (a KUKA arm within 0.05 mm); the planned poses of a target are the same numbers.
 BACKGROUND_POSE_TOLERANCE = (0.001, 0.1)
+
+
 def _rigid(matrix: list[list[float]]) -> list[list[float]]:
     problem = rigid_error(matrix)
     if problem is not None:
