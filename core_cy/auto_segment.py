@@ -1919,13 +1919,18 @@ class _BeyondOutline:
         """The median brightness of the table round the silhouette and the other views' hull (None where
         none is clear of them)."""
         round_it = _table_round(self.known, self.known)
-        return float(np.median(_brightness(self.view.coarse)[round_it])) if round_it.any() else None
+        return float(np.median(self.brightness[round_it])) if round_it.any() else None
+
+    @functools.cached_property
+    def brightness(self) -> np.ndarray:
+        """(h, w) the view's coarse pixels' channels summed (:func:`_brightness`), made once for every piece."""
+        return _brightness(self.view.coarse)
 
     def lit_as_the_table(self, piece: np.ndarray) -> bool:
         """Whether ``piece``'s median brightness is within the light's spread over a table
         (:data:`_LIGHT_FIELD_BEYOND`) of the table's round the silhouette and the other views' hull, or above
         it: a face turned up is lit as the table is, a stretch of the object's shadow is not."""
-        return self.lit_table is not None and float(np.median(_brightness(self.view.coarse)[piece])) >= np.exp(
+        return self.lit_table is not None and float(np.median(self.brightness[piece])) >= np.exp(
             -_LIGHT_FIELD_BEYOND) * self.lit_table
 
     def on_a_side(self, piece: np.ndarray) -> bool:
@@ -1937,7 +1942,7 @@ class _BeyondOutline:
         if self.plane is None or self.lit_table is None:
             return False
         below = _just_below(self.view, self.plane, piece) & (self.mask > 0) & ~piece
-        return bool(below.any()) and float(np.median(_brightness(self.view.coarse)[below])) < np.exp(
+        return bool(below.any()) and float(np.median(self.brightness[below])) < np.exp(
             -_LIGHT_FIELD_BEYOND) * self.lit_table
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
@@ -2144,16 +2149,14 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
     object's overhang darker."""
     beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
     open_shadow = ask.open_shadow & _clear_of(ask.known)
-    if not open_shadow.any():
+    if not open_shadow.any() or ask.lit_table is None:
         return grown
-    brightness = _brightness(ask.view.coarse)
+    brightness = ask.brightness
     # As dark as the open shadow within the light's spread over a table, and darker than the lit table by
     # that spread both ways: the shade of a face turned from the lamp, not the light varied over a table
     # where the object's shadow is faint (on fabric, the shadow is 0.74 of the lit table, the oak's 0.36).
-    shade = float(np.median(brightness[open_shadow])) * np.exp(_LIGHT_FIELD_BEYOND)
-    if ask.lit_table is None:
-        return grown
-    shade = min(shade, np.exp(-2.0 * _LIGHT_FIELD_BEYOND) * ask.lit_table)
+    shade = min(float(np.median(brightness[open_shadow])) * np.exp(_LIGHT_FIELD_BEYOND),
+                np.exp(-2.0 * _LIGHT_FIELD_BEYOND) * ask.lit_table)
     grown = grown.copy()
     count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
                                             connectivity=8)
@@ -3455,10 +3458,10 @@ def _log_ratio_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
     return np.log((image + _RATIO_OFFSET) / (empty + _RATIO_OFFSET)).astype(np.float32)
 
 
-def _change_noise(view: _View) -> float:
-    """The noise of the view's change against the empty workspace (:func:`_log_ratio`'s magnitudes summed
-    over the channels) on the table, as the coarse pictures rounded to whole grey levels give it, unless
-    their rounding made that estimate too high; then as the pictures before the rounding give it.
+def _change_noise(view: _View, change: np.ndarray) -> float:
+    """The noise of the view's ``change`` against the empty workspace (:func:`_log_ratio`'s magnitudes summed
+    over the channels, of the pictures before their rounding) on the table, as the coarse pictures rounded to
+    whole grey levels give it, unless their rounding made that estimate too high; then as ``change`` gives it.
 
     Rounding moves each channel of either image by half a grey level at most, so the rounded change lies
     within a grey level's step of the unrounded one, and so would its noise. On a dark, flat table it does
@@ -3470,7 +3473,7 @@ def _change_noise(view: _View) -> float:
     (read before the rounding there too, two dark cans' views lost 0.12 and 0.18, and a third its top)."""
     assert view.background is not None
     rounded = _noise_level(np.abs(_log_ratio_of(view.coarse, view.background)).sum(axis=2))
-    unrounded = _noise_level(np.abs(_log_ratio(view)).sum(axis=2))
+    unrounded = _noise_level(change)
     # The empty workspace's grey levels are whole (unless the light was evened): the kernel's median counts them.
     table = np.array([median(np.ascontiguousarray(view.background[..., k]).ravel()) for k in range(3)],
                      view.background.dtype)
@@ -3533,7 +3536,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # under _SURE of its noise: the graph cut's colour models would give a face of the table's colour
         # (a box of its table's wood) to the table, and are not to be asked there.
         textures[view.index][np.nan_to_num(texture) >= _GRAIN_LOST_WHOLE] = _GRAIN_LOST_WHOLE_SCORE
-        score = np.maximum(change / max(_change_noise(view), _BACKGROUND_NOISE_FLOOR), textures[view.index])
+        score = np.maximum(change / max(_change_noise(view, change), _BACKGROUND_NOISE_FLOOR), textures[view.index])
         # A face as bright as the table changed its tint only (the other views judge whether the table
         # itself took that tint: the glow of a coloured object beside it).
         score = np.maximum(score, _tint_change(view))
