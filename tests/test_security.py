@@ -129,6 +129,7 @@ def _router_slow_to_close(pki):
     context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
     context.load_cert_chain(pki / "router.pem", pki / "router.key")
     listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(10.0)   # a probe that never comes fails the test, and ends the thread
 
     def serve():
         connection, _ = listener.accept()
