@@ -40,9 +40,10 @@ $(STAMP): $(BIN)/python pyproject.toml setup.py $(wildcard core_cy/*.pyx core_cy
 	$(BIN)/python -m pip install --quiet --no-build-isolation -e '.[test]'
 	touch $@
 
+# Two test files at a time (pyproject.toml says why); `pytest` alone runs one at a time.
 test: $(STAMP)
 	$(BIN)/python -m mypy
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 demo: $(STAMP)
 	$(BIN)/robocell demo

@@ -23,6 +23,7 @@ from robocell.workers.sim.scans import default_K, plan_views
 __all__ = ["Scene", "render_view", "render_scan"]
 
 _SS = 3
+_RAYS_AT_ONCE = 8192
 
 
 @dataclass(frozen=True)
@@ -150,9 +151,27 @@ def render_view(scene: Scene, T_world_cam: np.ndarray, K: np.ndarray, size: tupl
     v = (np.arange(h * _SS) + 0.5) / _SS - 0.5
     u, v = np.meshgrid(u, v)
     pix = np.column_stack([u.ravel(), v.ravel(), np.ones(u.size)])
-    rays = np.linalg.solve(K, pix.T).T @ T_world_cam[:3, :3].T
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    origin = T_world_cam[:3, 3]
+    colour = np.zeros((len(pix), 3))
+    on_object = np.zeros(len(pix), dtype=bool)
+    # Each ray is traced on its own, so a few thousand at a time give the same pixels, and their
+    # arrays stay in the processor's cache.
+    for start in range(0, len(pix), _RAYS_AT_ONCE):
+        rows = slice(start, start + _RAYS_AT_ONCE)
+        rays = np.linalg.solve(K, pix[rows].T).T @ T_world_cam[:3, :3].T
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        colour[rows], on_object[rows] = _shaded(scene, T_world_cam[:3, 3], rays)
+    image = colour.reshape(h, _SS, w, _SS, 3).mean(axis=(1, 3))
+    coverage = on_object.reshape(h, _SS, w, _SS).mean(axis=(1, 3))
+    image = cv2.GaussianBlur(image.astype(np.float32), (0, 0), 0.6)
+    image += np.random.default_rng(seed).normal(0, scene.noise, image.shape).astype(np.float32)
+    bgr = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
+    mask = np.where(coverage >= 0.5, 255, 0).astype(np.uint8)
+    return cv2.imdecode(jpeg, cv2.IMREAD_COLOR), mask
+
+
+def _shaded(scene: Scene, origin: np.ndarray, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The colour each ray from ``origin`` sees, and whether it meets the object."""
     light = np.asarray(scene.light) / np.linalg.norm(scene.light)
     colour = np.zeros((len(rays), 3))
     t_obj, normal, local = _object_hit(scene, origin, rays) if scene.with_object else (
@@ -174,14 +193,7 @@ def render_view(scene: Scene, T_world_cam: np.ndarray, K: np.ndarray, size: tupl
     table_light = scene.ambient + (1 - scene.ambient) * light[2] * lit
     colour[on_table] = _table_colour(scene, points[:, :2]) * table_light[:, None]
     colour[~on_object & ~on_table] = (60, 60, 60)
-    image = colour.reshape(h, _SS, w, _SS, 3).mean(axis=(1, 3))
-    coverage = on_object.reshape(h, _SS, w, _SS).mean(axis=(1, 3))
-    image = cv2.GaussianBlur(image.astype(np.float32), (0, 0), 0.6)
-    image += np.random.default_rng(seed).normal(0, scene.noise, image.shape).astype(np.float32)
-    bgr = np.clip(np.rint(image), 0, 255).astype(np.uint8)
-    jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
-    mask = np.where(coverage >= 0.5, 255, 0).astype(np.uint8)
-    return cv2.imdecode(jpeg, cv2.IMREAD_COLOR), mask
+    return colour, on_object
 
 
 def render_scan(scene: Scene, *, views: int = 3, size: tuple[int, int] = (320, 240), seed: int = 0,

@@ -5,7 +5,13 @@ it can neither submit a job nor read an image.
 """
 
 import asyncio
+import contextlib
+import gc
+import socket
+import ssl
+import threading
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -13,7 +19,7 @@ import pytest
 from robocell.cli.demo import free_port
 from tests.pki import router_tls_settings, tls_settings, write_pki
 from robocell.wire.errors import CellError, CredentialsRefused, TransportError
-from robocell.wire.transport import Response, Transport
+from robocell.wire.transport import Response, Transport, _untrusted_certificate
 
 
 @pytest.fixture(scope="module")
@@ -114,6 +120,44 @@ def test_plain_tcp_to_a_tls_router_is_refused(pki):
             await client.close()
 
     _run(_with_router(pki, check))
+
+
+@contextlib.contextmanager
+def _router_slow_to_close(pki):
+    """A TLS server with the router's certificate that takes one connection, and answers its close only
+    after a while, as a router on a busy machine may; yields its port."""
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    context.load_cert_chain(pki / "router.pem", pki / "router.key")
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(10.0)   # a probe that never comes fails the test, and ends the thread
+
+    def serve():
+        connection, _ = listener.accept()
+        with context.wrap_socket(connection, server_side=True) as tls:
+            time.sleep(0.3)
+            with contextlib.suppress(OSError):
+                tls.recv(1)   # the client's close
+
+    server = threading.Thread(target=serve)
+    server.start()
+    try:
+        yield listener.getsockname()[1]
+    finally:
+        server.join(10)
+        listener.close()
+
+
+def test_the_probe_of_a_router_certificate_closes_its_connection_before_it_returns(pki):
+    """The probe behind "the router refused" ran in `robocell status`'s asyncio.run, which ended before a
+    slow router answered the TLS close: the probe's socket was left for the garbage collector, whose
+    ResourceWarning then failed whatever test it met."""
+    with _router_slow_to_close(pki) as port:
+        untrusted = asyncio.run(_untrusted_certificate("127.0.0.1", port, tls_settings(pki)))
+    with warnings.catch_warnings(record=True) as left:
+        warnings.simplefilter("always")
+        gc.collect()
+    assert untrusted is None   # the certificate is trusted
+    assert [str(warning.message) for warning in left if warning.category is ResourceWarning] == []
 
 
 # --- no reconstruction worker trusted on its word (issue 23) -----------------------------------------

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import contextlib
 import json
 import re
 import logging
@@ -622,7 +623,7 @@ async def _listening(endpoint: str) -> bool:
             _, writer = await asyncio.open_connection(address[1], address[2])
     except (OSError, TimeoutError):
         return False
-    writer.close()
+    await _close(writer)
     return True
 
 
@@ -660,13 +661,24 @@ async def _untrusted_certificate(host: str, port: int, settings: dict) -> str | 
         return None
     try:
         async with asyncio.timeout(_PROBE_TIMEOUT_S):
-            _, writer = await asyncio.open_connection(host, port, ssl=context, server_hostname=host)
+            _, writer = await asyncio.open_connection(host, port, ssl=context, server_hostname=host,
+                                                      ssl_shutdown_timeout=_PROBE_TIMEOUT_S)
     except ssl.SSLCertVerificationError as exc:
         return exc.verify_message or str(exc)
     except (OSError, TimeoutError):
         return None
-    writer.close()
+    await _close(writer)
     return None
+
+
+async def _close(writer: asyncio.StreamWriter) -> None:
+    """Close a probe's connection and wait until its socket is closed. A TLS connection's socket
+    closes only once the router has answered the close: left to a loop that ends first (as
+    ``asyncio.run`` does), it stays open until the garbage collector finds it."""
+    writer.close()
+    with contextlib.suppress(OSError, TimeoutError):   # ssl.SSLError is an OSError
+        async with asyncio.timeout(2 * _PROBE_TIMEOUT_S):   # the TLS close's own time-out ends it first
+            await writer.wait_closed()
 
 
 @dataclass
