@@ -2281,9 +2281,10 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     Where the parallax is within the noise (the table point behind the top, far off, looks as the top does),
     a pixel stands out by its light too: over what the lit table round the hull reaches
     (:func:`_lit_table_ceiling`), as a top nearer the lamp than the table is.
-    The two cues must agree: the piece touches the silhouette, is of a face's size (:data:`_BAY`), and the
-    other views see a point of their hull on its rays alike over all of it but its rim (:data:`_ALL_BUT_RIM`,
-    :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
+    The two cues must agree: the piece touches the silhouette, or is parted from it only by the blur of its
+    edge (a box's edge, rounded or in shade, is lit as neither face it parts, and joins them), is of a face's
+    size (:data:`_BAY`), and the other views see a point of their hull on its rays alike over all of it but
+    its rim (:data:`_ALL_BUT_RIM`, :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
     only where the object behind happens to have its colour. A face so found reaches as far as its evidence
     stands out at all (over 1) and the other views see it alike.
 
@@ -2314,7 +2315,9 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     at_all: np.ndarray = np.where(beyond & (score > 1.0), 255, 0).astype(np.uint8)
     at_all = cv2.morphologyEx(cv2.morphologyEx(at_all, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _SMALL)
     _, reach = cv2.connectedComponents(cv2.bitwise_or(at_all, stands), connectivity=8)
-    touching = cv2.dilate(mask, _SMALL) > 0
+    # A top meets the face below it along the box's edge, rounded or bevelled, whose light is neither face's:
+    # a lit top stands out up to that edge, within its blur of the silhouette (two steps of _SMALL).
+    touching = ~_clear_of(mask)
     area = cv2.countNonZero(mask)
     grown = mask.copy()
     for label in range(1, count):
@@ -2332,6 +2335,8 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
         face = reach == int(np.argmax(np.bincount(reach[piece])))
         alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
         grown[piece | (face & alike)] = 255
+        # The edge between the piece and the silhouette is the object's too.
+        grown[touching & (cv2.dilate(piece.astype(np.uint8), _SMALL, iterations=2) > 0)] = 255
         if nearer_the_lamp:
             # Such a top reaches as far as its light stands out over the lit table, beyond the hull too.
             assert brighter is not None
