@@ -1354,6 +1354,19 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # are looked into too, as those of a view not corrected. A view cut again within the others' hull
         # has looked there already.
         looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane, aim)
+        # A face found in one view's bays widens the other views' hull, which was carved while that view still
+        # missed it: their bays are looked into again, within the hull of the silhouettes as they are now,
+        # while some view grows by a bay (as many looks as views at most).
+        for _ in range(len(views) - 1):
+            grown = {i for i in range(len(views))
+                     if cv2.countNonZero(cv2.bitwise_and(looked[i], cv2.bitwise_not(masks[i])))
+                     > _BAY * cv2.countNonZero(masks[i])}
+            asked = {i for i in range(len(views)) if grown - {i}}
+            if not asked:
+                break
+            masks = looked
+            looked = _bays_looked_into(views, masks, scores, _Hulls(views, masks, plane, aim), done - trimmed, plane,
+                                       aim, asked)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
@@ -1585,7 +1598,8 @@ _FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray,
+                      asked: set[int] | None = None) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -1593,10 +1607,11 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
     other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
     own evidence, looks for the object there too; what the view had found is kept. A view corrected already
     (cut again within the others' hull) is looked into only for faces standing out
-    (:func:`_faces_standing_out`), which no cut by colour finds."""
+    (:func:`_faces_standing_out`), which no cut by colour finds. Only the views ``asked``, if given, are
+    looked into."""
     everyone = set(range(len(views)))
     looked = list(masks)
-    for i in sorted(everyone):
+    for i in sorted(everyone if asked is None else asked):
         score = scores[i]
         if score is None:
             continue
