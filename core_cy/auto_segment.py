@@ -1623,6 +1623,10 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # light or parallax shows standing out.
             if len(views) == 3 and views[i].background is None:
                 looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
+            elif plane is not None and views[i].shadow_look is not None:
+                # Nor does the empty workspace show it (below): the parallax the view has without it does.
+                looked[i] = _faces_standing_out(views[i], looked[i], _parallax_score(views, masks, i, plane), hull,
+                                                seen_alike)
             continue
         outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
         bay = cv2.bitwise_and(cv2.bitwise_and(outline, hull), cv2.bitwise_not(masks[i]))
@@ -1648,13 +1652,19 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
             # it decides, and a piece with a shadow's look must be seen alike by the others too; in a scan of
             # any number of views (_faces_beyond_outline says why).
-            others = [view for view in views if view is not views[i]]
-            parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
-            parallax = np.where(np.isnan(parallax), _HIDDEN, parallax)
+            parallax = _parallax_score(views, masks, i, plane)
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, parallax,
                                               views[i].shadow_look)
             looked[i] = _faces_standing_out(views[i], looked[i], parallax, hull, seen_alike)
     return looked
+
+
+def _parallax_score(views: Sequence[_View], masks: Sequence[np.ndarray], i: int, plane: np.ndarray) -> np.ndarray:
+    """View ``i``'s :func:`_colour_parallax` against the other views, their silhouettes ``masks`` hiding the
+    table behind them, with :data:`_HIDDEN` where no other view sees the table point."""
+    others = [view for view in views if view is not views[i]]
+    parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
+    return np.where(np.isnan(parallax), _HIDDEN, parallax)
 
 
 def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
