@@ -1396,7 +1396,9 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     the colour models the view's seeds trained give that shadow to the object. A face in shade may match
     the shadow behind it as well, so the evidence alone does not tell; but such a face is lit by the sky
     and no darker than the open shadow, while the table by the foot, whose sky the object hides in part,
-    is. A face that looks like the table (a dark can's top on its mat) has no shadow's look."""
+    is. A face that looks like the table (a dark can's top on its mat) has no shadow's look. A piece whose
+    table points the others see over half of it at most is asked in the parts where they do
+    (:func:`_parts_the_others_see`)."""
     pieces = _pieces_added(found, before)
     if not pieces:
         return found
@@ -1405,19 +1407,35 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     confirmed = score[crop] < 1.0
     open_shadow = None
     kept = found.copy()
-    for piece in pieces:
-        area = int(piece.sum())
-        evidence = score[piece & (score != _HIDDEN)]
-        if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
-            continue
-        looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
-        if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
-            continue
-        if open_shadow is None:
-            open_shadow = _confirmed_shadow_round(view, score, crop)
-        if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
-            kept[piece] = 0
+    for whole in pieces:
+        for piece in _parts_the_others_see(whole, score):
+            area = int(piece.sum())
+            evidence = score[piece & (score != _HIDDEN)]
+            if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
+                continue
+            looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
+            if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
+                continue
+            if open_shadow is None:
+                open_shadow = _confirmed_shadow_round(view, score, crop)
+            if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
+                kept[piece] = 0
     return kept
+
+
+def _parts_the_others_see(piece: np.ndarray, score: np.ndarray) -> list[np.ndarray]:
+    """``piece`` (bool, coarse) whole if the other views see the table points of over half of it (``score``,
+    the view's evidence, not :data:`_HIDDEN`), else the parts (bool, each 8-connected, opened by
+    :data:`_SMALL`, a speck's size at least) where they do. A face in shade whose table points the object
+    hides from the others may join the shadow by the foot, whose table points they see, in one piece: that
+    part is asked alone."""
+    seen = piece & (score != _HIDDEN)
+    if 2 * np.count_nonzero(seen) > np.count_nonzero(piece):
+        return [piece]
+    count, labels = cv2.connectedComponents(cv2.morphologyEx(seen.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                            connectivity=8)
+    parts = [labels == label for label in range(1, count)]
+    return [part for part in parts if np.count_nonzero(part) >= _SPECK]
 
 
 def _pieces_added(found: np.ndarray, before: np.ndarray) -> list[np.ndarray]:

@@ -958,3 +958,13 @@ def test_a_lit_top_is_looked_for_in_a_view_cut_again_with_the_empty_workspace_to
     they do without the empty workspace."""
     ious = _printed_scene_ious(printed_scene, 12, "laminate-sugar-box-tall-box", backgrounds=True)
     assert min(ious) > 0.9, ious
+
+
+def test_the_shadow_by_the_foot_joined_to_a_face_in_shade_is_left_out(printed_scene):
+    """A white box on white laminate, from the images alone: one view, cut again within the other views'
+    hull, took the box's missing face in shade and the shadow by its foot that the loose hull holds, in one
+    piece (0.84 before). The face's table points lie behind the box from the other views, the shadow's
+    they see and confirm, so the piece as a whole is mostly hidden from them and was not asked; asked
+    alone, the part they see has a shadow's look and is darker than the shadow cast in the open: left out."""
+    ious = _printed_scene_ious(printed_scene, 7, "laminate-white-box", backgrounds=False)
+    assert ious[1] > 0.9 and min(ious) > 0.9, ious
