@@ -1354,6 +1354,19 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # are looked into too, as those of a view not corrected. A view cut again within the others' hull
         # has looked there already.
         looked = _bays_looked_into(views, masks, scores, hulls, done - trimmed, plane, aim)
+        # A face found in one view's bays widens the other views' hull, which was carved while that view still
+        # missed it: their bays are looked into again, within the hull of the silhouettes as they are now,
+        # while some view grows by a bay (as many looks as views at most).
+        for _ in range(len(views) - 1):
+            grown = {i for i in range(len(views))
+                     if cv2.countNonZero(cv2.bitwise_and(looked[i], cv2.bitwise_not(masks[i])))
+                     > _BAY * cv2.countNonZero(masks[i])}
+            asked = {i for i in range(len(views)) if grown - {i}}
+            if not asked:
+                break
+            masks = looked
+            looked = _bays_looked_into(views, masks, scores, _Hulls(views, masks, plane, aim), done - trimmed, plane,
+                                       aim, asked)
         if plane is not None and _floats(hulls) is not None:
             # The bays only add to the silhouettes, so a hull that reached the plane before them still does;
             # one that floated is carved again from the silhouettes as they are now. Each look may find part
@@ -1383,7 +1396,9 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     the colour models the view's seeds trained give that shadow to the object. A face in shade may match
     the shadow behind it as well, so the evidence alone does not tell; but such a face is lit by the sky
     and no darker than the open shadow, while the table by the foot, whose sky the object hides in part,
-    is. A face that looks like the table (a dark can's top on its mat) has no shadow's look."""
+    is. A face that looks like the table (a dark can's top on its mat) has no shadow's look. A piece whose
+    table points the others see over half of it at most is asked in the parts where they do
+    (:func:`_parts_the_others_see`)."""
     pieces = _pieces_added(found, before)
     if not pieces:
         return found
@@ -1392,19 +1407,35 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
     confirmed = score[crop] < 1.0
     open_shadow = None
     kept = found.copy()
-    for piece in pieces:
-        area = int(piece.sum())
-        evidence = score[piece & (score != _HIDDEN)]
-        if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
-            continue
-        looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
-        if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
-            continue
-        if open_shadow is None:
-            open_shadow = _confirmed_shadow_round(view, score, crop)
-        if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
-            kept[piece] = 0
+    for whole in pieces:
+        for piece in _parts_the_others_see(whole, score):
+            area = int(piece.sum())
+            evidence = score[piece & (score != _HIDDEN)]
+            if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
+                continue
+            looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
+            if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
+                continue
+            if open_shadow is None:
+                open_shadow = _confirmed_shadow_round(view, score, crop)
+            if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
+                kept[piece] = 0
     return kept
+
+
+def _parts_the_others_see(piece: np.ndarray, score: np.ndarray) -> list[np.ndarray]:
+    """``piece`` (bool, coarse) whole if the other views see the table points of over half of it (``score``,
+    the view's evidence, not :data:`_HIDDEN`), else the parts (bool, each 8-connected, opened by
+    :data:`_SMALL`, a speck's size at least) where they do. A face in shade whose table points the object
+    hides from the others may join the shadow by the foot, whose table points they see, in one piece: that
+    part is asked alone."""
+    seen = piece & (score != _HIDDEN)
+    if 2 * np.count_nonzero(seen) > np.count_nonzero(piece):
+        return [piece]
+    count, labels = cv2.connectedComponents(cv2.morphologyEx(seen.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
+                                            connectivity=8)
+    parts = [labels == label for label in range(1, count)]
+    return [part for part in parts if np.count_nonzero(part) >= _SPECK]
 
 
 def _pieces_added(found: np.ndarray, before: np.ndarray) -> list[np.ndarray]:
@@ -1585,7 +1616,8 @@ _FLOATING = 2.0
 
 
 def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
-                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray) -> list[np.ndarray]:
+                      hulls: _Hulls, done: set[int], plane: np.ndarray | None, aim: np.ndarray,
+                      asked: set[int] | None = None) -> list[np.ndarray]:
     """Each silhouette seeded by its view's evidence (and not corrected yet) with its bays looked into: a bay
     is what lies within the silhouette's convex outline and within the other views' hull but outside the
     silhouette (over :data:`_BAY` of its area). A face of the table's colour and light that the view's
@@ -1593,10 +1625,11 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
     other views' hull is too loose to show it missing, but it holds it. The graph cut, seeded by the view's
     own evidence, looks for the object there too; what the view had found is kept. A view corrected already
     (cut again within the others' hull) is looked into only for faces standing out
-    (:func:`_faces_standing_out`), which no cut by colour finds."""
+    (:func:`_faces_standing_out`), which no cut by colour finds. Only the views ``asked``, if given, are
+    looked into."""
     everyone = set(range(len(views)))
     looked = list(masks)
-    for i in sorted(everyone):
+    for i in sorted(everyone if asked is None else asked):
         score = scores[i]
         if score is None:
             continue
@@ -1608,6 +1641,10 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # light or parallax shows standing out.
             if len(views) == 3 and views[i].background is None:
                 looked[i] = _faces_standing_out(views[i], looked[i], score, hull, seen_alike)
+            elif plane is not None and views[i].shadow_look is not None:
+                # Nor does the empty workspace show it (below): the parallax the view has without it does.
+                looked[i] = _faces_standing_out(views[i], looked[i], _parallax_score(views, masks, i, plane), hull,
+                                                seen_alike)
             continue
         outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
         bay = cv2.bitwise_and(cv2.bitwise_and(outline, hull), cv2.bitwise_not(masks[i]))
@@ -1633,13 +1670,19 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # top on white laminate changes hardly at all): the plane's parallax that the view has without
             # it decides, and a piece with a shadow's look must be seen alike by the others too; in a scan of
             # any number of views (_faces_beyond_outline says why).
-            others = [view for view in views if view is not views[i]]
-            parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
-            parallax = np.where(np.isnan(parallax), _HIDDEN, parallax)
+            parallax = _parallax_score(views, masks, i, plane)
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, parallax,
                                               views[i].shadow_look)
             looked[i] = _faces_standing_out(views[i], looked[i], parallax, hull, seen_alike)
     return looked
+
+
+def _parallax_score(views: Sequence[_View], masks: Sequence[np.ndarray], i: int, plane: np.ndarray) -> np.ndarray:
+    """View ``i``'s :func:`_colour_parallax` against the other views, their silhouettes ``masks`` hiding the
+    table behind them, with :data:`_HIDDEN` where no other view sees the table point."""
+    others = [view for view in views if view is not views[i]]
+    parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
+    return np.where(np.isnan(parallax), _HIDDEN, parallax)
 
 
 def _faces_hiding_the_grain(view: _View, mask: np.ndarray, hull: np.ndarray,
@@ -2281,9 +2324,10 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     Where the parallax is within the noise (the table point behind the top, far off, looks as the top does),
     a pixel stands out by its light too: over what the lit table round the hull reaches
     (:func:`_lit_table_ceiling`), as a top nearer the lamp than the table is.
-    The two cues must agree: the piece touches the silhouette, is of a face's size (:data:`_BAY`), and the
-    other views see a point of their hull on its rays alike over all of it but its rim (:data:`_ALL_BUT_RIM`,
-    :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
+    The two cues must agree: the piece touches the silhouette, or is parted from it only by the blur of its
+    edge (a box's edge, rounded or in shade, is lit as neither face it parts, and joins them), is of a face's
+    size (:data:`_BAY`), and the other views see a point of their hull on its rays alike over all of it but
+    its rim (:data:`_ALL_BUT_RIM`, :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
     only where the object behind happens to have its colour. A face so found reaches as far as its evidence
     stands out at all (over 1) and the other views see it alike.
 
@@ -2314,7 +2358,9 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     at_all: np.ndarray = np.where(beyond & (score > 1.0), 255, 0).astype(np.uint8)
     at_all = cv2.morphologyEx(cv2.morphologyEx(at_all, cv2.MORPH_CLOSE, _SMALL), cv2.MORPH_OPEN, _SMALL)
     _, reach = cv2.connectedComponents(cv2.bitwise_or(at_all, stands), connectivity=8)
-    touching = cv2.dilate(mask, _SMALL) > 0
+    # A top meets the face below it along the box's edge, rounded or bevelled, whose light is neither face's:
+    # a lit top stands out up to that edge, within its blur of the silhouette (two steps of _SMALL).
+    touching = ~_clear_of(mask)
     area = cv2.countNonZero(mask)
     grown = mask.copy()
     for label in range(1, count):
@@ -2332,6 +2378,8 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
         face = reach == int(np.argmax(np.bincount(reach[piece])))
         alike = seen_alike(cv2.dilate(np.where(face, 255, 0).astype(np.uint8), _SMALL))
         grown[piece | (face & alike)] = 255
+        # The edge between the piece and the silhouette is the object's too.
+        grown[touching & (cv2.dilate(piece.astype(np.uint8), _SMALL, iterations=2) > 0)] = 255
         if nearer_the_lamp:
             # Such a top reaches as far as its light stands out over the lit table, beyond the hull too.
             assert brighter is not None
