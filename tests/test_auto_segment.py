@@ -944,3 +944,12 @@ def test_a_lit_face_whose_table_points_the_object_hides_from_the_others_is_kept(
     ious = _printed_scene_ious(printed_scene, 9, "oak-table-colour-box", backgrounds=False)
     assert ious[1] > 0.75, ious
 
+
+def test_the_lit_table_before_a_side_s_foot_is_not_taken_for_the_object(printed_scene):
+    """An oak-coloured box on oak, from the images alone: from one view the lit oak just before the foot of
+    the box's side lies behind the box from the other views, so nothing but its look tells it from the box,
+    and the colour models, holding the box's top lit as the oak, took it (0.845). Below a side (darker than the
+    lit table), at the silhouette's rim, the box's surface goes on down to its foot, turned from the lamp:
+    what lies there lit as the table and of its colour is the table before the side's foot."""
+    ious = _printed_scene_ious(printed_scene, 7, "oak-table-colour-box", backgrounds=False)
+    assert ious[1] > 0.9, ious
