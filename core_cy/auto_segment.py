@@ -1366,26 +1366,36 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         masks = looked
     if plane is not None and len(views) > 2:
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
-        masks = _table_before_a_side_dropped(views, masks, scores, plane)
+        masks = _table_lit_at_the_rim_dropped(views, masks, scores, plane)
     return masks
 
 
-def _table_before_a_side_dropped(views: Sequence[_View], masks: list[np.ndarray],
-                                 scores: Sequence[np.ndarray | None], plane: np.ndarray) -> list[np.ndarray]:
-    """The silhouettes without the table lit before a side's foot.
+def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray],
+                                  scores: Sequence[np.ndarray | None], plane: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes without the table at their rim that is lit as the table round them and of its colour
+    (within a shadow's tint, :func:`_off_colour`), where it lies before a side's foot or beyond a top.
 
-    The table just before an object's foot, as a view sees it, may lie behind the object from every other
-    view, so nothing but its look tells it from the object, and where the object has the table's colour,
-    its top lit as the table is, the colour models take it. Hidden is each table point that no other view
-    sees past its silhouette as it stands now, or that none saw past the looks of the first cut (its score
-    :data:`_HIDDEN`): where another view's silhouette missed the face in front of the table point, its
-    face's colour stood out there, for the object. But below a side (darker than the lit table by more than
-    the light varies over a table, :data:`_LIGHT_FIELD_BEYOND`: turned from the lamp more than the table
-    is), down the plane's normal as the view sees it, at the silhouette's rim, the object's surface goes on
-    down to its foot or turns under it, away from the lamp: none of it is lit as the table and of the
-    table's colour within a shadow's tint (:func:`_off_colour`), as the table before the side's foot is
-    (7/oak-table-colour-box 1: 0.845 -> 0.947; 5/... 1: 0.709 -> 0.885). Without an empty workspace only:
-    with one, the table's change against it says where the table is."""
+    Where the object has the table's colour, its top lit as the table is, the colour models take the table
+    lit beside it. Two places are the table's whatever its look:
+
+    Before a side's foot: the table just before the object's foot, as a view sees it, may lie behind the
+    object from every other view, so nothing but its look tells it from the object. Hidden is each table
+    point that no other view sees past its silhouette as it stands now, or that none saw past the looks of
+    the first cut (its score :data:`_HIDDEN`): where another view's silhouette missed the face in front of
+    the table point, that face's colour stood out there, for the object. Below a side (darker than the lit
+    table by more than the light varies over a table, :data:`_LIGHT_FIELD_BEYOND`: turned from the lamp
+    more than the table is), down the plane's normal as the view sees it, at the silhouette's rim, the
+    object's surface goes on down to its foot or turns under it, away from the lamp: none of it is lit as
+    the table (7/oak-table-colour-box 1: 0.845 -> 0.947; 5/... 1: 0.709 -> 0.885).
+
+    Beyond a top: above a face lit as the table (:meth:`_BeyondOutline.beyond_a_top`), up the plane's
+    normal, the object ends; a stretch there whose table point the other views confirm, colour and grain
+    (its score under 1, a grain seen in it and in the table round the silhouette), is the table behind the
+    top (2/... 2: 0.781 -> 0.874). Where the table has no grain to compare (white laminate), a face of its
+    colour and light looks as the table point behind it does, print and all (the other views' flat table
+    says nothing of a grain), and the others' confirming says nothing.
+
+    Without an empty workspace only: with one, the table's change against it says where the table is."""
     found = list(masks)
     for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
         if score is None or view.background is not None:
@@ -1395,8 +1405,11 @@ def _table_before_a_side_dropped(views: Sequence[_View], masks: list[np.ndarray]
             continue
         brightness = _brightness(view.coarse)
         lit_table = float(np.median(brightness[round_it]))
-        table_colour = _median_colour(view.coarse, round_it)
         inside = mask > 0
+        table_like = inside & (np.abs(np.log(np.maximum(brightness, 1.0) / lit_table)) <= _LIGHT_FIELD_BEYOND)
+        if not table_like.any():
+            continue
+        table_like &= _off_colours(view.coarse, _median_colour(view.coarse, round_it), table_like) < 1.0
         seen = np.zeros(inside.shape, bool)
         behind = np.zeros(inside.shape, bool)
         for other in views:
@@ -1405,25 +1418,41 @@ def _table_before_a_side_dropped(views: Sequence[_View], masks: list[np.ndarray]
                 seen |= sees
                 behind |= hides
         hidden = (behind & ~seen) | (score == _HIDDEN)
-        lit = np.abs(np.log(np.maximum(brightness, 1.0) / lit_table)) <= _LIGHT_FIELD_BEYOND
-        candidates = inside & hidden & lit
-        if not candidates.any():
-            continue
-        candidates &= _off_colours(view.coarse, table_colour, candidates) < 1.0
-        candidates = cv2.morphologyEx(candidates.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
-        count, labels = cv2.connectedComponents(candidates.astype(np.uint8), connectivity=8)
-        rim = inside & ~(cv2.erode(mask, _SMALL) > 0)
-        kept = mask.copy()
-        for label in range(1, count):
-            part = labels == label
-            if not (part & rim).any():
-                continue
+        side = np.exp(-_LIGHT_FIELD_BEYOND) * lit_table
+        grain = functools.cache(lambda: _grain_seen(view))
+
+        def below_a_side(part: np.ndarray) -> bool:
             above = _just_below(view, plane, part, upward=True) & inside & ~part
-            if above.any() and float(np.median(brightness[above])) < np.exp(-_LIGHT_FIELD_BEYOND) * lit_table:
-                kept[part] = 0
+            return bool(above.any()) and float(np.median(brightness[above])) < side
+
+        def beyond_a_top(part: np.ndarray) -> bool:
+            below = _just_below(view, plane, part) & inside & ~part
+            return (bool(below.any()) and float(np.median(brightness[below])) >= side
+                    and float(np.median(grain()[part])) >= 0.5 and float(np.median(grain()[round_it])) >= 0.5)
+
+        kept = mask.copy()
+        for candidates, is_table in ((table_like & hidden, below_a_side), (table_like & (score < 1.0), beyond_a_top)):
+            for part in _rim_parts(candidates, mask):
+                if is_table(part):
+                    kept[part] = 0
         if not np.array_equal(kept, mask):
             found[i] = _filled_region(kept, view)
     return found
+
+
+def _rim_parts(candidates: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
+    """The pieces of ``candidates`` (bool, opened by :data:`_SMALL`) that reach the rim of ``mask`` (0/255)."""
+    opened = cv2.morphologyEx(candidates.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(opened, connectivity=8)
+    rim = (mask > 0) & ~(cv2.erode(mask, _SMALL) > 0)
+    return [part for part in (labels == label for label in range(1, count)) if (part & rim).any()]
+
+
+def _grain_seen(view: _View) -> np.ndarray:
+    """(h, w) float32: the share of each coarse pixel's fine pixels whose window shows a grain (a variance
+    over the flat's, :func:`_window_statistics`), where the plane's parallax of the grain says something."""
+    _, _, variance, floor = _window_statistics(_fine_grey(view), _flat_below(view))
+    return cv2.resize((variance > floor).astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
 
 
 def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score: np.ndarray,
@@ -2227,7 +2256,7 @@ def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarr
     the plane's normal (:meth:`_BeyondOutline.beyond_a_top`), is seen alike over as much of it where the
     object in front of it in the others' views has the table's colour (0.64 of it, its view 0.746 if kept,
     in test_a_dark_face_of_the_table_s_colour_beside_its_shadow): no face. The lit table before a side's
-    foot, which they may see alike too, is dropped after (:func:`_table_before_a_side_dropped`)."""
+    foot, which they may see alike too, is dropped after (:func:`_table_lit_at_the_rim_dropped`)."""
     beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
     open_shadow = ask.open_shadow & _clear_of(ask.known)
     if not open_shadow.any() or ask.lit_table is None:
