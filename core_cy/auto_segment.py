@@ -1379,7 +1379,93 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         masks = looked
     if plane is not None and len(views) > 2:
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
+        masks = _table_lit_at_the_rim_dropped(views, masks, scores, plane)
     return masks
+
+
+def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray],
+                                  scores: Sequence[np.ndarray | None], plane: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes without the table at their rim that is lit as the table round them and of its colour
+    (within a shadow's tint, :func:`_off_colour`), where it lies before a side's foot or beyond a top.
+
+    Where the object has the table's colour, its top lit as the table is, the colour models take the table
+    lit beside it. Two places are the table's whatever its look:
+
+    Before a side's foot: the table just before the object's foot, as a view sees it, may lie behind the
+    object from every other view, so nothing but its look tells it from the object. Hidden is each table
+    point that no other view sees past its silhouette as it stands now, or that none saw past the looks of
+    the first cut (its score :data:`_HIDDEN`): where another view's silhouette missed the face in front of
+    the table point, that face's colour stood out there, for the object. Below a side (darker than the lit
+    table by more than the light varies over a table, :data:`_LIGHT_FIELD_BEYOND`: turned from the lamp
+    more than the table is), down the plane's normal as the view sees it, at the silhouette's rim, the
+    object's surface goes on down to its foot or turns under it, away from the lamp: none of it is lit as
+    the table (7/oak-table-colour-box 1: 0.845 -> 0.947; 5/... 1: 0.709 -> 0.885).
+
+    Beyond a top: above a face lit as the table (:meth:`_BeyondOutline.beyond_a_top`), up the plane's
+    normal, the object ends; a stretch there whose table point the other views confirm, colour and grain
+    (its score under 1, a grain seen in it and in the table round the silhouette), is the table behind the
+    top (2/... 2: 0.781 -> 0.874). Where the table has no grain to compare (white laminate), a face of its
+    colour and light looks as the table point behind it does, print and all (the other views' flat table
+    says nothing of a grain), and the others' confirming says nothing.
+
+    Without an empty workspace only: with one, the table's change against it says where the table is."""
+    found = list(masks)
+    for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
+        if score is None or view.background is not None:
+            continue
+        round_it = _table_round(mask, mask)
+        if not round_it.any():
+            continue
+        brightness = _brightness(view.coarse)
+        lit_table = float(np.median(brightness[round_it]))
+        inside = mask > 0
+        table_like = inside & (np.abs(np.log(np.maximum(brightness, 1.0) / lit_table)) <= _LIGHT_FIELD_BEYOND)
+        if not table_like.any():
+            continue
+        table_like &= _off_colours(view.coarse, _median_colour(view.coarse, round_it), table_like) < 1.0
+        seen = np.zeros(inside.shape, bool)
+        behind = np.zeros(inside.shape, bool)
+        for other in views:
+            if other is not view:
+                _, sees, hides = view.sees(other, plane, masks[other.index])
+                seen |= sees
+                behind |= hides
+        hidden = (behind & ~seen) | (score == _HIDDEN)
+        side = np.exp(-_LIGHT_FIELD_BEYOND) * lit_table
+        grain = functools.cache(lambda: _grain_seen(view))
+
+        def below_a_side(part: np.ndarray) -> bool:
+            above = _just_below(view, plane, part, upward=True) & inside & ~part
+            return bool(above.any()) and float(np.median(brightness[above])) < side
+
+        def beyond_a_top(part: np.ndarray) -> bool:
+            below = _just_below(view, plane, part) & inside & ~part
+            return (bool(below.any()) and float(np.median(brightness[below])) >= side
+                    and float(np.median(grain()[part])) >= 0.5 and float(np.median(grain()[round_it])) >= 0.5)
+
+        kept = mask.copy()
+        for candidates, is_table in ((table_like & hidden, below_a_side), (table_like & (score < 1.0), beyond_a_top)):
+            for part in _rim_parts(candidates, mask):
+                if is_table(part):
+                    kept[part] = 0
+        if not np.array_equal(kept, mask):
+            found[i] = _filled_region(kept, view)
+    return found
+
+
+def _rim_parts(candidates: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
+    """The pieces of ``candidates`` (bool, opened by :data:`_SMALL`) that reach the rim of ``mask`` (0/255)."""
+    opened = cv2.morphologyEx(candidates.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(opened, connectivity=8)
+    rim = (mask > 0) & ~(cv2.erode(mask, _SMALL) > 0)
+    return [part for part in (labels == label for label in range(1, count)) if (part & rim).any()]
+
+
+def _grain_seen(view: _View) -> np.ndarray:
+    """(h, w) float32: the share of each coarse pixel's fine pixels whose window shows a grain (a variance
+    over the flat's, :func:`_window_statistics`), where the plane's parallax of the grain says something."""
+    _, _, variance, floor = _window_statistics(_fine_grey(view), _flat_below(view))
+    return cv2.resize((variance > floor).astype(np.float32), view.coarse_size, interpolation=cv2.INTER_AREA)
 
 
 def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score: np.ndarray,
@@ -1977,16 +2063,30 @@ class _BeyondOutline:
             -_LIGHT_FIELD_BEYOND) * self.lit_table
 
     def on_a_side(self, piece: np.ndarray) -> bool:
+        """Whether the silhouette just below ``piece`` (:meth:`lit_below`) is darker than the lit table beyond
+        the light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`): a top seen from above the object's side
+        sits on that side, which the lamp above lights less than a face turned up. Where the silhouette below
+        is lit as the table, it already holds the face turned up (a box's top), and what lies beyond it is the
+        table behind."""
+        return self.lit_below(piece) is False
+
+    def beyond_a_top(self, piece: np.ndarray) -> bool:
+        """Whether the silhouette just below ``piece`` (:meth:`lit_below`) is lit as the table, within the
+        light's spread over a table or brighter: a face turned up, a top, beyond which, up the plane's
+        normal, the object ends and the table behind it lies."""
+        return self.lit_below(piece) is True
+
+    def lit_below(self, piece: np.ndarray) -> bool | None:
         """Whether the silhouette just below ``piece`` (within :data:`_SIDE_BELOW` of it, down the plane's
-        normal as the view sees it) is darker than the lit table beyond the light's spread over a table
-        (:data:`_LIGHT_FIELD_BEYOND`): a top seen from above the object's side sits on that side, which the
-        lamp above lights less than a face turned up. Where the silhouette below is lit as the table, it
-        already holds the face turned up (a box's top), and what lies beyond it is the table behind."""
+        normal as the view sees it) is lit as the table round it (its median brightness no darker than the
+        lit table's beyond the light's spread over a table, :data:`_LIGHT_FIELD_BEYOND`); None where nothing
+        of the silhouette lies below it, or without a plane or a table round it."""
         if self.plane is None or self.lit_table is None:
-            return False
+            return None
         below = _just_below(self.view, self.plane, piece) & (self.mask > 0) & ~piece
-        return bool(below.any()) and float(np.median(self.brightness[below])) < np.exp(
-            -_LIGHT_FIELD_BEYOND) * self.lit_table
+        if not below.any():
+            return None
+        return bool(float(np.median(self.brightness[below])) >= np.exp(-_LIGHT_FIELD_BEYOND) * self.lit_table)
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
@@ -2034,9 +2134,9 @@ class _BeyondOutline:
         return self.view.grain_sums is not None and _grain_kept(self.view, piece, self.known)
 
 
-def _just_below(view: _View, plane: np.ndarray, region: np.ndarray) -> np.ndarray:
-    """(h, w) bool: where ``region`` (bool) lands moved down the plane's normal, as the view sees it at the
-    region's centre, by each whole coarse pixel up to :data:`_SIDE_BELOW`."""
+def _just_below(view: _View, plane: np.ndarray, region: np.ndarray, upward: bool = False) -> np.ndarray:
+    """(h, w) bool: where ``region`` (bool) lands moved down the plane's normal (``upward``: up it), as the
+    view sees it at the region's centre, by each whole coarse pixel up to :data:`_SIDE_BELOW`."""
     ys, xs = np.nonzero(region)
     centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
     ray = view.rays(centre)[0]
@@ -2049,8 +2149,9 @@ def _just_below(view: _View, plane: np.ndarray, region: np.ndarray) -> np.ndarra
     up = (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-9)
     source = region.astype(np.uint8)
     below = np.zeros(region.shape, bool)
+    sign = 1.0 if upward else -1.0
     for step in range(1, _SIDE_BELOW + 1):
-        shift = np.array([[1.0, 0.0, -step * up[0]], [0.0, 1.0, -step * up[1]]], np.float32)
+        shift = np.array([[1.0, 0.0, sign * step * up[0]], [0.0, 1.0, sign * step * up[1]]], np.float32)
         below |= cv2.warpAffine(source, shift, (source.shape[1], source.shape[0]), flags=cv2.INTER_NEAREST) > 0
     return below
 
@@ -2164,7 +2265,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         grown = _split_by_lost_grain(view, grown, mask, looks, lambda: ask.mapped_grain, None, ask.known,
                                      ask.hides_the_mapped_grain)
         if seen_alike is not None:
-            grown = _hidden_faces_in_shade(ask, grown)
+            grown = _hidden_faces_seen_alike(ask, grown)
     elif shadow is not None and view.grain_sums is not None:
         empty_workspace_grain = view.grain_sums
         grown = _split_by_lost_grain(view, grown, mask, beyond & shadow, lambda: empty_workspace_grain,
@@ -2174,11 +2275,12 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     return _filled_region(grown, view)
 
 
-def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray:
+def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray:
     """``grown`` with the parts beyond it, within the other views' hull, whose table points the other views'
-    silhouettes hide from them, that touch it, are of a face's size (:data:`_BAY` of the silhouette), have a
-    shadow's look and are as dark as the shadow cast in the open, and that the other views see alike over
-    :data:`_HIDDEN_FACE_ALIKE` of them.
+    silhouettes hide from them, that touch it, are of a face's size (:data:`_BAY` of the silhouette), that
+    the other views see alike over :data:`_HIDDEN_FACE_ALIKE` of them, and that are either lit by the lamp
+    (brighter than the shadow cast in the open) and not beyond a top, or have a shadow's look and are as
+    dark as the shadow cast in the open.
 
     A face in shade of the table's colour looks as a shadow on the table does, and the table points behind
     it lie behind the object from the other views, so neither the plane's parallax nor the grain they map
@@ -2189,7 +2291,15 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
     table beside a lying can or an ellipsoid over 0.50 to 0.52). A face turned from the lamp is lit by the
     sky alone, as the open shadow is (:data:`_LIGHT_FIELD_BEYOND`), and no darker than it
     (:func:`_darker_than_the_open_shadow`); the shadow's soft edge is lighter, the table under the
-    object's overhang darker."""
+    object's overhang darker. A face the lamp lights, wholly or in part, is told from the table beside the
+    foot the same way, by the others' likeness (an oak box's lit face, its table points hidden from the
+    others, was dropped with 0.67 of it seen alike: its view 0.573; a face half turned from the lamp, with
+    0.91 of it: 0.829); it is brighter than the open shadow by the light's spread both ways, which the
+    shadow on fabric, faint and lit nearly as the table, is not. But the table behind a top, beyond it up
+    the plane's normal (:meth:`_BeyondOutline.beyond_a_top`), is seen alike over as much of it where the
+    object in front of it in the others' views has the table's colour (0.64 of it, its view 0.746 if kept,
+    in test_a_dark_face_of_the_table_s_colour_beside_its_shadow): no face. The lit table before a side's
+    foot, which they may see alike too, is dropped after (:func:`_table_lit_at_the_rim_dropped`)."""
     beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
     open_shadow = ask.open_shadow & _clear_of(ask.known)
     if not open_shadow.any() or ask.lit_table is None:
@@ -2198,8 +2308,10 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
     # As dark as the open shadow within the light's spread over a table, and darker than the lit table by
     # that spread both ways: the shade of a face turned from the lamp, not the light varied over a table
     # where the object's shadow is faint (on fabric, the shadow is 0.74 of the lit table, the oak's 0.36).
-    shade = min(float(np.median(brightness[open_shadow])) * np.exp(_LIGHT_FIELD_BEYOND),
-                np.exp(-2.0 * _LIGHT_FIELD_BEYOND) * ask.lit_table)
+    shadow_level = float(np.median(brightness[open_shadow]))
+    shade = min(shadow_level * np.exp(_LIGHT_FIELD_BEYOND), np.exp(-2.0 * _LIGHT_FIELD_BEYOND) * ask.lit_table)
+    # Brighter than the open shadow by that spread both ways: lit by the lamp, in part at least.
+    lit = np.exp(2.0 * _LIGHT_FIELD_BEYOND) * shadow_level
     grown = grown.copy()
     count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
                                             connectivity=8)
@@ -2207,10 +2319,13 @@ def _hidden_faces_in_shade(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarray
     least = _BAY * cv2.countNonZero(ask.mask)
     for label in range(1, count):
         part = labels == label
-        if not (part & near).any() or part.sum() <= least or float(np.median(brightness[part])) > shade:
+        if not (part & near).any() or part.sum() <= least:
             continue
-        if (np.count_nonzero(ask.alike[part]) > _HIDDEN_FACE_ALIKE * part.sum() and ask.looks_a_shadow(part)
-                and not ask.darker_than_the_open_shadow(part)):
+        if np.count_nonzero(ask.alike[part]) <= _HIDDEN_FACE_ALIKE * part.sum():
+            continue
+        level = float(np.median(brightness[part]))
+        if ((level > lit and not ask.beyond_a_top(part))
+                or (level <= shade and ask.looks_a_shadow(part) and not ask.darker_than_the_open_shadow(part))):
             grown[part] = 255
     return grown
 
