@@ -427,3 +427,42 @@ def test_the_region_near_the_aim_is_the_object_beside_a_speck_on_the_aim():
     region = auto_segment._component_near(binary, np.array([100.0, 79.0]), reach=40.0)
     assert region is not None and np.count_nonzero(region) == 9
     assert auto_segment._component_near(np.zeros((150, 200), np.uint8), np.array([100.0, 79.0]), 40.0) is None
+
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_of_many_values_is_numpys_whether_or_not_the_sample_brackets_it(dtype):
+    """Many values (the evidence of a whole view) are selected between two of a sample's first: the median
+    is NumPy's all the same, with ties, sorted values, a middle at the bracket's edge, and a sample that
+    misses the middle (the selection then runs over all)."""
+    rng = np.random.default_rng(5)
+
+    def sampled(count):
+        return (np.arange(1024) * count) // 1024
+
+    def cases():
+        for count in (4096, 4097, 9000, 30001):
+            yield rng.normal(size=count)
+            yield np.where(rng.random(count) < 0.6, 0.0, np.abs(rng.normal(size=count)))  # most of a map is 0
+            yield np.sort(rng.normal(size=count))
+            yield np.sort(rng.normal(size=count))[::-1].copy()
+            yield np.full(count, 2.5)
+            yield np.round(rng.normal(size=count) * 3)  # few distinct values, many ties
+            missed = rng.normal(size=count)
+            missed[sampled(count)] = 1e6  # the sample sees only the largest value
+            yield missed
+        for count in (4096, 10000):
+            # Half zeros, half ones, the sample all ones: the bracket starts at the middle, and the value just
+            # below it is the largest under the bracket.
+            edge = np.ones(count)
+            rest = np.setdiff1d(np.arange(count), sampled(count))
+            edge[rng.choice(rest, count // 2, replace=False)] = 0.0
+            yield edge
+
+    for values in cases():
+        values = values.astype(dtype)
+        with_nan = values.copy()
+        with_nan[rng.random(len(values)) < 0.05] = np.nan
+        assert median_and_spread(values) == _reference(values)
+        assert median_and_spread(with_nan) == _reference(with_nan)
+        assert median(values) == float(np.median(values))
