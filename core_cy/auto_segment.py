@@ -1023,19 +1023,33 @@ def _unstepped_outline(image: np.ndarray, inside: np.ndarray, spread: float) -> 
     """
     within = cv2.erode(inside, _SMALL)
     beyond = 1 - cv2.dilate(inside, _SMALL)
-    colours = image.astype(np.float32)
-    window = (2 * _STEP_REACH + 1, 2 * _STEP_REACH + 1)
+    # Only the outline's own pixels are asked, so each side's sums are taken there alone.
+    rows, columns = np.nonzero((inside > 0) & (within == 0))
     means, counts = [], []
     for side in (within, beyond):
-        count = cv2.boxFilter(side.astype(np.float32), -1, window, normalize=False)
-        total = cv2.boxFilter(colours * side[..., None], -1, window, normalize=False)
-        means.append(total / np.maximum(count, 1.0)[..., None])
+        count, total = _window_sums(side, image * side[..., None], rows, columns, _STEP_REACH)
+        means.append(total / np.maximum(count, 1.0)[:, None])
         counts.append(count)
-    step = np.abs(means[0] - means[1]).sum(axis=2)
+    step = np.abs(means[0] - means[1]).sum(axis=1)
     # Each side's mean over a few pixels at least: at a thin spike of the outline one side is all but empty.
-    flat = ((inside > 0) & (within == 0) & (counts[0] >= _STEP_REACH) & (counts[1] >= _STEP_REACH)
-            & (step < _STEP_CLEAR * spread))
-    return cv2.dilate(flat.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, window)) > 0
+    flat = np.zeros(inside.shape, np.uint8)
+    flat[rows, columns] = (counts[0] >= _STEP_REACH) & (counts[1] >= _STEP_REACH) & (step < _STEP_CLEAR * spread)
+    return _dilated(flat, _STEP_REACH) > 0
+
+
+def _window_sums(side: np.ndarray, colours: np.ndarray, rows: np.ndarray, columns: np.ndarray,
+                 reach: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) and (N, 3) float32: the sums of ``side`` ((h, w) uint8) and of ``colours`` ((h, w, 3) uint8) over
+    the window of ``reach`` px either way around each of the N pixels (``rows``, ``columns``), the images
+    reflected about their edges as cv2.boxFilter's default border reflects them. Sums of whole numbers:
+    the integral image's are exact, as the box filter's are, and need not be taken at every pixel."""
+    size = 2 * reach + 1
+    sums = []
+    for image in (side, colours):
+        integral = cv2.integral(cv2.copyMakeBorder(image, reach, reach, reach, reach, cv2.BORDER_REFLECT_101))
+        sums.append((integral[rows + size, columns + size] - integral[rows, columns + size]
+                     - integral[rows + size, columns] + integral[rows, columns]).astype(np.float32))
+    return sums[0], sums[1]
 
 
 #: The colour either side of the outline is averaged within this many pixels of each outline pixel (and the
@@ -1567,8 +1581,7 @@ def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequenc
         picture[coarse[seen, 1], coarse[seen, 0]] = 255
         footprint = hulls.voxel * view.camera.focal_length / float(np.median(depth[seen])) / min(view.sx, view.sy) \
             if seen.any() else 1.0
-        size = 2 * int(np.ceil(footprint)) + 1
-        picture = cv2.dilate(picture, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        picture = _dilated(picture, int(np.ceil(footprint)))
         missing = cv2.countNonZero(cv2.bitwise_and(picture, cv2.bitwise_not(masks[i])))
         if missing <= _BAY * cv2.countNonZero(masks[i]):
             continue
@@ -2526,8 +2539,7 @@ class _Hulls:
         if not keep.any():
             return points
         footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
-        size = 2 * int(np.ceil(footprint)) + 3
-        return cv2.dilate(points, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        return _dilated(points, int(np.ceil(footprint)) + 1)
 
 
 def _refined(view: _View, coarse_mask: np.ndarray, on_plane: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -2906,8 +2918,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         near = _component_near(differs, centre, reach=0.25 * np.hypot(cw, ch))
         if near is not None:
             _, _, w, h = cv2.boundingRect(near)
-            reach = max(2, int(round(_BESIDE * max(w, h))))
-            beside = cv2.dilate(near, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+            beside = _dilated(near, max(2, int(round(_BESIDE * max(w, h))))) > 0
             attached = beside & ~seen
             score = np.where(attached, _HIDDEN, score)
             hidden |= attached
@@ -3029,18 +3040,30 @@ def _with_pieces_beside(region: np.ndarray, differs: np.ndarray) -> np.ndarray:
     """``region`` and the pieces of ``differs`` beside it (within a third of its size): a print's
     band of the table's own colour splits an object's evidence in two, and the piece at the aim alone
     loses the rest."""
-    x, y, w, h = cv2.boundingRect(region)
-    reach = max(2, int(round(_BESIDE * max(w, h))))
-    grown = cv2.dilate(region, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    _, _, w, h = cv2.boundingRect(region)
+    grown = _dilated(region, max(2, int(round(_BESIDE * max(w, h)))))
     count, labels = cv2.connectedComponents(cv2.bitwise_or(differs, region), connectivity=8)
     touching = np.zeros(count, bool)
-    touching[np.unique(labels[grown > 0])] = True
+    touching[labels[grown > 0]] = True
     touching[0] = False
     return np.where(touching[labels], 255, 0).astype(np.uint8)
 
 
 #: Pieces that stand out within this share of the region's size from it are of the same object.
 _BESIDE = 0.3
+
+
+def _dilated(binary: np.ndarray, reach: int) -> np.ndarray:
+    """``binary`` (uint8) dilated by the ellipse of ``reach`` px either way (2 reach + 1 across), as cv2.dilate
+    does it over the whole image: worked out over its pieces' box grown by ``reach`` alone, beyond which the
+    dilation reaches nothing (and the image's edge counts for nothing in a dilation)."""
+    x, y, w, h = cv2.boundingRect(binary)
+    dilated = np.zeros_like(binary)
+    if not w:
+        return dilated
+    box = (slice(max(0, y - reach), y + h + reach), slice(max(0, x - reach), x + w + reach))
+    dilated[box] = cv2.dilate(binary[box], cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    return dilated
 
 
 _CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -429,6 +430,55 @@ def test_the_region_near_the_aim_is_the_object_beside_a_speck_on_the_aim():
     assert auto_segment._component_near(np.zeros((150, 200), np.uint8), np.array([100.0, 79.0]), 40.0) is None
 
 
+def test_window_sums_are_the_box_filters_at_the_pixels_asked():
+    """The outline's sums, taken at its pixels alone, are what cv2.boxFilter gives there (its reflected
+    border too), on images smaller than the window as well."""
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        h, w = (int(n) for n in rng.integers(1, 40, 2))
+        side = (rng.random((h, w)) < 0.5).astype(np.uint8)
+        colours = rng.integers(0, 256, (h, w, 3), dtype=np.uint8) * side[..., None]
+        rows, columns = np.nonzero(rng.random((h, w)) < 0.3)
+        count, total = auto_segment._window_sums(side, colours, rows, columns, 5)
+        box_count = cv2.boxFilter(side.astype(np.float32), -1, (11, 11), normalize=False)
+        box_total = cv2.boxFilter(colours.astype(np.float32), -1, (11, 11), normalize=False)
+        assert count.dtype == total.dtype == np.float32
+        assert np.array_equal(count, box_count[rows, columns])
+        assert np.array_equal(total, box_total[rows, columns])
+
+
+def test_unstepped_outline_is_the_whole_images_box_filtered_means():
+    """The outline without a step, from sums at the outline alone, is the one from box filters over the
+    whole window: every mean and step alike, to the bit."""
+    def reference(image, inside, spread):
+        within = cv2.erode(inside, auto_segment._SMALL)
+        beyond = 1 - cv2.dilate(inside, auto_segment._SMALL)
+        means, counts = [], []
+        for side in (within, beyond):
+            count = cv2.boxFilter(side.astype(np.float32), -1, (11, 11), normalize=False)
+            total = cv2.boxFilter(image.astype(np.float32) * side[..., None], -1, (11, 11), normalize=False)
+            means.append(total / np.maximum(count, 1.0)[..., None])
+            counts.append(count)
+        step = np.abs(means[0] - means[1]).sum(axis=2)
+        flat = (inside > 0) & (within == 0) & (counts[0] >= 5) & (counts[1] >= 5)
+        return flat, step
+
+    rng = np.random.default_rng(4)
+    for trial in range(200):
+        h, w = (int(n) for n in rng.integers(8, 60, 2))
+        image = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        inside = np.zeros((h, w), np.uint8)
+        cv2.circle(inside, (int(rng.integers(0, w)), int(rng.integers(0, h))), int(rng.integers(2, 30)), 1, -1)
+        flat, step = reference(image, inside, 0.0)
+        if not flat.any():
+            continue
+        # Spreads that put the threshold exactly on some outline pixel's step, and just either side of it.
+        edge = float(rng.choice(step[flat])) / auto_segment._STEP_CLEAR
+        for spread in (np.nextafter(edge, 0.0), edge, np.nextafter(edge, np.inf), 1e9):
+            wanted = cv2.dilate((flat & (step < auto_segment._STEP_CLEAR * spread)).astype(np.uint8),
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (11, 11))) > 0
+            assert np.array_equal(auto_segment._unstepped_outline(image, inside, spread), wanted)
+
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_median_of_many_values_is_numpys_whether_or_not_the_sample_brackets_it(dtype):
@@ -466,3 +516,18 @@ def test_median_of_many_values_is_numpys_whether_or_not_the_sample_brackets_it(d
         assert median_and_spread(values) == _reference(values)
         assert median_and_spread(with_nan) == _reference(with_nan)
         assert median(values) == float(np.median(values))
+
+
+def test_dilated_over_the_pieces_box_is_the_whole_images_dilation():
+    """The dilation worked out over the pieces' box grown by its reach is cv2.dilate's over the whole image,
+    pieces on the image's edges, none at all, and reaches wider than the image included."""
+    rng = np.random.default_rng(6)
+    for trial in range(300):
+        h, w = (int(n) for n in rng.integers(1, 50, 2))
+        binary = np.zeros((h, w), np.uint8)
+        for _ in range(int(rng.integers(0, 4))):
+            x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
+            binary[y:y + int(rng.integers(1, 8)), x:x + int(rng.integers(1, 8))] = rng.choice([1, 255])
+        reach = int(rng.integers(0, 30))
+        whole = cv2.dilate(binary, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+        assert np.array_equal(auto_segment._dilated(binary, reach), whole)
