@@ -2487,7 +2487,13 @@ class _Hulls:
             aim_depth = float(view.camera.project(aim[None, :])[1][0])
             radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
         steps = np.linspace(-radius, radius, _HULL_GRID)
-        grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+        # The voxels' centres, as aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1) gives
+        # them, written axis by axis into one array.
+        grid = np.empty((_HULL_GRID,) * 3 + (3,))
+        grid[..., 0] = aim[0] + steps[:, None, None]
+        grid[..., 1] = aim[1] + steps[None, :, None]
+        grid[..., 2] = aim[2] + steps[None, None, :]
+        grid = grid.reshape(-1, 3)
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
@@ -2525,8 +2531,10 @@ class _Hulls:
 
     def into(self, carving: set[int], i: int) -> np.ndarray:
         """The hull of the views ``carving`` projected into view ``i`` (0/255)."""
-        seen_by = np.sum([self.pixels[j][1] for j in carving], axis=0)
-        misses = np.sum([~self.inside[j] for j in carving], axis=0)
+        seen_by, misses = np.zeros(len(self.grid), np.intp), np.zeros(len(self.grid), np.intp)
+        for j in carving:
+            seen_by += self.pixels[j][1]
+            misses += ~self.inside[j]
         # With three carving views or more, one of them may miss a voxel (a view that found only part
         # of the object carves the others' hulls less); a voxel that fewer than two carving views
         # (or all of them, if fewer) see within their images is not known to be anything.
