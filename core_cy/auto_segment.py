@@ -139,6 +139,7 @@ class _View:
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._nearest_maps: dict[tuple[int, bytes], np.ndarray] = {}
         # Each other view's image mapped through a plane and compared with this one, per comparison.
         self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
@@ -182,7 +183,13 @@ class _View:
         inside = inside_flat.reshape(ch, cw)
         if hidden is None:
             return maps, inside, np.zeros_like(inside)
-        behind = inside & (_remapped(hidden, maps, cv2.INTER_NEAREST, borderValue=0) > 0)
+        key = _pair(other, plane)
+        if key not in self._nearest_maps:
+            # The maps rounded to whole pixels, as cv2.remap rounds float maps for INTER_NEAREST on every call:
+            # once per pair of views, for the many looks at what hides the table.
+            self._nearest_maps[key] = cv2.convertMaps(  # type: ignore[call-overload]  # stubs want map2
+                maps, None, cv2.CV_16SC2, nninterpolation=True)[0]
+        behind = inside & (_remapped(hidden, self._nearest_maps[key], cv2.INTER_NEAREST, borderValue=0) > 0)
         return maps, inside & ~behind, behind
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
@@ -221,8 +228,9 @@ def _pair(other: _View, plane: np.ndarray) -> tuple[int, bytes]:
 
 
 def _remapped(image: np.ndarray, maps: np.ndarray, interpolation: int, **border) -> np.ndarray:
-    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives), by cv2.remap. The
-    two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV copies first."""
+    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives, or int16 whole pixels), by
+    cv2.remap. The two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV
+    copies first."""
     return cv2.remap(image, maps, None, interpolation, **border)  # type: ignore[call-overload]  # stubs want map2
 
 

@@ -531,3 +531,30 @@ def test_dilated_over_the_pieces_box_is_the_whole_images_dilation():
         reach = int(rng.integers(0, 30))
         whole = cv2.dilate(binary, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
         assert np.array_equal(auto_segment._dilated(binary, reach), whole)
+
+
+def test_what_hides_the_table_is_read_through_the_float_maps_rounded():
+    """The maps rounded to whole pixels once per pair of views read what hides the table as cv2.remap
+    reads it through the float maps, looks after looks: the table from two sides, and maps with half-pixel
+    ties, points far out of the picture and NaN."""
+    rng = np.random.default_rng(7)
+    image = np.zeros((480, 640, 3), np.uint8)
+    views = [auto_segment._View(i, image, _looking_at_origin(p), None)
+             for i, p in enumerate([[0.5, -0.1, 0.45], [-0.2, 0.5, 0.6]])]
+    plane = np.array([0.0, 0.0, 1.0, 0.0])
+    for view, other in [(views[0], views[1]), (views[1], views[0])]:
+        maps, inside = view.mapping(other, plane)
+        inside = inside.reshape(maps.shape[:2])
+        for _ in range(3):
+            hidden = np.where(rng.random((150, 200)) < 0.3, 255, 0).astype(np.uint8)
+            _, seen, behind = view.sees(other, plane, hidden)
+            expected = inside & (cv2.remap(hidden, maps, None, cv2.INTER_NEAREST, borderValue=0) > 0)
+            np.testing.assert_array_equal(behind, expected)
+            np.testing.assert_array_equal(seen, inside & ~expected)
+    maps = rng.uniform(-3, 12, (9, 11, 2)).astype(np.float32)
+    maps[::2] = np.round(maps[::2]) + 0.5
+    maps[1, :3] = [[1e9, 3.0], [np.nan, 2.0], [-7e4, np.inf]]
+    hidden = rng.integers(0, 256, (10, 10), dtype=np.uint8)
+    rounded = cv2.convertMaps(maps, None, cv2.CV_16SC2, nninterpolation=True)[0]
+    np.testing.assert_array_equal(auto_segment._remapped(hidden, rounded, cv2.INTER_NEAREST, borderValue=0),
+                                  cv2.remap(hidden, maps, None, cv2.INTER_NEAREST, borderValue=0))
