@@ -135,6 +135,8 @@ class _View:
         # Without an empty workspace: the brightness over the table's of the shadow that the view's first cut
         # saw in the open (_open_shadow_seen), None if it saw none.
         self.shadow_seen: np.ndarray | None = None
+        # The last graph cut's box's shadow without an empty workspace (_shadow_in_box), and what it was of.
+        self.box_shadow: tuple | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -3133,12 +3135,14 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
-        shadow = low & _shadow_like(view.coarse[crop], low)
+        if hidden_shadows:
+            shadow, seen = _shadow_in_box(view, crop, score)
+        else:
+            shadow = low & _shadow_like(view.coarse[crop], low)
         mask[shadow & ~sure] = cv2.GC_BGD
         if hidden_shadows:
             image = view.coarse[crop]
             hidden = score[crop] == _HIDDEN
-            seen = _shadow_seen(image, low, shadow, hidden)
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
@@ -3210,10 +3214,25 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
     confirm: ``score`` under 1), None where it sees none."""
     x0, y0, x1, y1 = _cut_box(view, region)
     crop = (slice(y0, y1), slice(x0, x1))
-    image = view.coarse[crop]
-    low = score[crop] < 1.0
-    seen = _shadow_seen(image, low, low & _shadow_like(image, low), score[crop] == _HIDDEN)
-    return None if seen is None else seen[1][seen[0]] / max(float(_median_colour(image, low).sum()), 1.0)
+    _, seen = _shadow_in_box(view, crop, score)
+    if seen is None:
+        return None
+    return seen[1][seen[0]] / max(float(_median_colour(view.coarse[crop], score[crop] < 1.0).sum()), 1.0)
+
+
+def _shadow_in_box(view: _View, crop: tuple[slice, slice],
+                   score: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+    """Without an empty workspace, within the graph cut's box ``crop``: the table the other views confirm
+    (``score`` under 1) that looks like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the
+    pixels hidden from them (``score`` :data:`_HIDDEN`) asked. A first cut asks it twice of one box and one
+    evidence (the shadow it sees in the open, then its graph cut): the view keeps its last one. Read only."""
+    rows, columns = crop
+    key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
+    if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
+        image, low = view.coarse[crop], score[crop] < 1.0
+        shadow = low & _shadow_like(image, low)
+        view.box_shadow = (view.coarse, key, shadow, _shadow_seen(image, low, shadow, score[crop] == _HIDDEN))
+    return view.box_shadow[2], view.box_shadow[3]
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,

@@ -558,3 +558,40 @@ def test_what_hides_the_table_is_read_through_the_float_maps_rounded():
     rounded = cv2.convertMaps(maps, None, cv2.CV_16SC2, nninterpolation=True)[0]
     np.testing.assert_array_equal(auto_segment._remapped(hidden, rounded, cv2.INTER_NEAREST, borderValue=0),
                                   cv2.remap(hidden, maps, None, cv2.INTER_NEAREST, borderValue=0))
+
+
+def test_the_shadow_in_a_box_kept_is_the_one_its_box_and_evidence_give():
+    """The shadow a view keeps for its last graph cut's box is what the box's image and evidence give
+    afresh, and another evidence, another box or an evened image is worked out anew."""
+    rng = np.random.default_rng(8)
+    image = np.full((480, 640, 3), 150, np.uint8)
+    image[200:300, 300:400] = 90                                # the table in shadow
+    image += rng.integers(0, 6, image.shape, dtype=np.uint8)    # the table's grain
+    view = auto_segment._View(0, image, _looking_at_origin([0.5, -0.1, 0.45]), None)
+
+    def afresh(crop, score):
+        picture, low = view.coarse[crop], score[crop] < 1.0
+        shadow = low & auto_segment._shadow_like(picture, low)
+        return shadow, auto_segment._shadow_seen(picture, low, shadow, score[crop] == auto_segment._HIDDEN)
+
+    def same(kept, wanted):
+        assert np.array_equal(kept[0], wanted[0])
+        assert (kept[1] is None) == (wanted[1] is None)
+        if wanted[1] is not None:
+            for a, b in zip(kept[1], wanted[1]):
+                assert np.array_equal(a, b)
+
+    score = rng.uniform(0.0, 0.9, (150, 200)).astype(np.float32)
+    score[70:90, 90:110] = auto_segment._HIDDEN
+    crop = (slice(40, 120), slice(60, 160))
+    first = auto_segment._shadow_in_box(view, crop, score)
+    assert first[1] is not None and first[0].any()
+    same(first, afresh(crop, score))
+    same(auto_segment._shadow_in_box(view, crop, score), first)
+    other = score.copy()
+    other[60:70, 95:125] = 3.0                                  # part of the shadow stands out now
+    same(auto_segment._shadow_in_box(view, crop, other), afresh(crop, other))
+    smaller = (slice(50, 110), slice(70, 150))
+    same(auto_segment._shadow_in_box(view, smaller, score), afresh(smaller, score))
+    view.coarse = view.coarse * np.float32(0.5)                 # the light evened
+    same(auto_segment._shadow_in_box(view, smaller, score), afresh(smaller, score))
