@@ -4,6 +4,7 @@ median of their distances from it, each found by selection in one copy of the va
 
 from cython cimport floating
 from libc.math cimport fabs, fabsf, floor, isfinite, rint, signbit, sqrt, sqrtf
+from libc.stdlib cimport free, malloc
 
 import numpy as np
 
@@ -43,11 +44,72 @@ cdef void _select(floating* values, Py_ssize_t count, Py_ssize_t k) noexcept nog
             return
 
 
+#: Of this many values or more, the median is looked for between two of a sample's first (_bracketed_median).
+cdef Py_ssize_t _BRACKETED = 4096
+#: The sample's size, and how many of its ranks either side of the middle's the bracket spans.
+cdef Py_ssize_t _SAMPLE = 1024, _BRACKET_RANKS = 64
+
+
+cdef bint _bracketed_median(floating* values, Py_ssize_t count, floating* found) noexcept nogil:
+    """The median of ``values[:count]`` into ``found``, True, when it lies between two values of an evenly spaced
+    sample that bracket the middle; False when it does not (the caller selects among all). One pass copies out
+    the values between them, a small share of all: the selection then runs over those alone."""
+    cdef Py_ssize_t middle = count // 2, k, below = 0, between = 0, rank, low_rank, high_rank
+    cdef floating low, high, value, upper, lower
+    cdef floating* sample = <floating*>malloc(_SAMPLE * sizeof(floating))
+    cdef floating* inside = <floating*>malloc(count * sizeof(floating))
+    if sample == NULL or inside == NULL:
+        free(sample)
+        free(inside)
+        return False
+    for k in range(_SAMPLE):
+        sample[k] = values[(k * count) // _SAMPLE]
+    rank = (middle * _SAMPLE) // count
+    low_rank, high_rank = max(rank - _BRACKET_RANKS, 0), min(rank + _BRACKET_RANKS, _SAMPLE - 1)
+    _select(sample, _SAMPLE, low_rank)
+    low = sample[low_rank]
+    _select(sample, _SAMPLE, high_rank)
+    high = sample[high_rank]
+    free(sample)
+    for k in range(count):
+        value = values[k]
+        # Without branches, which the values' order would make a guess.
+        inside[between] = value
+        between += (value >= low) & (value <= high)
+        below += value < low
+    if not (below <= middle < below + between):
+        free(inside)
+        return False
+    rank = middle - below
+    _select(inside, between, rank)
+    upper = inside[rank]
+    if count % 2:
+        found[0] = upper
+    else:
+        # The value just below the middle: the largest of those the selection left below it, or, the middle
+        # being the bracket's first, of those under the bracket (there are some: middle >= 1).
+        if rank > 0:
+            lower = inside[0]
+            for k in range(1, rank):
+                if inside[k] > lower:
+                    lower = inside[k]
+        else:
+            lower = low
+            for k in range(count):
+                if values[k] < low and (lower == low or values[k] > lower):
+                    lower = values[k]
+        found[0] = (lower + upper) / 2
+    free(inside)
+    return True
+
+
 cdef floating _median_in_place(floating* values, Py_ssize_t count) noexcept nogil:
     """The median of ``values[:count]`` (count >= 1), reordering them; of an even count, the mean of the two
     middle values, summed and halved in the values' own precision as NumPy's median does."""
     cdef Py_ssize_t middle = count // 2, k
-    cdef floating upper, lower
+    cdef floating upper, lower, found
+    if count >= _BRACKETED and _bracketed_median(values, count, &found):
+        return found
     _select(values, count, middle)
     upper = values[middle]
     if count % 2:

@@ -135,10 +135,13 @@ class _View:
         # Without an empty workspace: the brightness over the table's of the shadow that the view's first cut
         # saw in the open (_open_shadow_seen), None if it saw none.
         self.shadow_seen: np.ndarray | None = None
+        # The last graph cut's box's shadow without an empty workspace (_shadow_in_box), and what it was of.
+        self.box_shadow: tuple | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
         # The texture's local correlation with another view mapped through a plane, and where it is known.
         self.correlations: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self._mappings: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._nearest_maps: dict[tuple[int, bytes], np.ndarray] = {}
         # Each other view's image mapped through a plane and compared with this one, per comparison.
         self.differences: dict[tuple[int, bytes, Callable], np.ndarray] = {}
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each plane's points, per coarse pixel
@@ -182,7 +185,13 @@ class _View:
         inside = inside_flat.reshape(ch, cw)
         if hidden is None:
             return maps, inside, np.zeros_like(inside)
-        behind = inside & (_remapped(hidden, maps, cv2.INTER_NEAREST, borderValue=0) > 0)
+        key = _pair(other, plane)
+        if key not in self._nearest_maps:
+            # The maps rounded to whole pixels, as cv2.remap rounds float maps for INTER_NEAREST on every call:
+            # once per pair of views, for the many looks at what hides the table.
+            self._nearest_maps[key] = cv2.convertMaps(  # type: ignore[call-overload]  # stubs want map2
+                maps, None, cv2.CV_16SC2, nninterpolation=True)[0]
+        behind = inside & (_remapped(hidden, self._nearest_maps[key], cv2.INTER_NEAREST, borderValue=0) > 0)
         return maps, inside & ~behind, behind
 
     def to_coarse(self, uv: np.ndarray) -> np.ndarray:
@@ -221,8 +230,9 @@ def _pair(other: _View, plane: np.ndarray) -> tuple[int, bytes]:
 
 
 def _remapped(image: np.ndarray, maps: np.ndarray, interpolation: int, **border) -> np.ndarray:
-    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives), by cv2.remap. The
-    two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV copies first."""
+    """``image`` sampled at ``maps`` ((h, w, 2) float32, as :meth:`_View.mapping` gives, or int16 whole pixels), by
+    cv2.remap. The two-channel map goes in whole: taken apart, each channel is a strided view that OpenCV
+    copies first."""
     return cv2.remap(image, maps, None, interpolation, **border)  # type: ignore[call-overload]  # stubs want map2
 
 
@@ -1023,19 +1033,33 @@ def _unstepped_outline(image: np.ndarray, inside: np.ndarray, spread: float) -> 
     """
     within = cv2.erode(inside, _SMALL)
     beyond = 1 - cv2.dilate(inside, _SMALL)
-    colours = image.astype(np.float32)
-    window = (2 * _STEP_REACH + 1, 2 * _STEP_REACH + 1)
+    # Only the outline's own pixels are asked, so each side's sums are taken there alone.
+    rows, columns = np.nonzero((inside > 0) & (within == 0))
     means, counts = [], []
     for side in (within, beyond):
-        count = cv2.boxFilter(side.astype(np.float32), -1, window, normalize=False)
-        total = cv2.boxFilter(colours * side[..., None], -1, window, normalize=False)
-        means.append(total / np.maximum(count, 1.0)[..., None])
+        count, total = _window_sums(side, image * side[..., None], rows, columns, _STEP_REACH)
+        means.append(total / np.maximum(count, 1.0)[:, None])
         counts.append(count)
-    step = np.abs(means[0] - means[1]).sum(axis=2)
+    step = np.abs(means[0] - means[1]).sum(axis=1)
     # Each side's mean over a few pixels at least: at a thin spike of the outline one side is all but empty.
-    flat = ((inside > 0) & (within == 0) & (counts[0] >= _STEP_REACH) & (counts[1] >= _STEP_REACH)
-            & (step < _STEP_CLEAR * spread))
-    return cv2.dilate(flat.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, window)) > 0
+    flat = np.zeros(inside.shape, np.uint8)
+    flat[rows, columns] = (counts[0] >= _STEP_REACH) & (counts[1] >= _STEP_REACH) & (step < _STEP_CLEAR * spread)
+    return _dilated(flat, _STEP_REACH) > 0
+
+
+def _window_sums(side: np.ndarray, colours: np.ndarray, rows: np.ndarray, columns: np.ndarray,
+                 reach: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) and (N, 3) float32: the sums of ``side`` ((h, w) uint8) and of ``colours`` ((h, w, 3) uint8) over
+    the window of ``reach`` px either way around each of the N pixels (``rows``, ``columns``), the images
+    reflected about their edges as cv2.boxFilter's default border reflects them. Sums of whole numbers:
+    the integral image's are exact, as the box filter's are, and need not be taken at every pixel."""
+    size = 2 * reach + 1
+    sums = []
+    for image in (side, colours):
+        integral = cv2.integral(cv2.copyMakeBorder(image, reach, reach, reach, reach, cv2.BORDER_REFLECT_101))
+        sums.append((integral[rows + size, columns + size] - integral[rows, columns + size]
+                     - integral[rows + size, columns] + integral[rows, columns]).astype(np.float32))
+    return sums[0], sums[1]
 
 
 #: The colour either side of the outline is averaged within this many pixels of each outline pixel (and the
@@ -1684,8 +1708,7 @@ def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequenc
         picture[coarse[seen, 1], coarse[seen, 0]] = 255
         footprint = hulls.voxel * view.camera.focal_length / float(np.median(depth[seen])) / min(view.sx, view.sy) \
             if seen.any() else 1.0
-        size = 2 * int(np.ceil(footprint)) + 1
-        picture = cv2.dilate(picture, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        picture = _dilated(picture, int(np.ceil(footprint)))
         missing = cv2.countNonZero(cv2.bitwise_and(picture, cv2.bitwise_not(masks[i])))
         if missing <= _BAY * cv2.countNonZero(masks[i]):
             continue
@@ -2667,7 +2690,13 @@ class _Hulls:
             aim_depth = float(view.camera.project(aim[None, :])[1][0])
             radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
         steps = np.linspace(-radius, radius, _HULL_GRID)
-        grid = aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+        # The voxels' centres, as aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1) gives
+        # them, written axis by axis into one array.
+        grid = np.empty((_HULL_GRID,) * 3 + (3,))
+        grid[..., 0] = aim[0] + steps[:, None, None]
+        grid[..., 1] = aim[1] + steps[None, :, None]
+        grid[..., 2] = aim[2] + steps[None, None, :]
+        grid = grid.reshape(-1, 3)
         if plane is not None:
             grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
@@ -2705,8 +2734,10 @@ class _Hulls:
 
     def into(self, carving: set[int], i: int) -> np.ndarray:
         """The hull of the views ``carving`` projected into view ``i`` (0/255)."""
-        seen_by = np.sum([self.pixels[j][1] for j in carving], axis=0)
-        misses = np.sum([~self.inside[j] for j in carving], axis=0)
+        seen_by, misses = np.zeros(len(self.grid), np.intp), np.zeros(len(self.grid), np.intp)
+        for j in carving:
+            seen_by += self.pixels[j][1]
+            misses += ~self.inside[j]
         # With three carving views or more, one of them may miss a voxel (a view that found only part
         # of the object carves the others' hulls less); a voxel that fewer than two carving views
         # (or all of them, if fewer) see within their images is not known to be anything.
@@ -2719,8 +2750,7 @@ class _Hulls:
         if not keep.any():
             return points
         footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
-        size = 2 * int(np.ceil(footprint)) + 3
-        return cv2.dilate(points, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+        return _dilated(points, int(np.ceil(footprint)) + 1)
 
 
 def _refined(view: _View, coarse_mask: np.ndarray, on_plane: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -3099,8 +3129,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         near = _component_near(differs, centre, reach=0.25 * np.hypot(cw, ch))
         if near is not None:
             _, _, w, h = cv2.boundingRect(near)
-            reach = max(2, int(round(_BESIDE * max(w, h))))
-            beside = cv2.dilate(near, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+            beside = _dilated(near, max(2, int(round(_BESIDE * max(w, h))))) > 0
             attached = beside & ~seen
             score = np.where(attached, _HIDDEN, score)
             hidden |= attached
@@ -3222,18 +3251,30 @@ def _with_pieces_beside(region: np.ndarray, differs: np.ndarray) -> np.ndarray:
     """``region`` and the pieces of ``differs`` beside it (within a third of its size): a print's
     band of the table's own colour splits an object's evidence in two, and the piece at the aim alone
     loses the rest."""
-    x, y, w, h = cv2.boundingRect(region)
-    reach = max(2, int(round(_BESIDE * max(w, h))))
-    grown = cv2.dilate(region, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    _, _, w, h = cv2.boundingRect(region)
+    grown = _dilated(region, max(2, int(round(_BESIDE * max(w, h)))))
     count, labels = cv2.connectedComponents(cv2.bitwise_or(differs, region), connectivity=8)
     touching = np.zeros(count, bool)
-    touching[np.unique(labels[grown > 0])] = True
+    touching[labels[grown > 0]] = True
     touching[0] = False
     return np.where(touching[labels], 255, 0).astype(np.uint8)
 
 
 #: Pieces that stand out within this share of the region's size from it are of the same object.
 _BESIDE = 0.3
+
+
+def _dilated(binary: np.ndarray, reach: int) -> np.ndarray:
+    """``binary`` (uint8) dilated by the ellipse of ``reach`` px either way (2 reach + 1 across), as cv2.dilate
+    does it over the whole image: worked out over its pieces' box grown by ``reach`` alone, beyond which the
+    dilation reaches nothing (and the image's edge counts for nothing in a dilation)."""
+    x, y, w, h = cv2.boundingRect(binary)
+    dilated = np.zeros_like(binary)
+    if not w:
+        return dilated
+    box = (slice(max(0, y - reach), y + h + reach), slice(max(0, x - reach), x + w + reach))
+    dilated[box] = cv2.dilate(binary[box], cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    return dilated
 
 
 _CLOSING = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
@@ -3287,12 +3328,14 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
     else:
         # A shadow maps through the plane like the rest of the table, but its dark colour may suit the
         # object's model: a dark pixel that the other views confirm is table for sure.
-        shadow = low & _shadow_like(view.coarse[crop], low)
+        if hidden_shadows:
+            shadow, seen = _shadow_in_box(view, crop, score)
+        else:
+            shadow = low & _shadow_like(view.coarse[crop], low)
         mask[shadow & ~sure] = cv2.GC_BGD
         if hidden_shadows:
             image = view.coarse[crop]
             hidden = score[crop] == _HIDDEN
-            seen = _shadow_seen(image, low, shadow, hidden)
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
@@ -3364,10 +3407,25 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
     confirm: ``score`` under 1), None where it sees none."""
     x0, y0, x1, y1 = _cut_box(view, region)
     crop = (slice(y0, y1), slice(x0, x1))
-    image = view.coarse[crop]
-    low = score[crop] < 1.0
-    seen = _shadow_seen(image, low, low & _shadow_like(image, low), score[crop] == _HIDDEN)
-    return None if seen is None else seen[1][seen[0]] / max(float(_median_colour(image, low).sum()), 1.0)
+    _, seen = _shadow_in_box(view, crop, score)
+    if seen is None:
+        return None
+    return seen[1][seen[0]] / max(float(_median_colour(view.coarse[crop], score[crop] < 1.0).sum()), 1.0)
+
+
+def _shadow_in_box(view: _View, crop: tuple[slice, slice],
+                   score: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+    """Without an empty workspace, within the graph cut's box ``crop``: the table the other views confirm
+    (``score`` under 1) that looks like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the
+    pixels hidden from them (``score`` :data:`_HIDDEN`) asked. A first cut asks it twice of one box and one
+    evidence (the shadow it sees in the open, then its graph cut): the view keeps its last one. Read only."""
+    rows, columns = crop
+    key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
+    if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
+        image, low = view.coarse[crop], score[crop] < 1.0
+        shadow = low & _shadow_like(image, low)
+        view.box_shadow = (view.coarse, key, shadow, _shadow_seen(image, low, shadow, score[crop] == _HIDDEN))
+    return view.box_shadow[2], view.box_shadow[3]
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,

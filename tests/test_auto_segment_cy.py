@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -427,3 +428,170 @@ def test_the_region_near_the_aim_is_the_object_beside_a_speck_on_the_aim():
     region = auto_segment._component_near(binary, np.array([100.0, 79.0]), reach=40.0)
     assert region is not None and np.count_nonzero(region) == 9
     assert auto_segment._component_near(np.zeros((150, 200), np.uint8), np.array([100.0, 79.0]), 40.0) is None
+
+
+def test_window_sums_are_the_box_filters_at_the_pixels_asked():
+    """The outline's sums, taken at its pixels alone, are what cv2.boxFilter gives there (its reflected
+    border too), on images smaller than the window as well."""
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        h, w = (int(n) for n in rng.integers(1, 40, 2))
+        side = (rng.random((h, w)) < 0.5).astype(np.uint8)
+        colours = rng.integers(0, 256, (h, w, 3), dtype=np.uint8) * side[..., None]
+        rows, columns = np.nonzero(rng.random((h, w)) < 0.3)
+        count, total = auto_segment._window_sums(side, colours, rows, columns, 5)
+        box_count = cv2.boxFilter(side.astype(np.float32), -1, (11, 11), normalize=False)
+        box_total = cv2.boxFilter(colours.astype(np.float32), -1, (11, 11), normalize=False)
+        assert count.dtype == total.dtype == np.float32
+        assert np.array_equal(count, box_count[rows, columns])
+        assert np.array_equal(total, box_total[rows, columns])
+
+
+def test_unstepped_outline_is_the_whole_images_box_filtered_means():
+    """The outline without a step, from sums at the outline alone, is the one from box filters over the
+    whole window: every mean and step alike, to the bit."""
+    def reference(image, inside, spread):
+        within = cv2.erode(inside, auto_segment._SMALL)
+        beyond = 1 - cv2.dilate(inside, auto_segment._SMALL)
+        means, counts = [], []
+        for side in (within, beyond):
+            count = cv2.boxFilter(side.astype(np.float32), -1, (11, 11), normalize=False)
+            total = cv2.boxFilter(image.astype(np.float32) * side[..., None], -1, (11, 11), normalize=False)
+            means.append(total / np.maximum(count, 1.0)[..., None])
+            counts.append(count)
+        step = np.abs(means[0] - means[1]).sum(axis=2)
+        flat = (inside > 0) & (within == 0) & (counts[0] >= 5) & (counts[1] >= 5)
+        return flat, step
+
+    rng = np.random.default_rng(4)
+    for trial in range(200):
+        h, w = (int(n) for n in rng.integers(8, 60, 2))
+        image = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        inside = np.zeros((h, w), np.uint8)
+        cv2.circle(inside, (int(rng.integers(0, w)), int(rng.integers(0, h))), int(rng.integers(2, 30)), 1, -1)
+        flat, step = reference(image, inside, 0.0)
+        if not flat.any():
+            continue
+        # Spreads that put the threshold exactly on some outline pixel's step, and just either side of it.
+        edge = float(rng.choice(step[flat])) / auto_segment._STEP_CLEAR
+        for spread in (np.nextafter(edge, 0.0), edge, np.nextafter(edge, np.inf), 1e9):
+            wanted = cv2.dilate((flat & (step < auto_segment._STEP_CLEAR * spread)).astype(np.uint8),
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (11, 11))) > 0
+            assert np.array_equal(auto_segment._unstepped_outline(image, inside, spread), wanted)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_of_many_values_is_numpys_whether_or_not_the_sample_brackets_it(dtype):
+    """Many values (the evidence of a whole view) are selected between two of a sample's first: the median
+    is NumPy's all the same, with ties, sorted values, a middle at the bracket's edge, and a sample that
+    misses the middle (the selection then runs over all)."""
+    rng = np.random.default_rng(5)
+
+    def sampled(count):
+        return (np.arange(1024) * count) // 1024
+
+    def cases():
+        for count in (4096, 4097, 9000, 30001):
+            yield rng.normal(size=count)
+            yield np.where(rng.random(count) < 0.6, 0.0, np.abs(rng.normal(size=count)))  # most of a map is 0
+            yield np.sort(rng.normal(size=count))
+            yield np.sort(rng.normal(size=count))[::-1].copy()
+            yield np.full(count, 2.5)
+            yield np.round(rng.normal(size=count) * 3)  # few distinct values, many ties
+            missed = rng.normal(size=count)
+            missed[sampled(count)] = 1e6  # the sample sees only the largest value
+            yield missed
+        for count in (4096, 10000):
+            # Half zeros, half ones, the sample all ones: the bracket starts at the middle, and the value just
+            # below it is the largest under the bracket.
+            edge = np.ones(count)
+            rest = np.setdiff1d(np.arange(count), sampled(count))
+            edge[rng.choice(rest, count // 2, replace=False)] = 0.0
+            yield edge
+
+    for values in cases():
+        values = values.astype(dtype)
+        with_nan = values.copy()
+        with_nan[rng.random(len(values)) < 0.05] = np.nan
+        assert median_and_spread(values) == _reference(values)
+        assert median_and_spread(with_nan) == _reference(with_nan)
+        assert median(values) == float(np.median(values))
+
+
+def test_dilated_over_the_pieces_box_is_the_whole_images_dilation():
+    """The dilation worked out over the pieces' box grown by its reach is cv2.dilate's over the whole image,
+    pieces on the image's edges, none at all, and reaches wider than the image included."""
+    rng = np.random.default_rng(6)
+    for trial in range(300):
+        h, w = (int(n) for n in rng.integers(1, 50, 2))
+        binary = np.zeros((h, w), np.uint8)
+        for _ in range(int(rng.integers(0, 4))):
+            x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
+            binary[y:y + int(rng.integers(1, 8)), x:x + int(rng.integers(1, 8))] = rng.choice([1, 255])
+        reach = int(rng.integers(0, 30))
+        whole = cv2.dilate(binary, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+        assert np.array_equal(auto_segment._dilated(binary, reach), whole)
+
+
+def test_what_hides_the_table_is_read_through_the_float_maps_rounded():
+    """The maps rounded to whole pixels once per pair of views read what hides the table as cv2.remap
+    reads it through the float maps, looks after looks: the table from two sides, and maps with half-pixel
+    ties, points far out of the picture and NaN."""
+    rng = np.random.default_rng(7)
+    image = np.zeros((480, 640, 3), np.uint8)
+    views = [auto_segment._View(i, image, _looking_at_origin(p), None)
+             for i, p in enumerate([[0.5, -0.1, 0.45], [-0.2, 0.5, 0.6]])]
+    plane = np.array([0.0, 0.0, 1.0, 0.0])
+    for view, other in [(views[0], views[1]), (views[1], views[0])]:
+        maps, inside = view.mapping(other, plane)
+        inside = inside.reshape(maps.shape[:2])
+        for _ in range(3):
+            hidden = np.where(rng.random((150, 200)) < 0.3, 255, 0).astype(np.uint8)
+            _, seen, behind = view.sees(other, plane, hidden)
+            expected = inside & (cv2.remap(hidden, maps, None, cv2.INTER_NEAREST, borderValue=0) > 0)
+            np.testing.assert_array_equal(behind, expected)
+            np.testing.assert_array_equal(seen, inside & ~expected)
+    maps = rng.uniform(-3, 12, (9, 11, 2)).astype(np.float32)
+    maps[::2] = np.round(maps[::2]) + 0.5
+    maps[1, :3] = [[1e9, 3.0], [np.nan, 2.0], [-7e4, np.inf]]
+    hidden = rng.integers(0, 256, (10, 10), dtype=np.uint8)
+    rounded = cv2.convertMaps(maps, None, cv2.CV_16SC2, nninterpolation=True)[0]
+    np.testing.assert_array_equal(auto_segment._remapped(hidden, rounded, cv2.INTER_NEAREST, borderValue=0),
+                                  cv2.remap(hidden, maps, None, cv2.INTER_NEAREST, borderValue=0))
+
+
+def test_the_shadow_in_a_box_kept_is_the_one_its_box_and_evidence_give():
+    """The shadow a view keeps for its last graph cut's box is what the box's image and evidence give
+    afresh, and another evidence, another box or an evened image is worked out anew."""
+    rng = np.random.default_rng(8)
+    image = np.full((480, 640, 3), 150, np.uint8)
+    image[200:300, 300:400] = 90                                # the table in shadow
+    image += rng.integers(0, 6, image.shape, dtype=np.uint8)    # the table's grain
+    view = auto_segment._View(0, image, _looking_at_origin([0.5, -0.1, 0.45]), None)
+
+    def afresh(crop, score):
+        picture, low = view.coarse[crop], score[crop] < 1.0
+        shadow = low & auto_segment._shadow_like(picture, low)
+        return shadow, auto_segment._shadow_seen(picture, low, shadow, score[crop] == auto_segment._HIDDEN)
+
+    def same(kept, wanted):
+        assert np.array_equal(kept[0], wanted[0])
+        assert (kept[1] is None) == (wanted[1] is None)
+        if wanted[1] is not None:
+            for a, b in zip(kept[1], wanted[1]):
+                assert np.array_equal(a, b)
+
+    score = rng.uniform(0.0, 0.9, (150, 200)).astype(np.float32)
+    score[70:90, 90:110] = auto_segment._HIDDEN
+    crop = (slice(40, 120), slice(60, 160))
+    first = auto_segment._shadow_in_box(view, crop, score)
+    assert first[1] is not None and first[0].any()
+    same(first, afresh(crop, score))
+    same(auto_segment._shadow_in_box(view, crop, score), first)
+    other = score.copy()
+    other[60:70, 95:125] = 3.0                                  # part of the shadow stands out now
+    same(auto_segment._shadow_in_box(view, crop, other), afresh(crop, other))
+    smaller = (slice(50, 110), slice(70, 150))
+    same(auto_segment._shadow_in_box(view, smaller, score), afresh(smaller, score))
+    view.coarse = view.coarse * np.float32(0.5)                 # the light evened
+    same(auto_segment._shadow_in_box(view, smaller, score), afresh(smaller, score))
