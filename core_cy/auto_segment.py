@@ -1455,16 +1455,13 @@ def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray
                 seen |= sees
                 behind |= hides
         hidden = (behind & ~seen) | (score == _HIDDEN)
-        side = np.exp(-_LIGHT_FIELD_BEYOND) * lit_table
         grain = functools.cache(lambda: _grain_seen(view))
 
         def below_a_side(part: np.ndarray) -> bool:
-            above = _just_below(view, plane, part, upward=True) & inside & ~part
-            return bool(above.any()) and float(np.median(brightness[above])) < side
+            return _lit_below(view, plane, mask, brightness, lit_table, part, upward=True) is False
 
         def beyond_a_top(part: np.ndarray) -> bool:
-            below = _just_below(view, plane, part) & inside & ~part
-            return (bool(below.any()) and float(np.median(brightness[below])) >= side
+            return (_lit_below(view, plane, mask, brightness, lit_table, part) is True
                     and float(np.median(grain()[part])) >= 0.5 and float(np.median(grain()[round_it])) >= 0.5)
 
         kept = mask.copy()
@@ -2130,10 +2127,7 @@ class _BeyondOutline:
         of the silhouette lies below it, or without a plane or a table round it."""
         if self.plane is None or self.lit_table is None:
             return None
-        below = _just_below(self.view, self.plane, piece) & (self.mask > 0) & ~piece
-        if not below.any():
-            return None
-        return bool(float(np.median(self.brightness[below])) >= np.exp(-_LIGHT_FIELD_BEYOND) * self.lit_table)
+        return _lit_below(self.view, self.plane, self.mask, self.brightness, self.lit_table, piece)
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
@@ -2179,6 +2173,18 @@ class _BeyondOutline:
         """Whether ``piece`` keeps the empty workspace's grain as the table round it does: a shadow, whatever
         the other views see above it (the object beside it may look as dark from them)."""
         return self.view.grain_sums is not None and _grain_kept(self.view, piece, self.known)
+
+
+def _lit_below(view: _View, plane: np.ndarray, mask: np.ndarray, brightness: np.ndarray, lit_table: float,
+               piece: np.ndarray, upward: bool = False) -> bool | None:
+    """Whether the silhouette ``mask`` (0/255) just below ``piece`` (bool; :func:`_just_below`, ``upward``:
+    just above it) is lit as the table, its median ``brightness`` (:func:`_brightness`) no darker than
+    ``lit_table`` beyond the light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`); None where nothing
+    of the silhouette lies there."""
+    there = _just_below(view, plane, piece, upward) & (mask > 0) & ~piece
+    if not there.any():
+        return None
+    return bool(float(np.median(brightness[there])) >= np.exp(-_LIGHT_FIELD_BEYOND) * lit_table)
 
 
 def _just_below(view: _View, plane: np.ndarray, region: np.ndarray, upward: bool = False) -> np.ndarray:
