@@ -1476,10 +1476,21 @@ def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray
 
 def _rim_parts(candidates: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
     """The pieces of ``candidates`` (bool, opened by :data:`_SMALL`) that reach the rim of ``mask`` (0/255)."""
-    opened = cv2.morphologyEx(candidates.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(opened, connectivity=8)
     rim = (mask > 0) & ~(cv2.erode(mask, _SMALL) > 0)
-    return [part for part in (labels == label for label in range(1, count)) if (part & rim).any()]
+    return [part for part in _opened_parts(candidates) if (part & rim).any()]
+
+
+def _opened_parts(binary: np.ndarray) -> list[np.ndarray]:
+    """The 8-connected parts (bool) of ``binary`` (bool or uint8, any non-zero value set) opened by
+    :data:`_SMALL`: a sliver or a speck of a few pixels is no part."""
+    opened = cv2.morphologyEx(binary.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(opened, connectivity=8)
+    return [labels == label for label in range(1, count)]
+
+
+def _touching_over(parts: list[np.ndarray], touching: np.ndarray, least: float) -> list[np.ndarray]:
+    """The ``parts`` (bool) that touch ``touching`` (bool) and are over ``least`` pixels."""
+    return [part for part in parts if (part & touching).any() and part.sum() > least]
 
 
 def _grain_seen(view: _View) -> np.ndarray:
@@ -1539,18 +1550,13 @@ def _parts_the_others_see(piece: np.ndarray, score: np.ndarray) -> list[np.ndarr
     seen = piece & (score != _HIDDEN)
     if 2 * np.count_nonzero(seen) > np.count_nonzero(piece):
         return [piece]
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(seen.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
-    parts = [labels == label for label in range(1, count)]
-    return [part for part in parts if np.count_nonzero(part) >= _SPECK]
+    return [part for part in _opened_parts(seen) if np.count_nonzero(part) >= _SPECK]
 
 
 def _pieces_added(found: np.ndarray, before: np.ndarray) -> list[np.ndarray]:
     """The pieces (bool, each 8-connected) that a view's cut again, ``found`` (0/255), adds to ``before``
     (0/255), opened by :data:`_SMALL`: a sliver along ``before``'s edge is no piece."""
-    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(added, connectivity=8)
-    return [labels == label for label in range(1, count)]
+    return _opened_parts(cv2.bitwise_and(found, cv2.bitwise_not(before)))
 
 
 def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: np.ndarray,
@@ -1590,11 +1596,9 @@ def _parts_keeping_the_grain(view: _View, piece: np.ndarray, known: np.ndarray, 
         split = piece & ~_grain_lost_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
     else:
         split = _grain_kept_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
-    parts, labels = cv2.connectedComponents(cv2.morphologyEx(split.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
-    for part in range(1, parts):
-        if _grain_kept(view, labels == part, known):
-            found |= labels == part
+    for part in _opened_parts(split):
+        if _grain_kept(view, part, known):
+            found |= part
     return found
 
 
@@ -2069,10 +2073,7 @@ class _BeyondOutline:
         found = np.zeros(piece.shape, bool)
         if self._plane_grain is None:
             return found
-        confirmed = np.where(piece & self.seen & (self.parallax <= self.table_level), 255, 0).astype(np.uint8)
-        count, labels = cv2.connectedComponents(cv2.morphologyEx(confirmed, cv2.MORPH_OPEN, _SMALL), connectivity=8)
-        for label in range(1, count):
-            part = labels == label
+        for part in _opened_parts(piece & self.seen & (self.parallax <= self.table_level)):
             if part.sum() <= least or not self.looks_a_shadow(part):
                 continue
             told = _piece_and_table_grain(self.view, part, self.known, self.mapped_grain, None)
@@ -2372,14 +2373,8 @@ def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarr
     # Brighter than the open shadow by that spread both ways: lit by the lamp, in part at least.
     lit = np.exp(2.0 * _LIGHT_FIELD_BEYOND) * shadow_level
     grown = grown.copy()
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
     near = cv2.dilate(grown, _SMALL) > 0
-    least = _BAY * cv2.countNonZero(ask.mask)
-    for label in range(1, count):
-        part = labels == label
-        if not (part & near).any() or part.sum() <= least:
-            continue
+    for part in _touching_over(_opened_parts(beyond), near, _BAY * cv2.countNonZero(ask.mask)):
         if np.count_nonzero(ask.alike[part]) <= _HIDDEN_FACE_ALIKE * part.sum():
             continue
         level = float(np.median(brightness[part]))
@@ -2397,13 +2392,10 @@ _HIDDEN_FACE_ALIKE = 0.6
 def _standing_parts(standing: np.ndarray, touching: np.ndarray, least: float) -> np.ndarray:
     """(h, w) bool: the parts of ``standing`` (bool; closed, then opened by :data:`_SMALL`) that touch
     ``touching`` (bool) and are over ``least`` pixels."""
-    found = cv2.morphologyEx(standing.astype(np.uint8), cv2.MORPH_CLOSE, _SMALL)
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(found, cv2.MORPH_OPEN, _SMALL), connectivity=8)
     kept = np.zeros(standing.shape, bool)
-    for label in range(1, count):
-        part = labels == label
-        if (part & touching).any() and part.sum() > least:
-            kept |= part
+    for part in _touching_over(_opened_parts(cv2.morphologyEx(standing.astype(np.uint8), cv2.MORPH_CLOSE, _SMALL)),
+                               touching, least):
+        kept |= part
     return kept
 
 
@@ -2422,25 +2414,15 @@ def _split_by_lost_grain(view: _View, grown: np.ndarray, mask: np.ndarray, stret
     the table's, as strong as round it within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint
     grain (white laminate) leaves none above JPEG's floor, and the object's own print seen at a table point
     is stronger than any grain of the table."""
-    stretches = cv2.morphologyEx(stretches.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
     near = cv2.dilate(grown, _SMALL) > 0
     least = _BAY * cv2.countNonZero(mask)
-    count, labels = cv2.connectedComponents(stretches.astype(np.uint8), connectivity=8)
-    for label in range(1, count):
-        stretch = labels == label
-        if not (stretch & near).any() or stretch.sum() <= least:
-            continue
+    for stretch in _touching_over(_opened_parts(stretches), near, least):
         table = _table_grain_round(view, stretch, known, grain(), shade)
         if table is None:
             continue
         slope, power = table
         lost = _grain_lost_pixels(grain(), stretch, slope, _fine_per_coarse(view))
-        parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                               connectivity=8)
-        for part in range(1, parts):
-            piece = split == part
-            if not (piece & near).any() or piece.sum() <= least:
-                continue
+        for piece in _touching_over(_opened_parts(lost), near, least):
             seen_there = float(np.nanmean(grain()[piece][:, 1]))
             if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and accepts(piece):
                 grown[piece] = 255
