@@ -2034,9 +2034,10 @@ class _BeyondOutline:
         assert self._seen_alike is not None
         return self._seen_alike()
 
-    @functools.cached_property
+    @property
     def mapped_grain(self) -> np.ndarray:
-        """The table's grain the other views see at each pixel's table point (``plane_grain``)."""
+        """The table's grain the other views see at each pixel's table point (``plane_grain``, worked out once
+        by its maker, which :func:`_lit_faces_hiding_the_grain` asks too)."""
         assert self._plane_grain is not None
         return self._plane_grain()
 
@@ -2322,7 +2323,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     if plane_grain is not None:
         looks = np.zeros(mask.shape, bool)
         looks[ask.crop] = _shadow_like(view.coarse[ask.crop], ask.low | beyond[ask.crop]) & beyond[ask.crop]
-        grown = _split_by_lost_grain(view, grown, mask, looks, lambda: ask.mapped_grain, None, ask.known,
+        grown = _split_by_lost_grain(view, grown, mask, looks, plane_grain, None, ask.known,
                                      ask.hides_the_mapped_grain)
         if seen_alike is not None:
             grown = _hidden_faces_seen_alike(ask, grown)
