@@ -118,11 +118,8 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
-        # With the empty workspace: both coarse images before their rounding to whole grey levels (float32 BGR),
-        # whose change against each other the rounding does not hide in its steps (_log_ratio).
-        self.unrounded: tuple[np.ndarray, np.ndarray] | None = None if background is None else (
-            cv2.resize(image.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA),
-            cv2.resize(background.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA))
+        # The smooth light field the coarse pictures were divided by (_even_the_light), if they were.
+        self.light_field: np.ndarray | None = None
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
         # With the empty workspace: per coarse pixel, the sums its grain is told by over a region
@@ -148,6 +145,18 @@ class _View:
         self._warped: dict[tuple[int, bytes], np.ndarray] = {}
         # Each other view's fine grey image mapped through a plane onto a window of this one's (_fine_warped).
         self.fine_warped: dict[tuple[int, bytes, int, int, int, int], np.ndarray] = {}
+
+    @functools.cached_property
+    def unrounded(self) -> tuple[np.ndarray, np.ndarray]:
+        """With the empty workspace: both coarse images before their rounding to whole grey levels (float32
+        BGR, divided by the light field as the coarse ones are), whose change against each other the rounding
+        does not hide in its steps (_log_ratio). Asked only once the light is evened."""
+        assert self.full_background is not None
+        image, empty = (cv2.resize(picture.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA)
+                        for picture in (self.image, self.full_background))
+        if self.light_field is None:
+            return image, empty
+        return image / self.light_field, empty / self.light_field
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
@@ -1228,8 +1237,7 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
         view.coarse = view.coarse / field
         if view.background is not None:
             view.background = view.background / field
-        if view.unrounded is not None:
-            view.unrounded = (view.unrounded[0] / field, view.unrounded[1] / field)
+        view.light_field = field
 
 
 def _light_basis(view: _View, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -3689,7 +3697,6 @@ def _log_ratio(view: _View) -> np.ndarray:
     grey levels a channel) then changed alike within that step, and the other views' view of the shadow at
     the body's table points took the body for the table (seed 17's rubber mat: a view 0.78 before, 0.85).
     The noise of the change that first tells what changed at all is :func:`_change_noise`'s."""
-    assert view.unrounded is not None
     return _log_ratio_of(*view.unrounded)
 
 
