@@ -1635,10 +1635,8 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
             continue
         x0, y0, x1, y1 = _cut_box(view, mask)
         crop = (slice(y0, y1), slice(x0, x1))
-        image = view.coarse[crop]
-        low = score[crop] < 1.0
         hidden = score[crop] == _HIDDEN
-        seen = _shadow_seen(image, low, low & _shadow_like(image, low), hidden)
+        _, seen = _shadow_in_box(view, crop, score)
         if seen is None:
             continue
         shadow, brightness, _, off_table = seen
@@ -2567,9 +2565,7 @@ def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, s
     """(h, w) bool: the open shadow, as the table under the overhang is told from it: the table that the view's
     evidence ``score`` confirms within ``crop`` (the graph cut's box), with a shadow's look, round the object
     (:func:`_shadows_under_object_dropped`)."""
-    confirmed = score[crop] < 1.0
-    found = _shadow_seen(view.coarse[crop], confirmed, confirmed & _shadow_like(view.coarse[crop], confirmed),
-                         score[crop] == _HIDDEN)
+    _, found = _shadow_in_box(view, crop, score)
     open_shadow = np.zeros(score.shape, bool)
     if found is not None:
         open_shadow[crop] = found[0]
@@ -3412,10 +3408,11 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
 
 def _shadow_in_box(view: _View, crop: tuple[slice, slice],
                    score: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
-    """Without an empty workspace, within the graph cut's box ``crop``: the table the other views confirm
-    (``score`` under 1) that looks like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the
-    pixels hidden from them (``score`` :data:`_HIDDEN`) asked. A first cut asks it twice of one box and one
-    evidence (the shadow it sees in the open, then its graph cut): the view keeps its last one. Read only."""
+    """Within the graph cut's box ``crop``: the table the other views confirm (``score`` under 1) that looks
+    like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
+    (``score`` :data:`_HIDDEN`) asked: the one way to ask it, for the first cut's graph cut and the shadow it
+    sees in the open, the open shadow round a silhouette, and the table under the object's overhang. A first
+    cut asks it twice of one box and one evidence: the view keeps its last one. Read only."""
     rows, columns = crop
     key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
     if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
