@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -1639,7 +1640,7 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
         _, seen = _shadow_in_box(view, crop, score)
         if seen is None:
             continue
-        shadow, brightness, _, off_table = seen
+        shadow, brightness, _, off_table, _ = seen
         deepest = np.quantile(brightness[shadow], _SHADOW_DEEPEST)
         under = np.zeros(mask.shape, bool)
         under[crop] = (_hidden_shadow(off_table < 1.0, brightness, shadow, hidden) & (mask[crop] > 0)
@@ -2568,7 +2569,7 @@ def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, s
     _, found = _shadow_in_box(view, crop, score)
     open_shadow = np.zeros(score.shape, bool)
     if found is not None:
-        open_shadow[crop] = found[0]
+        open_shadow[crop] = found.shadow
     return open_shadow
 
 
@@ -3332,7 +3333,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
-                shadow, brightness, darker, off_table = seen
+                shadow, brightness, darker, off_table, _ = seen
                 mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
@@ -3376,12 +3377,20 @@ _CUT_MARGIN = 0.5
 _SURE = 5.0
 
 
-def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
-                 hidden: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+class _ShadowSeen(NamedTuple):
+    """The shadow a view sees within the graph cut's box (:func:`_shadow_seen`)."""
+    shadow: np.ndarray  # bool, the shadow as a region
+    brightness: np.ndarray  # each pixel's channels summed (:func:`_brightness`)
+    darker: np.ndarray  # bool, darker than the table (:data:`_SHADOW_DIMMER`)
+    off_table: np.ndarray  # the dark pixels' :func:`_off_colours` from the table's colour
+    table_colour: np.ndarray  # (3,) the median colour of the table the other views confirm
+
+
+def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray, hidden: np.ndarray) -> _ShadowSeen | None:
     """Within the graph cut's box: the ``shadow`` (:func:`_shadow_like` of the table the other views confirm,
-    ``low``) as a region, each pixel's brightness, whether it is darker than the table, and the dark pixels'
-    :func:`_off_colours` from the table's colour (the ``hidden`` ones and the confirmed table's); None where
-    no shadow region is seen."""
+    ``low``) as a region, each pixel's brightness, whether it is darker than the table, the dark pixels'
+    :func:`_off_colours` from the table's colour (the ``hidden`` ones and the confirmed table's), and that
+    colour; None where no shadow region is seen."""
     # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for
     # a shadow pixel by pixel, but not over a few pixels together.
     shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
@@ -3391,7 +3400,8 @@ def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
     brightness = _brightness(image)
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
-    return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
+    return _ShadowSeen(shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low)),
+                       table_colour)
 
 
 def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.ndarray | None:
@@ -3403,11 +3413,10 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
     _, seen = _shadow_in_box(view, crop, score)
     if seen is None:
         return None
-    return seen[1][seen[0]] / max(float(_median_colour(view.coarse[crop], score[crop] < 1.0).sum()), 1.0)
+    return seen.brightness[seen.shadow] / max(float(seen.table_colour.sum()), 1.0)
 
 
-def _shadow_in_box(view: _View, crop: tuple[slice, slice],
-                   score: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) -> tuple[np.ndarray, _ShadowSeen | None]:
     """Within the graph cut's box ``crop``: the table the other views confirm (``score`` under 1) that looks
     like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
     (``score`` :data:`_HIDDEN`) asked: the one way to ask it, for the first cut's graph cut and the shadow it
@@ -3423,7 +3432,7 @@ def _shadow_in_box(view: _View, crop: tuple[slice, slice],
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,
-                           darkenings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+                           darkenings: np.ndarray) -> _ShadowSeen | None:
     """As :func:`_shadow_seen`, for a view that sees no shadow in the open: the shadow is where the ``hidden``
     pixels have the colour of the table (the table the other views confirm, ``low``), darkened to no more
     than the other views see their open shadow darkened to (``darkenings``, its brightness over its table's,
@@ -3431,13 +3440,13 @@ def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarra
     if not np.any(low):
         return None
     table_colour = _median_colour(image, low)
-    brightness = image.sum(axis=2)
+    brightness = _brightness(image)
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     off_table = _off_colours(image, table_colour, darker & (hidden | low))
     ceiling = float(np.quantile(darkenings, _SHADOW_BRIGHTEST)) * float(table_colour.sum())
     shadow = cv2.morphologyEx((hidden & darker & (off_table < 1.0) & (brightness <= ceiling)).astype(np.uint8),
                               cv2.MORPH_OPEN, _SMALL) > 0
-    return (shadow, brightness, darker, off_table) if np.any(shadow) else None
+    return _ShadowSeen(shadow, brightness, darker, off_table, table_colour) if np.any(shadow) else None
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
