@@ -2112,8 +2112,7 @@ class _BeyondOutline:
         """Whether ``piece``'s median brightness is within the light's spread over a table
         (:data:`_LIGHT_FIELD_BEYOND`) of the table's round the silhouette and the other views' hull, or above
         it: a face turned up is lit as the table is, a stretch of the object's shadow is not."""
-        return self.lit_table is not None and float(np.median(self.brightness[piece])) >= np.exp(
-            -_LIGHT_FIELD_BEYOND) * self.lit_table
+        return self.lit_table is not None and _lit_as(self.brightness, piece, self.lit_table)
 
     def on_a_side(self, piece: np.ndarray) -> bool:
         """Whether the silhouette just below ``piece`` (:meth:`lit_below`) is darker than the lit table beyond
@@ -2191,9 +2190,13 @@ def _lit_below(view: _View, plane: np.ndarray, mask: np.ndarray, brightness: np.
     ``lit_table`` beyond the light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`); None where nothing
     of the silhouette lies there."""
     there = _just_below(view, plane, piece, upward) & (mask > 0) & ~piece
-    if not there.any():
-        return None
-    return bool(float(np.median(brightness[there])) >= np.exp(-_LIGHT_FIELD_BEYOND) * lit_table)
+    return _lit_as(brightness, there, lit_table) if there.any() else None
+
+
+def _lit_as(brightness: np.ndarray, region: np.ndarray, lit_table: float) -> bool:
+    """Whether ``region``'s (bool, not empty) median ``brightness`` is no darker than ``lit_table`` beyond the
+    light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`): lit as the table is, or brighter."""
+    return bool(float(np.median(brightness[region])) >= np.exp(-_LIGHT_FIELD_BEYOND) * lit_table)
 
 
 def _just_below(view: _View, plane: np.ndarray, region: np.ndarray, upward: bool = False) -> np.ndarray:
