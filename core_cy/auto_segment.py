@@ -613,7 +613,7 @@ def _background_evidence(view: _View) -> np.ndarray:
 def _darkening(view: _View) -> np.ndarray:
     """How much darker than the empty workspace each coarse pixel is (image over background brightness)."""
     assert view.background is not None
-    return (view.coarse.sum(axis=2) + 3 * _CHROMA_OFFSET) / (view.background.sum(axis=2) + 3 * _CHROMA_OFFSET)
+    return (_brightness(view.coarse) + 3 * _CHROMA_OFFSET) / (_brightness(view.background) + 3 * _CHROMA_OFFSET)
 
 
 def _shadow_of_table(view: _View) -> np.ndarray:
@@ -788,8 +788,8 @@ def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndar
     difference = _relative_difference(image, background)
     # A shadow multiplies every channel by about the same factor below 1: compare chromaticities.
     # The offset keeps a dark pixel's noise from passing for a change of colour.
-    brightness = image.sum(axis=2) + 3 * _CHROMA_OFFSET
-    ground = background.sum(axis=2) + 3 * _CHROMA_OFFSET
+    brightness = _brightness(image) + 3 * _CHROMA_OFFSET
+    ground = _brightness(background) + 3 * _CHROMA_OFFSET
     chroma = np.abs((image + _CHROMA_OFFSET) / brightness[..., None]
                     - (background + _CHROMA_OFFSET) / ground[..., None]).sum(axis=2) * 1.5
     darker = (brightness < 1.05 * ground) & (brightness > 0.15 * ground)
@@ -3078,7 +3078,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
                                         [standing[v.index] for v in views if v is not view])
             mapped_score = np.nan_to_num(mapped, nan=np.inf) / max(_noise_level(mapped), _NOISE_FLOOR)
             image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
-            brightness, ground = image.sum(axis=2), empty.sum(axis=2)
+            brightness, ground = _brightness(image), _brightness(empty)
             hue_shift = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
             shadow = (brightness < 0.95 * ground) & (hue_shift < _LAMP_HUE_SHIFT) & (mapped_score < 1.5)
             evidence = np.where(shadow, np.minimum(evidence, mapped), evidence)
