@@ -1540,8 +1540,7 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
             evidence = score[piece & (score != _HIDDEN)]
             if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
                 continue
-            looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
-            if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
+            if np.count_nonzero(_shadow_look(view, crop, confirmed, piece)) <= _MOSTLY * area:
                 continue
             if open_shadow is None:
                 open_shadow = _confirmed_shadow_round(view, score, crop)
@@ -2144,9 +2143,8 @@ class _BeyondOutline:
     def looks_a_shadow(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it: darker than the table the view's evidence
         confirms round the object, of its chromaticity (:func:`_shadow_like`)."""
-        looks = np.zeros(self.mask.shape, bool)
-        looks[self.crop] = _shadow_like(self.view.coarse[self.crop], self.low | piece[self.crop])
-        return bool(2 * np.count_nonzero(looks[piece]) >= np.count_nonzero(piece))
+        looks = _shadow_look(self.view, self.crop, self.low, piece)
+        return bool(2 * np.count_nonzero(looks) >= np.count_nonzero(piece))
 
     def hides_the_mapped_grain(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
@@ -2331,8 +2329,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     # where the grain is lost, and a part weighed as a piece of the cut is.
     beyond = (hull > 0) & (grown == 0)
     if plane_grain is not None:
-        looks = np.zeros(mask.shape, bool)
-        looks[ask.crop] = _shadow_like(view.coarse[ask.crop], ask.low | beyond[ask.crop]) & beyond[ask.crop]
+        looks = _shadow_look(view, ask.crop, ask.low, beyond)
         grown = _split_by_lost_grain(view, grown, mask, looks, plane_grain, None, ask.known,
                                      ask.hides_the_mapped_grain)
         if seen_alike is not None:
@@ -3450,6 +3447,15 @@ def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarra
     shadow = cv2.morphologyEx((hidden & darker & (off_table < 1.0) & (brightness <= ceiling)).astype(np.uint8),
                               cv2.MORPH_OPEN, _SMALL) > 0
     return _ShadowSeen(shadow, brightness, darker, off_table, table_colour) if np.any(shadow) else None
+
+
+def _shadow_look(view: _View, crop: tuple[slice, slice], table: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels of ``region`` (bool, coarse) within the graph cut's box ``crop`` that have a
+    shadow's look (:func:`_shadow_like`) against ``table`` (bool, the box's: the table the view's evidence
+    confirms), the region counted in with it."""
+    looks = np.zeros(region.shape, bool)
+    looks[crop] = _shadow_like(view.coarse[crop], table | region[crop]) & region[crop]
+    return looks
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
