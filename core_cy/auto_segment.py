@@ -1543,8 +1543,8 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
             if np.count_nonzero(_shadow_look(view, crop, confirmed, piece)) <= _MOSTLY * area:
                 continue
             if open_shadow is None:
-                open_shadow = _confirmed_shadow_round(view, score, crop)
-            if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
+                open_shadow = _confirmed_shadow_round(view, score, crop, cv2.bitwise_or(hull, before))
+            if _darker_than_the_open_shadow(_brightness(view.coarse), piece, open_shadow):
                 kept[piece] = 0
     return kept
 
@@ -2031,8 +2031,9 @@ class _BeyondOutline:
 
     @functools.cached_property
     def open_shadow(self) -> np.ndarray:
-        """The open shadow the view's evidence confirms round the object (:func:`_confirmed_shadow_round`)."""
-        return _confirmed_shadow_round(self.view, self.score, self.crop)
+        """The open shadow the view's evidence confirms round the object, clear of the silhouette and the other
+        views' hull (:func:`_confirmed_shadow_round`)."""
+        return _confirmed_shadow_round(self.view, self.score, self.crop, self.known)
 
     @functools.cached_property
     def alike(self) -> np.ndarray:
@@ -2138,7 +2139,7 @@ class _BeyondOutline:
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
-        return _darker_than_the_open_shadow(self.view, piece, self.known, self.open_shadow)
+        return _darker_than_the_open_shadow(self.brightness, piece, self.open_shadow)
 
     def looks_a_shadow(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it: darker than the table the view's evidence
@@ -2369,7 +2370,7 @@ def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray) -> np.ndarr
     in test_a_dark_face_of_the_table_s_colour_beside_its_shadow): no face. The lit table before a side's
     foot, which they may see alike too, is dropped after (:func:`_table_lit_at_the_rim_dropped`)."""
     beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
-    open_shadow = ask.open_shadow & _clear_of(ask.known)
+    open_shadow = ask.open_shadow
     if not open_shadow.any() or ask.lit_table is None:
         return grown
     brightness = ask.brightness
@@ -2562,27 +2563,27 @@ _ALL_BUT_RIM = 0.85
 _SIDE_BELOW = 6
 
 
-def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
+def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice],
+                            known: np.ndarray) -> np.ndarray:
     """(h, w) bool: the open shadow, as the table under the overhang is told from it: the table that the view's
     evidence ``score`` confirms within ``crop`` (the graph cut's box), with a shadow's look, round the object
+    and clear of ``known`` (0/255, the silhouette and the other views' hull; :func:`_clear_of`)
     (:func:`_shadows_under_object_dropped`)."""
     _, found = _shadow_in_box(view, crop, score)
     open_shadow = np.zeros(score.shape, bool)
     if found is not None:
         open_shadow[crop] = found.shadow
-    return open_shadow
+    return open_shadow & _clear_of(known)
 
 
-def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
-    """Whether ``piece`` (bool, coarse) is darker than the deepest open shadow (its :data:`_SHADOW_DEEPEST`
-    quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond ``known`` (0/255, the
-    silhouette and the other views' hull). A face of the table's colour turned from the lamp is lit by the
-    sky and is no darker than the shadow cast in the open; the table under the object's overhang is
-    (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
-    open_shadow = shadow & _clear_of(known)
+def _darker_than_the_open_shadow(brightness: np.ndarray, piece: np.ndarray, open_shadow: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) is darker, by the view's ``brightness`` (:func:`_brightness`), than the
+    deepest ``open_shadow`` (bool, :func:`_confirmed_shadow_round`; its :data:`_SHADOW_DEEPEST` quantile of
+    brightness). A face of the table's colour turned from the lamp is lit by the sky and is no darker than the
+    shadow cast in the open; the table under the object's overhang is (:func:`_shadows_under_object_dropped`).
+    Without an open shadow to compare with, it is taken to be."""
     if not open_shadow.any():
         return True
-    brightness = _brightness(view.coarse)
     deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
     return float(np.median(brightness[piece])) < deepest
 
