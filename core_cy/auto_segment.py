@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -118,11 +119,8 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
-        # With the empty workspace: both coarse images before their rounding to whole grey levels (float32 BGR),
-        # whose change against each other the rounding does not hide in its steps (_log_ratio).
-        self.unrounded: tuple[np.ndarray, np.ndarray] | None = None if background is None else (
-            cv2.resize(image.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA),
-            cv2.resize(background.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA))
+        # The smooth light field the coarse pictures were divided by (_even_the_light), if they were.
+        self.light_field: np.ndarray | None = None
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
         self.fine: dict[str, np.ndarray] = {}  # grey images at the fine scale
         # With the empty workspace: per coarse pixel, the sums its grain is told by over a region
@@ -148,6 +146,18 @@ class _View:
         self._warped: dict[tuple[int, bytes], np.ndarray] = {}
         # Each other view's fine grey image mapped through a plane onto a window of this one's (_fine_warped).
         self.fine_warped: dict[tuple[int, bytes, int, int, int, int], np.ndarray] = {}
+
+    @functools.cached_property
+    def unrounded(self) -> tuple[np.ndarray, np.ndarray]:
+        """With the empty workspace: both coarse images before their rounding to whole grey levels (float32
+        BGR, divided by the light field as the coarse ones are), whose change against each other the rounding
+        does not hide in its steps (_log_ratio). Asked only once the light is evened."""
+        assert self.full_background is not None
+        image, empty = (cv2.resize(picture.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA)
+                        for picture in (self.image, self.full_background))
+        if self.light_field is None:
+            return image, empty
+        return image / self.light_field, empty / self.light_field
 
     def mapping(self, other: _View, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where each coarse pixel's table point (through ``plane``) falls in ``other``'s coarse image, as
@@ -603,7 +613,7 @@ def _background_evidence(view: _View) -> np.ndarray:
 def _darkening(view: _View) -> np.ndarray:
     """How much darker than the empty workspace each coarse pixel is (image over background brightness)."""
     assert view.background is not None
-    return (view.coarse.sum(axis=2) + 3 * _CHROMA_OFFSET) / (view.background.sum(axis=2) + 3 * _CHROMA_OFFSET)
+    return (_brightness(view.coarse) + 3 * _CHROMA_OFFSET) / (_brightness(view.background) + 3 * _CHROMA_OFFSET)
 
 
 def _shadow_of_table(view: _View) -> np.ndarray:
@@ -778,8 +788,8 @@ def _shadowless_difference(image: np.ndarray, background: np.ndarray) -> np.ndar
     difference = _relative_difference(image, background)
     # A shadow multiplies every channel by about the same factor below 1: compare chromaticities.
     # The offset keeps a dark pixel's noise from passing for a change of colour.
-    brightness = image.sum(axis=2) + 3 * _CHROMA_OFFSET
-    ground = background.sum(axis=2) + 3 * _CHROMA_OFFSET
+    brightness = _brightness(image) + 3 * _CHROMA_OFFSET
+    ground = _brightness(background) + 3 * _CHROMA_OFFSET
     chroma = np.abs((image + _CHROMA_OFFSET) / brightness[..., None]
                     - (background + _CHROMA_OFFSET) / ground[..., None]).sum(axis=2) * 1.5
     darker = (brightness < 1.05 * ground) & (brightness > 0.15 * ground)
@@ -1228,8 +1238,7 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
         view.coarse = view.coarse / field
         if view.background is not None:
             view.background = view.background / field
-        if view.unrounded is not None:
-            view.unrounded = (view.unrounded[0] / field, view.unrounded[1] / field)
+        view.light_field = field
 
 
 def _light_basis(view: _View, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -1457,16 +1466,13 @@ def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray
                 seen |= sees
                 behind |= hides
         hidden = (behind & ~seen) | (score == _HIDDEN)
-        side = np.exp(-_LIGHT_FIELD_BEYOND) * lit_table
         grain = functools.cache(lambda: _grain_seen(view))
 
         def below_a_side(part: np.ndarray) -> bool:
-            above = _just_below(view, plane, part, upward=True) & inside & ~part
-            return bool(above.any()) and float(np.median(brightness[above])) < side
+            return _lit_below(view, plane, mask, brightness, lit_table, part, upward=True) is False
 
         def beyond_a_top(part: np.ndarray) -> bool:
-            below = _just_below(view, plane, part) & inside & ~part
-            return (bool(below.any()) and float(np.median(brightness[below])) >= side
+            return (_lit_below(view, plane, mask, brightness, lit_table, part) is True
                     and float(np.median(grain()[part])) >= 0.5 and float(np.median(grain()[round_it])) >= 0.5)
 
         kept = mask.copy()
@@ -1481,10 +1487,21 @@ def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray
 
 def _rim_parts(candidates: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
     """The pieces of ``candidates`` (bool, opened by :data:`_SMALL`) that reach the rim of ``mask`` (0/255)."""
-    opened = cv2.morphologyEx(candidates.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(opened, connectivity=8)
     rim = (mask > 0) & ~(cv2.erode(mask, _SMALL) > 0)
-    return [part for part in (labels == label for label in range(1, count)) if (part & rim).any()]
+    return [part for part in _opened_parts(candidates) if (part & rim).any()]
+
+
+def _opened_parts(binary: np.ndarray) -> list[np.ndarray]:
+    """The 8-connected parts (bool) of ``binary`` (bool or uint8, any non-zero value set) opened by
+    :data:`_SMALL`: a sliver or a speck of a few pixels is no part."""
+    opened = cv2.morphologyEx(binary.astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
+    count, labels = cv2.connectedComponents(opened, connectivity=8)
+    return [labels == label for label in range(1, count)]
+
+
+def _touching_over(parts: list[np.ndarray], touching: np.ndarray, least: float) -> list[np.ndarray]:
+    """The ``parts`` (bool) that touch ``touching`` (bool) and are over ``least`` pixels."""
+    return [part for part in parts if (part & touching).any() and part.sum() > least]
 
 
 def _grain_seen(view: _View) -> np.ndarray:
@@ -1525,12 +1542,11 @@ def _shadows_left_out(view: _View, before: np.ndarray, found: np.ndarray, score:
             evidence = score[piece & (score != _HIDDEN)]
             if 2 * len(evidence) <= area or median(np.ascontiguousarray(evidence, np.float32)) >= 1.0:
                 continue
-            looks = _shadow_like(view.coarse[crop], confirmed | piece[crop])
-            if np.count_nonzero(looks[piece[crop]]) <= _MOSTLY * area:
+            if np.count_nonzero(_shadow_look(view, crop, confirmed, piece)) <= _MOSTLY * area:
                 continue
             if open_shadow is None:
-                open_shadow = _confirmed_shadow_round(view, score, crop)
-            if _darker_than_the_open_shadow(view, piece, cv2.bitwise_or(hull, before), open_shadow):
+                open_shadow = _confirmed_shadow_round(view, score, crop, cv2.bitwise_or(hull, before))
+            if _darker_than_the_open_shadow(_brightness(view.coarse), piece, open_shadow):
                 kept[piece] = 0
     return kept
 
@@ -1544,18 +1560,13 @@ def _parts_the_others_see(piece: np.ndarray, score: np.ndarray) -> list[np.ndarr
     seen = piece & (score != _HIDDEN)
     if 2 * np.count_nonzero(seen) > np.count_nonzero(piece):
         return [piece]
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(seen.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
-    parts = [labels == label for label in range(1, count)]
-    return [part for part in parts if np.count_nonzero(part) >= _SPECK]
+    return [part for part in _opened_parts(seen) if np.count_nonzero(part) >= _SPECK]
 
 
 def _pieces_added(found: np.ndarray, before: np.ndarray) -> list[np.ndarray]:
     """The pieces (bool, each 8-connected) that a view's cut again, ``found`` (0/255), adds to ``before``
     (0/255), opened by :data:`_SMALL`: a sliver along ``before``'s edge is no piece."""
-    added = cv2.morphologyEx(cv2.bitwise_and(found, cv2.bitwise_not(before)), cv2.MORPH_OPEN, _SMALL)
-    count, labels = cv2.connectedComponents(added, connectivity=8)
-    return [labels == label for label in range(1, count)]
+    return _opened_parts(cv2.bitwise_and(found, cv2.bitwise_not(before)))
 
 
 def _shadows_keeping_the_grain_left_out(view: _View, before: np.ndarray, found: np.ndarray,
@@ -1595,11 +1606,9 @@ def _parts_keeping_the_grain(view: _View, piece: np.ndarray, known: np.ndarray, 
         split = piece & ~_grain_lost_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
     else:
         split = _grain_kept_pixels(view.grain_sums, piece, table[0], _fine_per_coarse(view))
-    parts, labels = cv2.connectedComponents(cv2.morphologyEx(split.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
-    for part in range(1, parts):
-        if _grain_kept(view, labels == part, known):
-            found |= labels == part
+    for part in _opened_parts(split):
+        if _grain_kept(view, part, known):
+            found |= part
     return found
 
 
@@ -1628,13 +1637,11 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
             continue
         x0, y0, x1, y1 = _cut_box(view, mask)
         crop = (slice(y0, y1), slice(x0, x1))
-        image = view.coarse[crop]
-        low = score[crop] < 1.0
         hidden = score[crop] == _HIDDEN
-        seen = _shadow_seen(image, low, low & _shadow_like(image, low), hidden)
+        _, seen = _shadow_in_box(view, crop, score)
         if seen is None:
             continue
-        shadow, brightness, _, off_table = seen
+        shadow, brightness, _, off_table, _ = seen
         deepest = np.quantile(brightness[shadow], _SHADOW_DEEPEST)
         under = np.zeros(mask.shape, bool)
         under[crop] = (_hidden_shadow(off_table < 1.0, brightness, shadow, hidden) & (mask[crop] > 0)
@@ -2038,8 +2045,9 @@ class _BeyondOutline:
 
     @functools.cached_property
     def open_shadow(self) -> np.ndarray:
-        """The open shadow the view's evidence confirms round the object (:func:`_confirmed_shadow_round`)."""
-        return _confirmed_shadow_round(self.view, self.score, self.crop)
+        """The open shadow the view's evidence confirms round the object, clear of the silhouette and the other
+        views' hull (:func:`_confirmed_shadow_round`)."""
+        return _confirmed_shadow_round(self.view, self.score, self.crop, self.known)
 
     @functools.cached_property
     def alike(self) -> np.ndarray:
@@ -2047,9 +2055,10 @@ class _BeyondOutline:
         assert self._seen_alike is not None
         return self._seen_alike()
 
-    @functools.cached_property
+    @property
     def mapped_grain(self) -> np.ndarray:
-        """The table's grain the other views see at each pixel's table point (``plane_grain``)."""
+        """The table's grain the other views see at each pixel's table point (``plane_grain``, worked out once
+        by its maker, which :func:`_lit_faces_hiding_the_grain` asks too)."""
         assert self._plane_grain is not None
         return self._plane_grain()
 
@@ -2086,10 +2095,7 @@ class _BeyondOutline:
         found = np.zeros(piece.shape, bool)
         if self._plane_grain is None:
             return found
-        confirmed = np.where(piece & self.seen & (self.parallax <= self.table_level), 255, 0).astype(np.uint8)
-        count, labels = cv2.connectedComponents(cv2.morphologyEx(confirmed, cv2.MORPH_OPEN, _SMALL), connectivity=8)
-        for label in range(1, count):
-            part = labels == label
+        for part in _opened_parts(piece & self.seen & (self.parallax <= self.table_level)):
             if part.sum() <= least or not self.looks_a_shadow(part):
                 continue
             told = _piece_and_table_grain(self.view, part, self.known, self.mapped_grain, None)
@@ -2120,8 +2126,7 @@ class _BeyondOutline:
         """Whether ``piece``'s median brightness is within the light's spread over a table
         (:data:`_LIGHT_FIELD_BEYOND`) of the table's round the silhouette and the other views' hull, or above
         it: a face turned up is lit as the table is, a stretch of the object's shadow is not."""
-        return self.lit_table is not None and float(np.median(self.brightness[piece])) >= np.exp(
-            -_LIGHT_FIELD_BEYOND) * self.lit_table
+        return self.lit_table is not None and _lit_as(self.brightness, piece, self.lit_table)
 
     def on_a_side(self, piece: np.ndarray) -> bool:
         """Whether the silhouette just below ``piece`` (:meth:`lit_below`) is darker than the lit table beyond
@@ -2144,21 +2149,17 @@ class _BeyondOutline:
         of the silhouette lies below it, or without a plane or a table round it."""
         if self.plane is None or self.lit_table is None:
             return None
-        below = _just_below(self.view, self.plane, piece) & (self.mask > 0) & ~piece
-        if not below.any():
-            return None
-        return bool(float(np.median(self.brightness[below])) >= np.exp(-_LIGHT_FIELD_BEYOND) * self.lit_table)
+        return _lit_below(self.view, self.plane, self.mask, self.brightness, self.lit_table, piece)
 
     def darker_than_the_open_shadow(self, piece: np.ndarray) -> bool:
         """:func:`_darker_than_the_open_shadow`, against the open shadow beyond the silhouette and the hull."""
-        return _darker_than_the_open_shadow(self.view, piece, self.known, self.open_shadow)
+        return _darker_than_the_open_shadow(self.brightness, piece, self.open_shadow)
 
     def looks_a_shadow(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it: darker than the table the view's evidence
         confirms round the object, of its chromaticity (:func:`_shadow_like`)."""
-        looks = np.zeros(self.mask.shape, bool)
-        looks[self.crop] = _shadow_like(self.view.coarse[self.crop], self.low | piece[self.crop])
-        return bool(2 * np.count_nonzero(looks[piece]) >= np.count_nonzero(piece))
+        looks = _shadow_look(self.view, self.crop, self.low, piece)
+        return bool(2 * np.count_nonzero(looks) >= np.count_nonzero(piece))
 
     def hides_the_mapped_grain(self, piece: np.ndarray) -> bool:
         """Whether ``piece`` has a shadow's look over half of it (darker than the table the other views
@@ -2193,6 +2194,22 @@ class _BeyondOutline:
         """Whether ``piece`` keeps the empty workspace's grain as the table round it does: a shadow, whatever
         the other views see above it (the object beside it may look as dark from them)."""
         return self.view.grain_sums is not None and _grain_kept(self.view, piece, self.known)
+
+
+def _lit_below(view: _View, plane: np.ndarray, mask: np.ndarray, brightness: np.ndarray, lit_table: float,
+               piece: np.ndarray, upward: bool = False) -> bool | None:
+    """Whether the silhouette ``mask`` (0/255) just below ``piece`` (bool; :func:`_just_below`, ``upward``:
+    just above it) is lit as the table, its median ``brightness`` (:func:`_brightness`) no darker than
+    ``lit_table`` beyond the light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`); None where nothing
+    of the silhouette lies there."""
+    there = _just_below(view, plane, piece, upward) & (mask > 0) & ~piece
+    return _lit_as(brightness, there, lit_table) if there.any() else None
+
+
+def _lit_as(brightness: np.ndarray, region: np.ndarray, lit_table: float) -> bool:
+    """Whether ``region``'s (bool, not empty) median ``brightness`` is no darker than ``lit_table`` beyond the
+    light's spread over a table (:data:`_LIGHT_FIELD_BEYOND`): lit as the table is, or brighter."""
+    return bool(float(np.median(brightness[region])) >= np.exp(-_LIGHT_FIELD_BEYOND) * lit_table)
 
 
 def _just_below(view: _View, plane: np.ndarray, region: np.ndarray, upward: bool = False) -> np.ndarray:
@@ -2329,9 +2346,8 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     # where the grain is lost, and a part weighed as a piece of the cut is.
     beyond = (hull > 0) & (grown == 0)
     if plane_grain is not None:
-        looks = np.zeros(mask.shape, bool)
-        looks[ask.crop] = _shadow_like(view.coarse[ask.crop], ask.low | beyond[ask.crop]) & beyond[ask.crop]
-        grown = _split_by_lost_grain(view, grown, mask, looks, lambda: ask.mapped_grain, None, ask.known,
+        looks = _shadow_look(view, ask.crop, ask.low, beyond)
+        grown = _split_by_lost_grain(view, grown, mask, looks, plane_grain, None, ask.known,
                                      ask.hides_the_mapped_grain)
         if seen_alike is not None:
             grown = _hidden_faces_seen_alike(ask, grown, grain_before_the_looks)
@@ -2378,7 +2394,7 @@ def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray,
     plane from it (14/fabric-soup-can-can 2: 0.978 -> 0.939 looked again, under half of its table points
     hidden before the looks; the faces the looks again found, in shade, are kept as before)."""
     beyond = (ask.hull > 0) & (grown == 0) & ~ask.seen_behind
-    open_shadow = ask.open_shadow & _clear_of(ask.known)
+    open_shadow = ask.open_shadow
     if not open_shadow.any() or ask.lit_table is None:
         return grown
     brightness = ask.brightness
@@ -2390,14 +2406,8 @@ def _hidden_faces_seen_alike(ask: _BeyondOutline, grown: np.ndarray,
     # Brighter than the open shadow by that spread both ways: lit by the lamp, in part at least.
     lit = np.exp(2.0 * _LIGHT_FIELD_BEYOND) * shadow_level
     grown = grown.copy()
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(beyond.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                            connectivity=8)
     near = cv2.dilate(grown, _SMALL) > 0
-    least = _BAY * cv2.countNonZero(ask.mask)
-    for label in range(1, count):
-        part = labels == label
-        if not (part & near).any() or part.sum() <= least:
-            continue
+    for part in _touching_over(_opened_parts(beyond), near, _BAY * cv2.countNonZero(ask.mask)):
         if np.count_nonzero(ask.alike[part]) <= _HIDDEN_FACE_ALIKE * part.sum():
             continue
         level = float(np.median(brightness[part]))
@@ -2418,13 +2428,10 @@ _HIDDEN_FACE_ALIKE = 0.6
 def _standing_parts(standing: np.ndarray, touching: np.ndarray, least: float) -> np.ndarray:
     """(h, w) bool: the parts of ``standing`` (bool; closed, then opened by :data:`_SMALL`) that touch
     ``touching`` (bool) and are over ``least`` pixels."""
-    found = cv2.morphologyEx(standing.astype(np.uint8), cv2.MORPH_CLOSE, _SMALL)
-    count, labels = cv2.connectedComponents(cv2.morphologyEx(found, cv2.MORPH_OPEN, _SMALL), connectivity=8)
     kept = np.zeros(standing.shape, bool)
-    for label in range(1, count):
-        part = labels == label
-        if (part & touching).any() and part.sum() > least:
-            kept |= part
+    for part in _touching_over(_opened_parts(cv2.morphologyEx(standing.astype(np.uint8), cv2.MORPH_CLOSE, _SMALL)),
+                               touching, least):
+        kept |= part
     return kept
 
 
@@ -2443,25 +2450,15 @@ def _split_by_lost_grain(view: _View, grown: np.ndarray, mask: np.ndarray, stret
     the table's, as strong as round it within :data:`_GRAIN_POWER_SPREAD`: a shadow deep enough on a faint
     grain (white laminate) leaves none above JPEG's floor, and the object's own print seen at a table point
     is stronger than any grain of the table."""
-    stretches = cv2.morphologyEx(stretches.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
     near = cv2.dilate(grown, _SMALL) > 0
     least = _BAY * cv2.countNonZero(mask)
-    count, labels = cv2.connectedComponents(stretches.astype(np.uint8), connectivity=8)
-    for label in range(1, count):
-        stretch = labels == label
-        if not (stretch & near).any() or stretch.sum() <= least:
-            continue
+    for stretch in _touching_over(_opened_parts(stretches), near, least):
         table = _table_grain_round(view, stretch, known, grain(), shade)
         if table is None:
             continue
         slope, power = table
         lost = _grain_lost_pixels(grain(), stretch, slope, _fine_per_coarse(view))
-        parts, split = cv2.connectedComponents(cv2.morphologyEx(lost.astype(np.uint8), cv2.MORPH_OPEN, _SMALL),
-                                               connectivity=8)
-        for part in range(1, parts):
-            piece = split == part
-            if not (piece & near).any() or piece.sum() <= least:
-                continue
+        for piece in _touching_over(_opened_parts(lost), near, least):
             seen_there = float(np.nanmean(grain()[piece][:, 1]))
             if power / _GRAIN_POWER_SPREAD < seen_there < power * _GRAIN_POWER_SPREAD and accepts(piece):
                 grown[piece] = 255
@@ -2593,29 +2590,27 @@ _ALL_BUT_RIM = 0.85
 _SIDE_BELOW = 6
 
 
-def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
+def _confirmed_shadow_round(view: _View, score: np.ndarray, crop: tuple[slice, slice],
+                            known: np.ndarray) -> np.ndarray:
     """(h, w) bool: the open shadow, as the table under the overhang is told from it: the table that the view's
     evidence ``score`` confirms within ``crop`` (the graph cut's box), with a shadow's look, round the object
+    and clear of ``known`` (0/255, the silhouette and the other views' hull; :func:`_clear_of`)
     (:func:`_shadows_under_object_dropped`)."""
-    confirmed = score[crop] < 1.0
-    found = _shadow_seen(view.coarse[crop], confirmed, confirmed & _shadow_like(view.coarse[crop], confirmed),
-                         score[crop] == _HIDDEN)
+    _, found = _shadow_in_box(view, crop, score)
     open_shadow = np.zeros(score.shape, bool)
     if found is not None:
-        open_shadow[crop] = found[0]
-    return open_shadow
+        open_shadow[crop] = found.shadow
+    return open_shadow & _clear_of(known)
 
 
-def _darker_than_the_open_shadow(view: _View, piece: np.ndarray, known: np.ndarray, shadow: np.ndarray) -> bool:
-    """Whether ``piece`` (bool, coarse) is darker than the deepest open shadow (its :data:`_SHADOW_DEEPEST`
-    quantile of brightness): the pixels with a shadow's look (``shadow``, bool) beyond ``known`` (0/255, the
-    silhouette and the other views' hull). A face of the table's colour turned from the lamp is lit by the
-    sky and is no darker than the shadow cast in the open; the table under the object's overhang is
-    (:func:`_shadows_under_object_dropped`). Without an open shadow to compare with, it is taken to be."""
-    open_shadow = shadow & _clear_of(known)
+def _darker_than_the_open_shadow(brightness: np.ndarray, piece: np.ndarray, open_shadow: np.ndarray) -> bool:
+    """Whether ``piece`` (bool, coarse) is darker, by the view's ``brightness`` (:func:`_brightness`), than the
+    deepest ``open_shadow`` (bool, :func:`_confirmed_shadow_round`; its :data:`_SHADOW_DEEPEST` quantile of
+    brightness). A face of the table's colour turned from the lamp is lit by the sky and is no darker than the
+    shadow cast in the open; the table under the object's overhang is (:func:`_shadows_under_object_dropped`).
+    Without an open shadow to compare with, it is taken to be."""
     if not open_shadow.any():
         return True
-    brightness = _brightness(view.coarse)
     deepest = float(np.quantile(brightness[open_shadow], _SHADOW_DEEPEST))
     return float(np.median(brightness[piece])) < deepest
 
@@ -3108,7 +3103,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
                                         [standing[v.index] for v in views if v is not view])
             mapped_score = np.nan_to_num(mapped, nan=np.inf) / max(_noise_level(mapped), _NOISE_FLOOR)
             image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
-            brightness, ground = image.sum(axis=2), empty.sum(axis=2)
+            brightness, ground = _brightness(image), _brightness(empty)
             hue_shift = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
             shadow = (brightness < 0.95 * ground) & (hue_shift < _LAMP_HUE_SHIFT) & (mapped_score < 1.5)
             evidence = np.where(shadow, np.minimum(evidence, mapped), evidence)
@@ -3366,7 +3361,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
-                shadow, brightness, darker, off_table = seen
+                shadow, brightness, darker, off_table, _ = seen
                 mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
@@ -3410,12 +3405,20 @@ _CUT_MARGIN = 0.5
 _SURE = 5.0
 
 
-def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
-                 hidden: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+class _ShadowSeen(NamedTuple):
+    """The shadow a view sees within the graph cut's box (:func:`_shadow_seen`)."""
+    shadow: np.ndarray  # bool, the shadow as a region
+    brightness: np.ndarray  # each pixel's channels summed (:func:`_brightness`)
+    darker: np.ndarray  # bool, darker than the table (:data:`_SHADOW_DIMMER`)
+    off_table: np.ndarray  # the dark pixels' :func:`_off_colours` from the table's colour
+    table_colour: np.ndarray  # (3,) the median colour of the table the other views confirm
+
+
+def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray, hidden: np.ndarray) -> _ShadowSeen | None:
     """Within the graph cut's box: the ``shadow`` (:func:`_shadow_like` of the table the other views confirm,
-    ``low``) as a region, each pixel's brightness, whether it is darker than the table, and the dark pixels'
-    :func:`_off_colours` from the table's colour (the ``hidden`` ones and the confirmed table's); None where
-    no shadow region is seen."""
+    ``low``) as a region, each pixel's brightness, whether it is darker than the table, the dark pixels'
+    :func:`_off_colours` from the table's colour (the ``hidden`` ones and the confirmed table's), and that
+    colour; None where no shadow region is seen."""
     # A shadow is a region; the table's own darker grain (a mat's speckle, wood's late rings) passes for
     # a shadow pixel by pixel, but not over a few pixels together.
     shadow = cv2.morphologyEx(shadow.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
@@ -3425,7 +3428,8 @@ def _shadow_seen(image: np.ndarray, low: np.ndarray, shadow: np.ndarray,
     brightness = _brightness(image)
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     # Only the dark pixels' colours are asked about: the hidden ones, and the table the others see.
-    return shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low))
+    return _ShadowSeen(shadow, brightness, darker, _off_colours(image, table_colour, darker & (hidden | low)),
+                       table_colour)
 
 
 def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.ndarray | None:
@@ -3437,15 +3441,15 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
     _, seen = _shadow_in_box(view, crop, score)
     if seen is None:
         return None
-    return seen[1][seen[0]] / max(float(_median_colour(view.coarse[crop], score[crop] < 1.0).sum()), 1.0)
+    return seen.brightness[seen.shadow] / max(float(seen.table_colour.sum()), 1.0)
 
 
-def _shadow_in_box(view: _View, crop: tuple[slice, slice],
-                   score: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
-    """Without an empty workspace, within the graph cut's box ``crop``: the table the other views confirm
-    (``score`` under 1) that looks like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the
-    pixels hidden from them (``score`` :data:`_HIDDEN`) asked. A first cut asks it twice of one box and one
-    evidence (the shadow it sees in the open, then its graph cut): the view keeps its last one. Read only."""
+def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) -> tuple[np.ndarray, _ShadowSeen | None]:
+    """Within the graph cut's box ``crop``: the table the other views confirm (``score`` under 1) that looks
+    like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
+    (``score`` :data:`_HIDDEN`) asked: the one way to ask it, for the first cut's graph cut and the shadow it
+    sees in the open, the open shadow round a silhouette, and the table under the object's overhang. A first
+    cut asks it twice of one box and one evidence: the view keeps its last one. Read only."""
     rows, columns = crop
     key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
     if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
@@ -3456,7 +3460,7 @@ def _shadow_in_box(view: _View, crop: tuple[slice, slice],
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,
-                           darkenings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+                           darkenings: np.ndarray) -> _ShadowSeen | None:
     """As :func:`_shadow_seen`, for a view that sees no shadow in the open: the shadow is where the ``hidden``
     pixels have the colour of the table (the table the other views confirm, ``low``), darkened to no more
     than the other views see their open shadow darkened to (``darkenings``, its brightness over its table's,
@@ -3464,13 +3468,22 @@ def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarra
     if not np.any(low):
         return None
     table_colour = _median_colour(image, low)
-    brightness = image.sum(axis=2)
+    brightness = _brightness(image)
     darker = brightness < _SHADOW_DIMMER * float(table_colour.sum())
     off_table = _off_colours(image, table_colour, darker & (hidden | low))
     ceiling = float(np.quantile(darkenings, _SHADOW_BRIGHTEST)) * float(table_colour.sum())
     shadow = cv2.morphologyEx((hidden & darker & (off_table < 1.0) & (brightness <= ceiling)).astype(np.uint8),
                               cv2.MORPH_OPEN, _SMALL) > 0
-    return (shadow, brightness, darker, off_table) if np.any(shadow) else None
+    return _ShadowSeen(shadow, brightness, darker, off_table, table_colour) if np.any(shadow) else None
+
+
+def _shadow_look(view: _View, crop: tuple[slice, slice], table: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels of ``region`` (bool, coarse) within the graph cut's box ``crop`` that have a
+    shadow's look (:func:`_shadow_like`) against ``table`` (bool, the box's: the table the view's evidence
+    confirms), the region counted in with it."""
+    looks = np.zeros(region.shape, bool)
+    looks[crop] = _shadow_like(view.coarse[crop], table | region[crop]) & region[crop]
+    return looks
 
 
 def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -3727,7 +3740,6 @@ def _log_ratio(view: _View) -> np.ndarray:
     grey levels a channel) then changed alike within that step, and the other views' view of the shadow at
     the body's table points took the body for the table (seed 17's rubber mat: a view 0.78 before, 0.85).
     The noise of the change that first tells what changed at all is :func:`_change_noise`'s."""
-    assert view.unrounded is not None
     return _log_ratio_of(*view.unrounded)
 
 
