@@ -25,7 +25,7 @@ segmentation, so the reconstruction uses its default), three ways:
 A reconstruction that fails scores 0 and is counted. Prints tables; asserts nothing. Rendering takes a few
 minutes: --keep DIR keeps the bundles (and reuses them when DIR already holds them). --record FILE writes
 each scan's scores (per way: volumetric IoU, silhouette IoU per view, grasp verdict, error) as JSON, so
-that two runs can be compared scan by scan and view by view.
+that two runs can be compared scan by scan and view by view (bench/compare_segment.py).
 """
 
 from __future__ import annotations
