@@ -2519,9 +2519,9 @@ def _faces_standing_out(view: _View, mask: np.ndarray, score: np.ndarray, hull: 
     The two cues must agree: the piece touches the silhouette, or is parted from it only by the blur of its
     edge (a box's edge, rounded or in shade, is lit as neither face it parts, and joins them), is of a face's
     size (:data:`_BAY`), and the other views see a point of their hull on its rays alike over all of it but
-    its rim (:data:`_ALL_BUT_RIM`, :func:`_seen_alike`). The table seen through the hull, which is looser than the object, is seen alike
-    only where the object behind happens to have its colour. A face so found reaches as far as its evidence
-    stands out at all (over 1) and the other views see it alike.
+    its rim (:data:`_ALL_BUT_RIM`, :func:`_seen_alike`). The table seen through the hull, which is looser
+    than the object, is seen alike only where the object behind happens to have its colour. A face so found
+    reaches as far as its evidence stands out at all (over 1) and the other views see it alike.
 
     A piece nearer the lamp than the table (:func:`_nearer_the_lamp_than_the_table`) is told from the table
     by its light already, and needs the others' likeness over :data:`_MOSTLY` of it only: where another view
