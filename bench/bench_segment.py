@@ -19,8 +19,9 @@ segmentation, so the reconstruction uses its default), three ways:
     as the cell and `robocell reconstruct --grasps` plan it, holds the true object (the same judge);
 (c) speed: `robocell reconstruct` on the 3-view 640x480 JPEG bundles, from outside, one core
     (taskset -c 0), as a ratio to OpenCV's decode of the same three JPEGs on the same core, measured
-    in the same run, over the bundles that reconstruct; the classic red HSV bundles of the standard set
-    beside it for reference.
+    in the same run, over the bundles that reconstruct; beside it the same bundles with their true
+    silhouettes given as masks (the fit's own cost, no segmentation) and the classic red HSV bundles of
+    the standard set, for reference.
 
 A reconstruction that fails scores 0 and is counted. Prints tables; asserts nothing. Rendering takes a few
 minutes: --keep DIR keeps the bundles (and reuses them when DIR already holds them). --record FILE writes
@@ -186,7 +187,22 @@ def _outside_ms(dirs: list[Path], pin: list[str], lines: int = 30) -> tuple[floa
     return float(np.median(np.diff(stamps))) * 1e3, errors
 
 
-def timing(groups: dict[str, list[Path]]) -> None:
+def masks_bundle(plain: Path, out: Path) -> Path:
+    """``plain``'s scan with its true silhouettes for masks in place of its images, at ``out``: what
+    `robocell reconstruct` costs when the segmentation is given (made unless already there)."""
+    if not (out / "scan.json").exists():
+        out.mkdir(parents=True, exist_ok=True)
+        scan = json.loads((plain / "scan.json").read_text())
+        for i, view in enumerate(scan["views"]):
+            del view["image"]
+            view["mask"] = f"truth_mask{i}.png"
+            shutil.copy2(plain / view["mask"], out / view["mask"])
+        (out / "scan.json").write_text(json.dumps(scan, indent=1))
+    return out
+
+
+def timing(groups: dict[str, tuple[list[Path], list[Path]]]) -> None:
+    """Per group, (the bundles reconstructed, the bundles whose JPEGs are decoded beside them)."""
     cv2.setNumThreads(1)
     pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
     if hasattr(os, "sched_setaffinity"):
@@ -195,18 +211,20 @@ def timing(groups: dict[str, list[Path]]) -> None:
           "640x480 JPEG a bundle: wall time between output lines (median over 30), beside OpenCV decoding the "
           "same three JPEGs on the same core just before and after (median)")
     print(f"{'bundles':<34}{'reconstruct ms':>16}{'decode ms':>12}{'ratio':>8}{'errors':>8}")
-    for name, dirs in groups.items():
+    for name, (dirs, decoded) in groups.items():
         if not dirs:
             continue
         jpegs = []
-        for d in dirs:
+        for d in decoded:
             scan = json.loads((d / "scan.json").read_text())
             jpegs.append([(d / v["image"]).read_bytes() for v in scan["views"]])
         before = _decode_ms(jpegs)
         outside, errors = _outside_ms(dirs, pin)
         decode = (before + _decode_ms(jpegs)) / 2
         print(f"{name:<34}{outside:>16.2f}{decode:>12.2f}{outside / decode:>8.2f}{errors:>8}")
-    print("  (decode: the three views' JPEGs; a bundle with backgrounds has three more to read)")
+    print("  (decode: the three views' JPEGs; a bundle with backgrounds has three more to read; the true masks'\n"
+          "   bundles are the default's with the true silhouettes, PNG, in place of the images: the fit's own cost,\n"
+          "   beside the decode of the images they stand for)")
 
 
 def main() -> None:
@@ -247,9 +265,12 @@ def main() -> None:
                 if not (path / "scan.json").exists():
                     spec.write(work / "standard")
                 red.append(path)
-            timing({"printed, default segmentation": timed("default", 1),
-                    "printed, + background": timed("+ background", 2),
-                    "red standard set, hsv (reference)": red})
+            plain = timed("default", 1)
+            given = [masks_bundle(d, work / "masks-timing" / f"{d.parents[1].name}-{d.name}") for d in plain]
+            timing({"printed, default segmentation": (plain, plain),
+                    "printed, + background": (timed("+ background", 2),) * 2,
+                    "printed, true masks given": (given, plain),
+                    "red standard set, hsv (reference)": (red, red)})
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)
