@@ -829,6 +829,15 @@ def _component_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.n
     return (labels == label).astype(np.uint8) * 255
 
 
+def _regions_holding(binary: np.ndarray, marks: np.ndarray) -> np.ndarray:
+    """The connected regions of ``binary`` (0/255) that hold a pixel of ``marks`` (0/255), 0/255."""
+    count, labels = cv2.connectedComponents(binary, connectivity=8)
+    holding = np.zeros(count, bool)
+    holding[labels[marks > 0]] = True
+    holding[0] = False
+    return np.where(holding[labels], 255, 0).astype(np.uint8)
+
+
 def _components_near(binary: np.ndarray, point: np.ndarray, reach: float) -> np.ndarray:
     """All connected regions of ``binary`` with a pixel within ``reach`` px of ``point`` (0/255)."""
     count, labels = cv2.connectedComponents(binary, connectivity=8)
@@ -3155,12 +3164,14 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
             attached = beside & ~seen
             score = np.where(attached, _HIDDEN, score)
             hidden |= attached
-    joined = cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8))
-    region = _component_near(joined, centre, reach=0.25 * np.hypot(cw, ch))
     # A pixel is hidden only where the other views' first look saw something stand in front of its
     # table point: on an empty table, or with a shadow alone, nothing is hidden. An object of the
-    # table's colour may be all hidden and hardly differ where the others see it.
-    if region is None or cv2.countNonZero(region) < _SPECK or not cv2.countNonZero(cv2.bitwise_and(region, differs)):
+    # table's colour may be all hidden and hardly differ where the others see it; but a region of
+    # hidden pixels alone (table behind another view's object or its shadow) says nothing stands there,
+    # and is no candidate, however near the aim or large it is beside the object's pieces.
+    region = _component_near(_regions_holding(cv2.bitwise_or(differs, np.where(hidden, 255, 0).astype(np.uint8)),
+                                              differs), centre, reach=0.25 * np.hypot(cw, ch))
+    if region is None or cv2.countNonZero(region) < _SPECK:
         raise SilhouetteError(_NOTHING, view=view.index)
     if view.background is not None:
         # Against the empty workspace what differs is the object, but in pieces where its print or its
