@@ -377,13 +377,25 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
 
     def refitted_where_contradicted(model: Superquadric, resting: bool) -> Superquadric | None:
         """``model`` (one superquadric) fitted again with auto's edge samples that run far from its own
-        outline doubtful; None if there are none such."""
-        contradicted = [None if before is None else
-                        before | (np.abs(outline_distances(model, camera, samples)) > _CONTRADICTED_PX)
-                        for before, camera, samples in zip(doubtful, cameras, edges)]
-        if not any(now is not None and np.any(now != before) for now, before in zip(contradicted, doubtful)):
+        outline doubtful, and those of them that were doubtful already set aside; None if there are none such."""
+        far = [None if before is None else np.abs(outline_distances(model, camera, samples)) > _CONTRADICTED_PX
+               for before, camera, samples in zip(doubtful, cameras, edges)]
+        if not any(view_far is not None and np.any(view_far) for view_far in far):
             return None
-        refined = fit_to_silhouettes(model, cameras, edges, support_plane=plane, doubtful=contradicted,
+        # A sample whose colours could not confirm it and that the views contradict has nothing left to speak for
+        # it: under the fading loss a thin strip of shadow a few pixels wide would still pull, and more so where
+        # two views took in the same strip. It is set aside; the rest of the fit is as it was.
+        kept_edges: list[np.ndarray] = []
+        kept_doubts: list[np.ndarray | None] = []
+        for samples, before, view_far in zip(edges, doubtful, far):
+            if before is None or view_far is None:
+                kept_edges.append(samples)
+                kept_doubts.append(None)
+            else:
+                keep = ~(before & view_far)
+                kept_edges.append(samples[keep])
+                kept_doubts.append((before | view_far)[keep])
+        refined = fit_to_silhouettes(model, cameras, kept_edges, support_plane=plane, doubtful=kept_doubts,
                                      resting=resting)
         evaluations["fit"] += refined.evaluations
         return refined.superquadric
@@ -392,7 +404,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         # The model stays one superquadric: a stretch of one view's outline that runs far from it, where the
         # other views hold it, is one they contradict (a shadow or a strip of table taken in, a face left
         # out), whatever its colours say. Such samples are doubtful as those on unsure pixels are, their
-        # pull fading as they lie farther, and the fit goes on from where it is: they can no longer drag it.
+        # pull fading as they lie farther, and those on unsure pixels too are set aside; the fit goes on from
+        # where it is: they can no longer drag it.
         refined = refitted_where_contradicted(parts[0], resting=False)
         if refined is not None:
             superquadric, parts = refined, (refined,)

@@ -171,11 +171,28 @@ def test_a_box_of_its_oak_table_s_colour_is_held_by_its_true_edges(printed_scene
     box's true edges, beside its faces in shade, were unsure. The fit followed the strip (0.930 before,
     against the true object by the simulator's judge); an outline across which the image shows no step
     is unsure too, and the true edges hold the model (issue 20)."""
+    assert _judged_from_images(printed_scene, 0, "oak-table-colour-box") > 0.95
+
+
+def _judged_from_images(printed_scene, seed: int, name: str) -> float:
+    """The volumetric IoU of the model of one of the simulator's printed scenes (the ``printed_scene``
+    fixture), reconstructed from its images and the support plane alone, against the true object by the
+    simulator's judge (workers/sim/judge.py, written apart from the fit)."""
     from robocell.workers.sim.judge import Part, parts_from_truth, union_iou
 
-    spec, directory = printed_scene(0, "oak-table-colour-box")
+    spec, directory = printed_scene(seed, name)
     bundle = load_bundle(directory)
     views = [dataclasses.replace(view, background=None) for view in bundle.views]  # the images alone
     result = reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
     parts = [Part.from_dict(part.to_dict()) for part in result.parts]
-    assert union_iou(parts, parts_from_truth(spec.objects[0].truth())) > 0.95
+    return union_iou(parts, parts_from_truth(spec.objects[0].truth()))
+
+
+def test_a_thin_strip_of_foot_shadow_that_the_views_contradict_does_not_pull_the_fit(printed_scene):
+    """A white box on white laminate, images and the support plane only: the box's faces in shade and its
+    shadow are alike, so the samples along its lower outline are doubtful, and the views took in a thin strip
+    of the shadow at the box's foot (its samples 5-7 px outside the true outline in two views, 2 in the
+    third). The fading loss still pulls at a few pixels, the views agreed, and the model followed them
+    half-way (0.914 against the true object by the simulator's judge). A doubtful sample that the views
+    contradict (over 3 px from the model they hold) has nothing left to speak for it and is set aside."""
+    assert _judged_from_images(printed_scene, 16, "laminate-white-box") > 0.945
