@@ -1703,7 +1703,8 @@ def _cast_shadows_dropped(views: Sequence[_View], masks: list[np.ndarray], score
     cv2.fillConvexPoly(footprint, cv2.convexHull(on_grid(feet[tall]).astype(np.int32)), 1)
     footprint = _dilated(footprint, 1)  # a voxel round it: the tall voxels' own width
     # Per view: each coarse pixel's plane point on the grid, whether it lies beyond the footprint, and whether
-    # the others' hull in front of it is low (None for a view seeded by the aim alone).
+    # the others' hull in front of it is low (None for a view seeded by the aim alone, or that the others
+    # confirm nowhere).
     on_plane: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
     shown, lit = [], []
     for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
@@ -1718,13 +1719,19 @@ def _cast_shadows_dropped(views: Sequence[_View], masks: list[np.ndarray], score
         beyond = (valid & (footprint[cells[:, 1], cells[:, 0]] == 0)).reshape(ch, cw)
         cells = cells.reshape(ch, cw, 2)
         low = _others_hull_height(hulls, i) < _TALL * top
-        on_plane.append((cells, beyond, low))
-        # What the light is fitted to: the silhouette's low part beyond the footprint, and against it the
-        # table the other views confirm (``score`` under 1) lit as the table is (no shadow's darkness).
-        confirmed = score < 1.0
-        if not confirmed.any():
-            on_plane[-1] = None
+        on_plane.append((cells, beyond, low) if np.any(score < 1.0) else None)
+    # What the light is fitted to: the silhouettes' low part beyond the footprint, but for what is lit as the
+    # table, and against it the table the other views confirm (``score`` under 1) lit so (no shadow's
+    # darkness). No light is fitted to fewer than _SPECK pixels (_light_fitted): most scans stop here.
+    if sum(np.count_nonzero((mask > 0) & seen[2] & seen[1]) for mask, seen in zip(masks, on_plane)
+           if seen is not None) < _SPECK:
+        return masks
+    for view, mask, score, seen_on_plane in zip(views, masks, scores, on_plane):
+        if seen_on_plane is None:
             continue
+        cells, beyond, low = seen_on_plane
+        assert score is not None
+        confirmed = score < 1.0
         lit_table = _brightness(view.coarse) >= _SHADOW_DIMMER * float(_median_colour(view.coarse, confirmed).sum())
         shown.append(cells[(mask > 0) & low & beyond & ~lit_table])
         lit.append(cells[confirmed & lit_table & beyond])
