@@ -1869,15 +1869,16 @@ def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit
         corners.append(members[cv2.convexHull(cells[members].astype(np.int32), returnPoints=False).ravel()])
     corner = np.concatenate(corners)
     points, lifted = cells[corner], heights[corner]
-    # What a shadow covers is counted cell by cell: shown counts for it, the lit table against it.
-    counts = np.zeros(side * side, np.float64)
-    np.add.at(counts, shown[:, 1] * side + shown[:, 0], 1.0)
-    np.add.at(counts, lit[:, 1] * side + lit[:, 0], -1.0)
-    weight = counts.reshape(side, side)
+    # What a shadow covers is counted cell by cell: shown counts for it, the lit table against it, but not on
+    # the shadow's rim (its penumbra, lit in part).
+    shown_count, lit_count = (np.bincount(found[:, 1] * side + found[:, 0], minlength=side * side).reshape(side, side)
+                              for found in (shown, lit))
 
     def fit(azimuth: float, elevation: float) -> tuple[float, float]:
         outline, shadow = _cast_shadow(points, lifted, _shadow_offset(azimuth, elevation), side, cell)
-        return -float(np.sum(weight, where=shadow > 0)), cv2.contourArea(outline)
+        inner = cv2.erode(shadow, _SMALL)
+        return (float(np.sum(lit_count, where=inner > 0) - np.sum(shown_count, where=shadow > 0)),
+                cv2.contourArea(outline))
 
     tried = {(azimuth, elevation): fit(azimuth, elevation)
              for elevation in np.arange(_LOWEST_LAMP, _HIGHEST_LAMP + 1e-9, 5.0)
