@@ -1424,6 +1424,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     if plane is not None and len(views) > 2:
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
         masks = _table_lit_at_the_rim_dropped(views, masks, scores, plane)
+        masks = _cast_shadows_dropped(views, masks, scores, plane, aim)
     return masks
 
 
@@ -1666,6 +1667,250 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
     return found
 
 
+def _cast_shadows_dropped(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np.ndarray | None],
+                          plane: np.ndarray, aim: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes without the object's cast shadow where the lamp, fitted to the scan, puts it.
+
+    A dark object on a dark table is of its shadow's colour, and where each view hides behind the object
+    the stretch of shadow that another view sees, no view confirms that stretch through the plane: the
+    silhouettes that took it in carve a hull that holds it too (a wedge over the shadow, high by the object
+    and falling away from it), and nothing said so far tells it from the object. But the lamp is one,
+    distant, the same for every view, and the shadow on the plane is the object's upper part projected
+    along its light: the hull's voxels at :data:`_TALL` of its height or more are the object's (the wedge
+    stays lower but right by the object), and the light is the one whose projection of them covers, beyond
+    their footprint, the silhouettes' pixels under which the other views' hull stays low, and not the lit
+    table the views confirm (:func:`_light_fitted`). Where it explains too little of them (a wide base
+    round the object, low parts on every side), nothing is dropped. Else each view drops what lies in that
+    predicted shadow, beyond the tall part's footprint, of its silhouette: the pixels in front of which
+    nothing of the hull over that footprint stands, and, joined to them, those low under the others' hull
+    (the shadow right by the object, where the voxels round the footprint stand in front of it). A view
+    that sees the object in front of its shadow keeps it: the hull over the footprint stands there. Without
+    an empty workspace only: with one, the change against it tells the shadow by itself."""
+    if any(view.background is not None for view in views):
+        return masks
+    hulls = _Hulls(views, masks, plane, aim)
+    voxels = _hull_voxels(hulls)
+    assert hulls.height is not None
+    # A view that misses much of what the other views' hull holds (its colour models gave a face of the
+    # table's colour to the table) carved the hull short of the object: its tall part is not the object's.
+    if not voxels.any() or max(_hull_missed(hulls, mask, i) for i, mask in enumerate(masks)) > _HULL_MISSED:
+        return masks
+    normal = plane[:3]
+    across = _plane_basis(normal)
+    top = float(hulls.height[voxels].max())
+    tall = voxels & (hulls.height >= _TALL * top)
+    feet = (hulls.grid - hulls.height[:, None] * normal[None, :]) @ across.T  # each voxel's foot, on the plane
+    origin = feet[tall].mean(axis=0)
+    # The plane's grid, a voxel a cell, as far round the tall part as the lowest lamp casts its shadow.
+    cell = hulls.voxel
+    side = 2 * int(np.ceil((top / np.tan(np.radians(_LOWEST_LAMP)) + np.ptp(feet[tall], axis=0).max()) / cell)) + 1
+
+    def on_grid(points: np.ndarray) -> np.ndarray:
+        return np.rint((points - origin) / cell).astype(np.int64) + side // 2
+
+    footprint = np.zeros((side, side), np.uint8)
+    cv2.fillConvexPoly(footprint, cv2.convexHull(on_grid(feet[tall]).astype(np.int32)), 1)
+    footprint = _dilated(footprint, 1)  # a voxel round it: the tall voxels' own width
+    # Per view: each coarse pixel's plane point on the grid, whether it lies beyond the footprint, and whether
+    # the others' hull in front of it is low (None for a view seeded by the aim alone, or that the others
+    # confirm nowhere).
+    on_plane: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+    shown, lit = [], []
+    for i, (view, mask, score) in enumerate(zip(views, masks, scores)):
+        if score is None:
+            on_plane.append(None)
+            continue
+        cw, ch = view.coarse_size
+        points, valid = _plane_points(view, plane)
+        cells = on_grid(points @ across.T)
+        valid &= np.all((cells >= 0) & (cells < side), axis=1)
+        cells = np.where(valid[:, None], cells, 0)
+        beyond = (valid & (footprint[cells[:, 1], cells[:, 0]] == 0)).reshape(ch, cw)
+        cells = cells.reshape(ch, cw, 2)
+        low = _others_hull_height(hulls, i) < _TALL * top
+        on_plane.append((cells, beyond, low) if np.any(score < 1.0) else None)
+    # What the light is fitted to: the silhouettes' low part beyond the footprint, but for what is lit as the
+    # table, and against it the table the other views confirm (``score`` under 1) lit so (no shadow's
+    # darkness). No light is fitted to fewer than _SPECK pixels (_light_fitted): most scans stop here.
+    if sum(np.count_nonzero((mask > 0) & seen[2] & seen[1]) for mask, seen in zip(masks, on_plane)
+           if seen is not None) < _SPECK:
+        return masks
+    for view, mask, score, seen_on_plane in zip(views, masks, scores, on_plane):
+        if seen_on_plane is None:
+            continue
+        cells, beyond, low = seen_on_plane
+        assert score is not None
+        confirmed = score < 1.0
+        lit_table = _brightness(view.coarse) >= _SHADOW_DIMMER * float(_median_colour(view.coarse, confirmed).sum())
+        shown.append(cells[(mask > 0) & low & beyond & ~lit_table])
+        lit.append(cells[confirmed & lit_table & beyond])
+    offset = _light_fitted(on_grid(feet[tall]), hulls.height[tall], np.concatenate(shown), np.concatenate(lit), side,
+                           cell)
+    if offset is None:
+        return masks
+    # A cell wider all round: the penumbra, and the voxels' own width.
+    _, shadow_cells = _cast_shadow(on_grid(feet[tall]), hulls.height[tall], offset, side, cell, penumbra=1)
+    # The hull over the tall part's footprint: what stands there, in front of which a view sees no shadow.
+    foot_cells = on_grid(feet)
+    inside_grid = np.all((foot_cells >= 0) & (foot_cells < side), axis=1)
+    standing = voxels & inside_grid
+    standing[standing] = footprint[foot_cells[standing, 1], foot_cells[standing, 0]] > 0
+    found = list(masks)
+    for i, (view, mask) in enumerate(zip(views, masks)):
+        seen_on_plane = on_plane[i]
+        if seen_on_plane is None:
+            continue
+        cells, beyond, low = seen_on_plane
+        shaded = beyond & (shadow_cells[cells[..., 1], cells[..., 0]] > 0) & (mask > 0)
+        clear = shaded & (_voxels_into(hulls, standing, i) == 0)
+        clear = cv2.morphologyEx(clear.astype(np.uint8), cv2.MORPH_OPEN, _SMALL) > 0
+        if np.count_nonzero(clear) < _SPECK:
+            continue
+        count, parts = cv2.connectedComponents((shaded & low).astype(np.uint8), connectivity=4)
+        touched = np.unique(parts[clear])
+        dropped = clear | np.isin(parts, touched[touched > 0])
+        kept = mask.copy()
+        kept[dropped] = 0
+        found[i] = _filled_region(kept, view)
+    return found
+
+
+#: The hull's voxels at this share of its height or more are the object's: the wedge that a shadow taken in
+#: carves stays below it away from the object.
+_TALL = 0.5
+#: A view that misses over this share of the other views' hull carved the hull short of the object.
+_HULL_MISSED = 0.4
+#: The lamps fitted: from this many degrees above the plane up to :data:`_HIGHEST_LAMP`.
+_LOWEST_LAMP = 15.0
+_HIGHEST_LAMP = 85.0
+#: The fitted light must explain this share of what it is fitted to (less what it covers of the lit table).
+_LIGHT_EXPLAINS = 0.5
+
+
+def _hull_missed(hulls: _Hulls, mask: np.ndarray, i: int) -> float:
+    """The share of the other views' hull, of the voxels view ``i`` sees, that falls outside its ``mask``."""
+    coarse, seen, _ = hulls.pixels[i]
+    kept = hulls.carved(set(range(len(hulls.views))) - {i}) & seen
+    return float(np.mean(mask[coarse[kept, 1], coarse[kept, 0]] == 0)) if kept.any() else 0.0
+
+
+def _plane_basis(normal: np.ndarray) -> np.ndarray:
+    """(2, 3) two orthonormal directions across the plane of unit ``normal``."""
+    first = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    first /= np.linalg.norm(first)
+    return np.stack([first, np.cross(normal, first)])
+
+
+def _hull_voxels(hulls: _Hulls) -> np.ndarray:
+    """(N,) bool: the voxels inside every view's silhouette and seen by two views at least."""
+    everyone = range(len(hulls.views))
+    inside = np.ones(len(hulls.grid), bool)
+    for i in everyone:
+        inside &= hulls.inside[i]
+    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
+    return inside
+
+
+def _others_hull_height(hulls: _Hulls, i: int) -> np.ndarray:
+    """(h, w) float32: per coarse pixel of view ``i``, the height above the plane of the highest voxel of the
+    other views' hull (as :meth:`_Hulls.into` keeps it) in front of the plane there, 0 where none is."""
+    assert hulls.height is not None
+    coarse, seen, depth = hulls.pixels[i]
+    keep = hulls.carved(set(range(len(hulls.views))) - {i}) & seen
+    heights = np.zeros(hulls.shape[i], np.float32)
+    if not keep.any():
+        return heights
+    np.maximum.at(heights, (coarse[keep, 1], coarse[keep, 0]), np.maximum(hulls.height[keep], 0.0).astype(np.float32))
+    reach = _voxel_reach(hulls, i, depth[keep])
+    return cv2.dilate(heights, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+
+
+def _voxel_reach(hulls: _Hulls, i: int, depth: np.ndarray) -> int:
+    """How many coarse pixels of view ``i`` a voxel at ``depth`` (their median) covers either way."""
+    view = hulls.views[i]
+    return int(np.ceil(hulls.voxel * view.camera.focal_length / float(np.median(depth)) / min(view.sx, view.sy))) + 1
+
+
+def _voxels_into(hulls: _Hulls, chosen: np.ndarray, i: int) -> np.ndarray:
+    """The ``chosen`` voxels (bool (N,)) projected into view ``i`` (0/255), each as wide as it is there."""
+    coarse, seen, depth = hulls.pixels[i]
+    keep = chosen & seen
+    points = np.zeros(hulls.shape[i], np.uint8)
+    if not keep.any():
+        return points
+    points[coarse[keep, 1], coarse[keep, 0]] = 255
+    return _dilated(points, _voxel_reach(hulls, i, depth[keep]))
+
+
+def _cast_shadow(cells: np.ndarray, heights: np.ndarray, offset: np.ndarray, side: int, cell: float,
+                 penumbra: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """On the plane's grid (``side`` cells a side, ``cell`` wide), the shadow that points at ``cells`` (M, 2)
+    and ``heights`` (M,) cast where a unit of height moves a point's shadow by ``offset`` ((2,), along the
+    plane): the convex outline of their feet and their shadows ((K, 1, 2) int32) and its cells, with
+    ``penumbra`` cells round it ((side, side) uint8 0/1)."""
+    moved = cells + np.rint(heights[:, None] * offset[None, :] / cell).astype(np.int64)
+    outline = cv2.convexHull(np.concatenate([cells, moved]).astype(np.int32))
+    shadow = np.zeros((side, side), np.uint8)
+    cv2.fillConvexPoly(shadow, outline, 1)
+    if penumbra:
+        cv2.polylines(shadow, [outline], True, 1, thickness=2 * penumbra + 1)
+    return outline, shadow
+
+
+def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit: np.ndarray, side: int,
+                  cell: float) -> np.ndarray | None:
+    """The light that casts the shadow of the tall voxels (their feet at ``cells`` (M, 2) of the plane's grid,
+    ``side`` cells a side and ``cell`` wide; ``heights`` (M,)) over the most of ``shown`` (K, 2 cells: what
+    looks like shadow beyond their footprint) and the least of ``lit`` (the lit table the views confirm): as
+    (2,) how far along the plane a unit of height moves a point's shadow, or None when the best light
+    explains under :data:`_LIGHT_EXPLAINS` of ``shown`` (less the lit table it covers) or lies on the
+    search's bounds (no lamp within them fits).
+
+    Azimuths 10 degrees apart and elevations 5 apart (:data:`_LOWEST_LAMP` to :data:`_HIGHEST_LAMP`) are
+    tried, then the best one's neighbours half as far; of equally good ones the shortest shadow is taken."""
+    if len(shown) < _SPECK:
+        return None
+    # Only the corners of each layer of voxels matter to a convex shadow.
+    corners = []
+    layers = np.rint(heights / cell).astype(np.int64)
+    for layer in np.unique(layers):
+        members = np.nonzero(layers == layer)[0]
+        corners.append(members[cv2.convexHull(cells[members].astype(np.int32), returnPoints=False).ravel()])
+    corner = np.concatenate(corners)
+    points, lifted = cells[corner], heights[corner]
+    # What a shadow covers is counted cell by cell: shown counts for it, the lit table against it, but not on
+    # the shadow's rim (its penumbra, lit in part).
+    shown_count, lit_count = (np.bincount(found[:, 1] * side + found[:, 0], minlength=side * side).reshape(side, side)
+                              for found in (shown, lit))
+
+    def fit(azimuth: float, elevation: float) -> tuple[float, float]:
+        outline, shadow = _cast_shadow(points, lifted, _shadow_offset(azimuth, elevation), side, cell)
+        inner = cv2.erode(shadow, _SMALL)
+        return (float(np.sum(lit_count, where=inner > 0) - np.sum(shown_count, where=shadow > 0)),
+                cv2.contourArea(outline))
+
+    tried = {(azimuth, elevation): fit(azimuth, elevation)
+             for elevation in np.arange(_LOWEST_LAMP, _HIGHEST_LAMP + 1e-9, 5.0)
+             for azimuth in np.arange(0.0, 360.0, 10.0)}
+    azimuth, elevation = min(tried, key=tried.__getitem__)
+    for near in ((azimuth + da) % 360.0 for da in (-5.0, 0.0, 5.0)):
+        for height in (elevation - 2.5, elevation, elevation + 2.5):
+            if _LOWEST_LAMP <= height <= _HIGHEST_LAMP and (near, height) not in tried:
+                tried[(near, height)] = fit(near, height)
+    azimuth, elevation = min(tried, key=tried.__getitem__)
+    explained = -tried[(azimuth, elevation)][0]
+    if explained < _LIGHT_EXPLAINS * len(shown) or elevation in (_LOWEST_LAMP, _HIGHEST_LAMP):
+        return None
+    return _shadow_offset(azimuth, elevation)
+
+
+def _shadow_offset(azimuth: float, elevation: float) -> np.ndarray:
+    """(2,) how far along the plane a unit of height moves a point's shadow under a lamp at ``azimuth`` (degrees,
+    in the plane's basis) and ``elevation`` (degrees above the plane)."""
+    a = np.radians(azimuth)
+    return -np.array([np.cos(a), np.sin(a)]) / np.tan(np.radians(elevation))
+
+
 #: The deepest shadow the other views confirm is taken at this quantile of its pixels' brightness, and the
 #: table under the object's overhang is darker than this share of it.
 _SHADOW_DEEPEST = 0.1
@@ -1680,11 +1925,7 @@ def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
 def _floats(hulls: _Hulls) -> np.ndarray | None:
     """Whether the hull of all the views stands over :data:`_FLOATING` voxels above the plane: the voxels
     inside every view's silhouette (and seen by two at least) if it does, else None."""
-    everyone = range(len(hulls.views))
-    inside = np.ones(len(hulls.grid), bool)
-    for i in everyone:
-        inside &= hulls.inside[i]
-    inside &= np.sum([hulls.pixels[i][1] for i in everyone], axis=0) >= 2
+    inside = _hull_voxels(hulls)
     if hulls.height is None or not inside.any() or float(hulls.height[inside].min()) <= _FLOATING * hulls.voxel:
         return None
     return inside
@@ -2765,6 +3006,10 @@ class _Hulls:
 
     def into(self, carving: set[int], i: int) -> np.ndarray:
         """The hull of the views ``carving`` projected into view ``i`` (0/255)."""
+        return _voxels_into(self, self.carved(carving), i)
+
+    def carved(self, carving: set[int]) -> np.ndarray:
+        """(N,) bool: the voxels of the hull of the views ``carving``."""
         seen_by, misses = np.zeros(len(self.grid), np.intp), np.zeros(len(self.grid), np.intp)
         for j in carving:
             seen_by += self.pixels[j][1]
@@ -2772,16 +3017,7 @@ class _Hulls:
         # With three carving views or more, one of them may miss a voxel (a view that found only part
         # of the object carves the others' hulls less); a voxel that fewer than two carving views
         # (or all of them, if fewer) see within their images is not known to be anything.
-        keep = (misses <= (1 if len(carving) >= 3 else 0)) & (seen_by >= min(2, len(carving)))
-        coarse, seen, depth = self.pixels[i]
-        keep &= seen
-        view = self.views[i]
-        points = np.zeros(self.shape[i], np.uint8)
-        points[coarse[keep, 1], coarse[keep, 0]] = 255
-        if not keep.any():
-            return points
-        footprint = self.voxel * view.camera.focal_length / float(np.median(depth[keep])) / min(view.sx, view.sy)
-        return _dilated(points, int(np.ceil(footprint)) + 1)
+        return (misses <= (1 if len(carving) >= 3 else 0)) & (seen_by >= min(2, len(carving)))
 
 
 def _refined(view: _View, coarse_mask: np.ndarray, on_plane: bool) -> tuple[np.ndarray, np.ndarray]:
