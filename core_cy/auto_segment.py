@@ -1425,6 +1425,7 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
         masks = _table_lit_at_the_rim_dropped(views, masks, scores, plane)
         masks = _cast_shadows_dropped(views, masks, scores, plane, aim)
+        masks = _tops_beyond_a_side_added(views, masks, plane, aim)
     return masks
 
 
@@ -1493,6 +1494,249 @@ def _table_lit_at_the_rim_dropped(views: Sequence[_View], masks: list[np.ndarray
         if not np.array_equal(kept, mask):
             found[i] = _filled_region(kept, view)
     return found
+
+
+def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], plane: np.ndarray,
+                              aim: np.ndarray) -> list[np.ndarray]:
+    """The silhouettes with the top that a view lost beyond a side's upper edge, where another view found it.
+
+    A box's top of the table's colour, lit by the lamp as the table is, looks as the table behind it does:
+    neither colour, light nor parallax tells them apart, and a view may keep the box's sides only. Its
+    silhouette's upper rim is then the top's near edge, with a side just below it (darker than the lit table
+    beyond the light's spread over a table, :data:`_LIGHT_FIELD_BEYOND`: turned from the lamp); a view that
+    found the top has the top just below its rim, lit as the table. Geometry says the rest. The near edge
+    lies at the top's height: the rays through that view's rim leave, at that height, the other views'
+    silhouettes swept down to the table (:func:`_under_silhouettes`: the side outlines, which every view
+    found, bound the object whatever its top; :func:`_upper_rim_height`). At that height the top's section
+    is where the views that found the top see it within their silhouettes and the others' side outlines
+    allow it; seen from a view that lost it, it lies beyond the rim, and is added there.
+
+    Only where some view has a side below its rim and some other a face lit as the table, and only where that
+    section is a top that was lost for its look: the views that found it hold most of it (:data:`_FITS_WHOLE`;
+    a height read off the far rim of a top that every view found, a dark can's on its dark mat, lies above the
+    top, where the views that see the top lower hold the section's near part only), and they see it of the
+    table's look (:func:`_of_the_table_s_look`; a print's, an ellipsoid's or a bottle's shoulder is not, and the
+    view would have told it from the table). Where every view found its top, none is lost (a stretch of table
+    beyond it, the opposite error, is left as it is)."""
+    brightness = [_brightness(view.coarse) for view in views]
+    side_below: list[bool | None] = []
+    rounds = [_table_round(mask, mask) for mask in masks]
+    for view, mask, bright, round_it in zip(views, masks, brightness, rounds):
+        beyond = _beyond_the_upper_rim(view, plane, mask)
+        side_below.append(None if not (round_it.any() and beyond.any()) else _lit_below(
+            view, plane, mask, bright, float(np.median(bright[round_it])), beyond) is False)
+    lost = [i for i, side in enumerate(side_below) if side]
+    found = [i for i, side in enumerate(side_below) if side is False]
+    if not lost or not found:
+        return masks
+    reach = _reach(views, masks, aim)
+    heights = [_upper_rim_height(views, masks, plane, i, reach) for i in lost]
+    if not any(np.isfinite(heights)):
+        return masks
+    height = float(np.nanmin(heights))
+    points, spacing = _plane_samples(plane, aim, height, reach)
+    outlined = np.ones(len(points), bool)
+    for view, mask in zip(views, masks):
+        outlined &= _under_silhouettes(view, mask, points, plane)
+    top = outlined.copy()
+    for j in found:
+        top &= _in_silhouette(views[j], masks[j], points)
+    # A top at that height fits, whole, in the silhouettes of the views that found it: they hold over half of
+    # the section the side outlines allow (the rest, the corners three views' outlines leave, lies beyond its
+    # far edge). A section taken above the top (a can's far rim, dark, in views that found its top) reaches
+    # beyond the rim of the views that see the top lower: they hold its near part alone.
+    if np.count_nonzero(top) <= _FITS_WHOLE * np.count_nonzero(outlined):
+        return masks
+    # The top a view lost for the table's look has that look where the views that found it see it: a top of
+    # another look (a print, a bottle's shoulder) the lost view would have told from the table.
+    for j in found:
+        seen = cv2.bitwise_and(_projected_points(views[j], points[top], spacing, masks[j].shape), masks[j]) > 0
+        if not seen.any() or not _of_the_table_s_look(views[j].coarse, brightness[j], seen, rounds[j]):
+            return masks
+    # The top's edges are where the views' rims meet its height (the near edges of the views that lost it, the
+    # far edges of those that found it), and a top is flat and convex: the corners of the section that three
+    # views' side outlines leave beyond them are table.
+    top &= _within_the_rims(views, masks, plane, height, points)
+    added = list(masks)
+    for i in lost:
+        section = _projected_points(views[i], points[top], spacing, masks[i].shape)
+        beyond = cv2.bitwise_and(section, cv2.bitwise_not(masks[i]))
+        # The rim and the height read off it are known to a coarse pixel or two: the section's near edge may
+        # stop that short of the rim, and the gap between them is the top's too.
+        near = cv2.dilate(masks[i], _CLOSING) > 0
+        for part in _opened_parts(beyond > 0):
+            if (part & near).any():
+                joined = cv2.morphologyEx(cv2.bitwise_or(masks[i], part.astype(np.uint8) * 255), cv2.MORPH_CLOSE,
+                                          _CLOSING)
+                around = cv2.dilate(part.astype(np.uint8), _CLOSING)
+                added[i] = cv2.bitwise_or(added[i], cv2.bitwise_and(joined, around))
+        added[i] = _holes_filled(added[i])
+    return added
+
+
+#: The upper rim of a silhouette: its pixels from which this many coarse pixels up the plane's normal leave it.
+_RIM_STEP = 2
+#: Heights are looked at in steps of this share of the hull's reach; a section is sampled so finely across.
+_HEIGHT_STEP = 1 / 80
+#: A column down to the table is sampled at this many points.
+_COLUMN_SAMPLES = 48
+#: A lost top's section fits in the silhouettes of the views that found it over this share of what the side
+#: outlines allow (:func:`_tops_beyond_a_side_added`): all but the corners that three views' outlines leave
+#: (a third of it: a lost box top 0.67 to 0.69), where a section taken above a top holds its near part only
+#: (a dark can's found top, 0.28 to 0.54).
+_FITS_WHOLE = 0.6
+
+
+def _moved(binary: np.ndarray, by: np.ndarray) -> np.ndarray:
+    """(h, w) bool: ``binary`` (bool) moved by the coarse offset ``by`` (2,)."""
+    shift = np.array([[1.0, 0.0, by[0]], [0.0, 1.0, by[1]]], np.float32)
+    return cv2.warpAffine(binary.astype(np.uint8), shift, binary.shape[::-1], flags=cv2.INTER_NEAREST) > 0
+
+
+def _up_in_silhouette(view: _View, plane: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(2,) the unit direction in the coarse image in which the plane's normal points, at the table point
+    under the centre of ``mask`` (0/255, not empty)."""
+    ys, xs = np.nonzero(mask)
+    centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
+    foot = _on_plane(view, plane, centre)[0]
+    ends = view.to_coarse(view.project(np.array([foot, foot + 0.01 * np.asarray(plane[:3], np.float64)]))[0])
+    return (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-12)
+
+
+def _upper_rim(view: _View, plane: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels of ``mask`` (0/255, not empty) from which :data:`_RIM_STEP` pixels up the
+    plane's normal leave it: the silhouette's upper rim, where a face ends up the normal."""
+    inside = mask > 0
+    return inside & ~_moved(inside, -_RIM_STEP * _up_in_silhouette(view, plane, mask))
+
+
+def _beyond_the_upper_rim(view: _View, plane: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels just beyond the silhouette's upper rim (:func:`_upper_rim`), up the normal."""
+    up = _up_in_silhouette(view, plane, mask)
+    return _moved(_upper_rim(view, plane, mask), _RIM_STEP * up) & ~(mask > 0)
+
+
+def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float = 0.0) -> np.ndarray:
+    """(N, 3) where the rays through full-resolution pixels ``uv`` (N, 2) meet the plane raised by ``height``."""
+    rays = view.rays(uv)
+    normal = np.asarray(plane[:3], np.float64)
+    above = float(normal @ view.camera.center + plane[3]) - height
+    return view.camera.center - (above / (rays @ normal))[:, None] * rays
+
+
+def _in_silhouette(view: _View, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether world ``points`` (N, 3) fall in ``mask`` (0/255), the view's coarse silhouette."""
+    uv, depth = view.project(points)
+    coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+    height, width = mask.shape
+    inside = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    hit = np.zeros(len(points), bool)
+    hit[inside] = mask[coarse[inside, 1], coarse[inside, 0]] > 0
+    return hit
+
+
+def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether the column under each world point (N, 3), down the plane's normal to the plane, meets
+    the view's silhouette ``mask`` (0/255): the silhouette swept down to the table, which its side outlines
+    bound whatever the view missed of its top."""
+    normal = np.asarray(plane[:3], np.float64)
+    heights = points @ normal + plane[3]
+    met = np.zeros(len(points), bool)
+    for share in np.linspace(0.0, 1.0, _COLUMN_SAMPLES):
+        met |= _in_silhouette(view, mask, points - (share * heights)[:, None] * normal)
+    return met
+
+
+def _reach(views: Sequence[_View], masks: Sequence[np.ndarray], aim: np.ndarray) -> float:
+    """How far from the aim the silhouettes reach, in world units (with a fifth to spare): the half side of
+    the cube the hulls are carved in (:class:`_Hulls`)."""
+    radius = 0.0
+    for view, mask in zip(views, masks):
+        ys, xs = np.nonzero(mask)
+        centre = _coarse_aim(view, aim)
+        reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]), initial=1.0)) * max(view.sx, view.sy)
+        aim_depth = float(view.camera.project(aim[None, :])[1][0])
+        radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
+    return radius
+
+
+def _of_the_table_s_look(image: np.ndarray, brightness: np.ndarray, region: np.ndarray, round_it: np.ndarray) -> bool:
+    """Whether ``region`` (bool) is lit as the table round the silhouette (``round_it``, bool, not empty; its
+    median ``brightness`` no darker than the table's beyond the light's spread, :func:`_lit_as`) and of the
+    table's colour there (its median :func:`_off_colour` from the table's median colour under 1)."""
+    table = _median_colour(image, round_it)
+    return (_lit_as(brightness, region, float(np.median(brightness[round_it])))
+            and float(np.median(_off_colour(image[region], table))) < 1.0)
+
+
+def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray, i: int,
+                      reach: float) -> float:
+    """The median over view ``i``'s upper rim of the highest height at which the ray through a rim pixel lies
+    within every other view's silhouette swept down to the table (:func:`_under_silhouettes`); NaN where no
+    ray does. A top's near edge lies there: above it the ray passes in front of the object."""
+    view = views[i]
+    ys, xs = np.nonzero(_upper_rim(view, plane, masks[i]))
+    if not len(xs):
+        return float("nan")
+    uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
+    highest = np.full(len(xs), np.nan)
+    for height in np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach):
+        points = _on_plane(view, plane, uv, height)
+        within = np.ones(len(xs), bool)
+        for j, (other, mask) in enumerate(zip(views, masks)):
+            if j != i:
+                within &= _under_silhouettes(other, mask, points, plane)
+        highest[within] = height
+    return float(np.nanmedian(highest)) if np.isfinite(highest).any() else float("nan")
+
+
+def _plane_axes(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two (3,) unit vectors along the plane, square to each other and to its normal."""
+    normal = np.asarray(plane[:3], np.float64)
+    across = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    return across, np.cross(normal, across)
+
+
+def _within_the_rims(views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray, height: float,
+                     points: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether each of ``points`` (N, 3), at ``height`` over the plane, lies within the convex
+    outline of where the rays through every view's upper rim (:func:`_upper_rim`) meet that height."""
+    axes = np.column_stack(_plane_axes(plane))
+    rims = []
+    for view, mask in zip(views, masks):
+        ys, xs = np.nonzero(_upper_rim(view, plane, mask))
+        uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
+        rims.append(_on_plane(view, plane, uv, height) @ axes)
+    outline = cv2.convexHull(np.concatenate(rims).astype(np.float32))
+    return np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), False) >= 0 for x, y in points @ axes])
+
+
+def _plane_samples(plane: np.ndarray, aim: np.ndarray, height: float, reach: float) -> tuple[np.ndarray, float]:
+    """(N, 3) points on a square grid in the plane raised by ``height``, within ``reach`` of the aim's foot,
+    :data:`_HEIGHT_STEP` of the reach apart, and that spacing."""
+    normal = np.asarray(plane[:3], np.float64)
+    across, along = _plane_axes(plane)
+    centre = aim - (float(normal @ aim) + plane[3] - height) * normal
+    steps = np.arange(-reach, reach, _HEIGHT_STEP * reach)
+    u, v = (grid.reshape(-1, 1) for grid in np.meshgrid(steps, steps))
+    return centre + u * across + v * along, _HEIGHT_STEP * reach
+
+
+def _projected_points(view: _View, points: np.ndarray, spacing: float, shape: tuple[int, ...]) -> np.ndarray:
+    """(h, w) 0/255: the world ``points`` (N, 3), sampled ``spacing`` apart, projected into the view's coarse
+    image and closed over the gaps between their pixels."""
+    uv, depth = view.project(points)
+    coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+    height, width = shape[:2]
+    inside = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    drawn = np.zeros((height, width), np.uint8)
+    drawn[coarse[inside, 1], coarse[inside, 0]] = 255
+    if not inside.any():
+        return drawn
+    gap = int(np.ceil(spacing * view.camera.focal_length / float(np.median(depth[inside])) / min(view.sx, view.sy)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * gap + 3, 2 * gap + 3))
+    return cv2.morphologyEx(drawn, cv2.MORPH_CLOSE, kernel)
 
 
 def _rim_parts(candidates: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
@@ -2954,13 +3198,7 @@ class _Hulls:
 
     def __init__(self, views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray | None,
                  aim: np.ndarray) -> None:
-        radius = 0.0
-        for view, mask in zip(views, masks):
-            ys, xs = np.nonzero(mask)
-            centre = _coarse_aim(view, aim)
-            reach_px = float(np.max(np.hypot(xs - centre[0], ys - centre[1]), initial=1.0)) * max(view.sx, view.sy)
-            aim_depth = float(view.camera.project(aim[None, :])[1][0])
-            radius = max(radius, float(1.2 * reach_px * aim_depth / view.camera.focal_length))
+        radius = _reach(views, masks, aim)
         steps = np.linspace(-radius, radius, _HULL_GRID)
         # The voxels' centres, as aim + np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1) gives
         # them, written axis by axis into one array.
