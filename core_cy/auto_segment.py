@@ -55,6 +55,8 @@ __all__ = ["auto_silhouettes", "aim_point", "unsure_pixels"]
 COARSE_SIDE = 200
 #: A view in which nothing stands out over this share of the evidence's noise is empty.
 _NOTHING = "nothing stands on the table near the views' aim"
+_SPECK_LEFT = ("only a speck of what stands near the views' aim was told from the table (an object of the table's "
+               "own colour and light?): give the views pictures of the empty workspace, or masks")
 _GC_ITERATIONS = 2
 #: The evidence's noise is taken to be at least this (a relative colour difference): JPEG and a
 #: pixel's worth of misregistration leave that much on a flat table.
@@ -969,6 +971,11 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                     break
     masks = [mask for mask, _ in cuts]
     masks = _agreed(views, masks, [score for _, score in cuts], plane, aim)
+    for view, mask in zip(views, masks):
+        # A speck is no silhouette: carved from, it would put the object's centre off the other views' rays,
+        # and the error would blame the poses.
+        if cv2.countNonZero(mask) < _SPECK:
+            raise SilhouetteError(_SPECK_LEFT, view=view.index)
     return [_refined(view, mask, on_plane=plane is not None) for view, mask in zip(views, masks)]
 
 
