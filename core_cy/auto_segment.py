@@ -1431,8 +1431,12 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     if plane is not None and len(views) > 2:
         masks = _shadows_under_object_dropped(views, masks, scores, plane, aim)
         masks = _table_lit_at_the_rim_dropped(views, masks, scores, plane)
-        masks = _cast_shadows_dropped(views, masks, scores, plane, aim)
+        # The lamp is fitted to the object as whole as the views give it: a top one view lost is found first.
+        # Fitted first, the shadows it drops changed the silhouettes the top's height is read from, and a dark
+        # can's top, found in every view, was taken for lost (33/rubber-mat-dark-can 0 and 1: 0.947 and 0.853
+        # with this order, 0.791 and 0.710 with the other).
         masks = _tops_beyond_a_side_added(views, masks, plane, aim)
+        masks = _cast_shadows_dropped(views, masks, scores, plane, aim)
     return masks
 
 
