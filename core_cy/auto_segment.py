@@ -1604,14 +1604,19 @@ def _moved(binary: np.ndarray, by: np.ndarray) -> np.ndarray:
     return cv2.warpAffine(binary.astype(np.uint8), shift, binary.shape[::-1], flags=cv2.INTER_NEAREST) > 0
 
 
-def _up_in_silhouette(view: _View, plane: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def _up_in_silhouette(view: _View, plane: np.ndarray, region: np.ndarray) -> np.ndarray:
     """(2,) the unit direction in the coarse image in which the plane's normal points, at the table point
-    under the centre of ``mask`` (0/255, not empty)."""
-    ys, xs = np.nonzero(mask)
+    under the centre of ``region`` (bool or 0/255, not empty)."""
+    ys, xs = np.nonzero(region)
     centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
-    foot = _on_plane(view, plane, centre)[0]
-    ends = view.to_coarse(view.project(np.array([foot, foot + 0.01 * np.asarray(plane[:3], np.float64)]))[0])
-    return (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-12)
+    ray = view.rays(centre)[0]
+    normal = np.asarray(plane[:3], np.float64)
+    height = float(normal @ view.camera.center + plane[3])
+    on_plane = view.camera.center - height / float(ray @ normal) * ray
+    # Up is toward the camera's side of the plane; a step of a hundredth of the camera's height only sets
+    # the direction.
+    ends = view.to_coarse(view.project(np.array([on_plane, on_plane + 0.01 * height * normal]))[0])
+    return (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-9)
 
 
 def _upper_rim(view: _View, plane: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -2720,22 +2725,11 @@ def _lit_as(brightness: np.ndarray, region: np.ndarray, lit_table: float) -> boo
 def _just_below(view: _View, plane: np.ndarray, region: np.ndarray, upward: bool = False) -> np.ndarray:
     """(h, w) bool: where ``region`` (bool) lands moved down the plane's normal (``upward``: up it), as the
     view sees it at the region's centre, by each whole coarse pixel up to :data:`_SIDE_BELOW`."""
-    ys, xs = np.nonzero(region)
-    centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
-    ray = view.rays(centre)[0]
-    normal = np.asarray(plane[:3], np.float64)
-    height = float(normal @ view.camera.center + plane[3])
-    on_plane = view.camera.center - height / float(ray @ normal) * ray
-    # Up is toward the camera's side of the plane; a step of a hundredth of the camera's height only sets
-    # the direction.
-    ends = view.to_coarse(view.project(np.array([on_plane, on_plane + 0.01 * height * normal]))[0])
-    up = (ends[1] - ends[0]) / max(float(np.linalg.norm(ends[1] - ends[0])), 1e-9)
-    source = region.astype(np.uint8)
+    up = _up_in_silhouette(view, plane, region)
     below = np.zeros(region.shape, bool)
     sign = 1.0 if upward else -1.0
     for step in range(1, _SIDE_BELOW + 1):
-        shift = np.array([[1.0, 0.0, sign * step * up[0]], [0.0, 1.0, sign * step * up[1]]], np.float32)
-        below |= cv2.warpAffine(source, shift, (source.shape[1], source.shape[0]), flags=cv2.INTER_NEAREST) > 0
+        below |= _moved(region, sign * step * up)
     return below
 
 
