@@ -1361,9 +1361,11 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # it (the plane's parallax, the empty workspace) knows better than a hull that another view's miss
         # carved too small (on the benchmark's printed scenes every such cut lost), unless it is the only
         # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
-        # all see empty space where it sees more (a tint that JPEG put on the table in that view alone).
+        # all see empty space where it sees more (a tint that JPEG put on the table in that view alone). Nor does
+        # a view know better whose silhouette lies mostly beyond the others' hull where they, left without it,
+        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too.
         candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
-            scores[i] is None or _alone_in_excess(i, excess))]
+            scores[i] is None or _alone_in_excess(i, excess) or _mostly_beyond(i, masks, hulls, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -2180,6 +2182,32 @@ _UNDER_OBJECT = 0.7
 def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
     """Whether view ``index`` is the only one of three or more that reaches out of the others' hull."""
     return len(excess) > 2 and all(share <= 1.0 for other, share in excess.items() if other != index)
+
+
+def _mostly_beyond(index: int, masks: Sequence[np.ndarray], hulls: _Hulls, excess: dict[int, float]) -> bool:
+    """Whether view ``index``'s silhouette lies over :data:`_MOSTLY_BEYOND` of it out of the other views' hull
+    (of three or more) while they, left without it, nearly agree: what reaches out of each one's hull of the
+    rest is under :data:`_NEARLY_AGREED` times :data:`_DISAGREEMENT` of it.
+
+    Two views' hull is looser than the object they found: for a view that reaches mostly beyond it to be
+    right, both others would have to have missed most of the object, and missed it alike. Such a view took in
+    a stretch of table: a band of lighter grain beside a box of the table's colour, four times the box
+    (52/oak-table-colour-box 2: 0.23, and the fit followed it into a slab a twentieth of a millimetre thin).
+    A view that missed part of the object makes another reach out of the hull a little too, so the first was
+    not alone in its excess; but leaving it out, not the view that reaches out a little, brings the others to
+    agree."""
+    if len(excess) < 3 or excess[index] * _DISAGREEMENT <= _MOSTLY_BEYOND:
+        return False
+    others = set(excess) - {index}
+    return all(_excess(masks[j], hulls.into(others - {j}, j)) < _NEARLY_AGREED for j in others)
+
+
+#: A view whose silhouette lies over this share of it out of the others' hull has taken in mostly table, if
+#: they nearly agree without it (:func:`_mostly_beyond`).
+_MOSTLY_BEYOND = 0.5
+#: Views nearly agree when what reaches out of each one's hull of the rest is under this many times
+#: :data:`_DISAGREEMENT` of it.
+_NEARLY_AGREED = 2.0
 
 
 def _floats(hulls: _Hulls) -> np.ndarray | None:
