@@ -1632,12 +1632,13 @@ def _beyond_the_upper_rim(view: _View, plane: np.ndarray, mask: np.ndarray) -> n
     return _moved(_upper_rim(view, plane, mask), _RIM_STEP * up) & ~(mask > 0)
 
 
-def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float = 0.0) -> np.ndarray:
-    """(N, 3) where the rays through full-resolution pixels ``uv`` (N, 2) meet the plane raised by ``height``."""
+def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float | np.ndarray = 0.0) -> np.ndarray:
+    """(N, 3) where the rays through full-resolution pixels ``uv`` (N, 2) meet the plane raised by ``height``;
+    (H, N, 3) for ``height`` an (H,) array of heights, each ray traced once for all of them."""
     rays = view.rays(uv)
     normal = np.asarray(plane[:3], np.float64)
-    above = float(normal @ view.camera.center + plane[3]) - height
-    return view.camera.center - (above / (rays @ normal))[:, None] * rays
+    above = float(normal @ view.camera.center + plane[3]) - np.asarray(height, np.float64)[..., None]
+    return view.camera.center - (above / (rays @ normal))[..., None] * rays
 
 
 def _in_silhouette(view: _View, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -1695,15 +1696,19 @@ def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane
     if not len(xs):
         return float("nan")
     uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
-    highest = np.full(len(xs), np.nan)
-    for height in np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach):
-        points = _on_plane(view, plane, uv, height)
-        within = np.ones(len(xs), bool)
-        for j, (other, mask) in enumerate(zip(views, masks)):
-            if j != i:
-                within &= _under_silhouettes(other, mask, points, plane)
-        highest[within] = height
-    return float(np.nanmedian(highest)) if np.isfinite(highest).any() else float("nan")
+    heights = np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach)
+    # Every height's points at once: the rays are traced once, each other view looked into once.
+    points = _on_plane(view, plane, uv, heights).reshape(-1, 3)
+    inside_all = np.ones(len(points), bool)
+    for j, (other, mask) in enumerate(zip(views, masks)):
+        if j != i:
+            inside_all &= _under_silhouettes(other, mask, points, plane)
+    within = inside_all.reshape(len(heights), len(xs))
+    if not within.any():
+        return float("nan")
+    # Per rim pixel, the last height (the highest) at which its ray lies within; NaN where it never does.
+    last = len(heights) - 1 - np.argmax(within[::-1], axis=0)
+    return float(np.nanmedian(np.where(within.any(axis=0), heights[last], np.nan)))
 
 
 def _plane_axes(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
