@@ -2111,15 +2111,22 @@ def _cast_shadow(cells: np.ndarray, heights: np.ndarray, offset: np.ndarray, sid
                  penumbra: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """On the plane's grid (``side`` cells a side, ``cell`` wide), the shadow that points at ``cells`` (M, 2)
     and ``heights`` (M,) cast where a unit of height moves a point's shadow by ``offset`` ((2,), along the
-    plane): the convex outline of their feet and their shadows ((K, 1, 2) int32) and its cells, with
-    ``penumbra`` cells round it ((side, side) uint8 0/1)."""
-    moved = cells + np.rint(heights[:, None] * offset[None, :] / cell).astype(np.int64)
-    outline = cv2.convexHull(np.concatenate([cells, moved]).astype(np.int32))
+    plane): the convex outline of their feet and their shadows ((K, 1, 2) int32, :func:`_shadow_outline`) and
+    its cells, with ``penumbra`` cells round it ((side, side) uint8 0/1)."""
+    outline = _shadow_outline(cells, heights, offset, cell)
     shadow = np.zeros((side, side), np.uint8)
     cv2.fillConvexPoly(shadow, outline, 1)
     if penumbra:
         cv2.polylines(shadow, [outline], True, 1, thickness=2 * penumbra + 1)
     return outline, shadow
+
+
+def _shadow_outline(cells: np.ndarray, heights: np.ndarray, offset: np.ndarray, cell: float) -> np.ndarray:
+    """The convex outline ((K, 1, 2) int32, on the plane's grid) of the feet at ``cells`` (M, 2) of points
+    ``heights`` (M,) high and of the shadows they cast where a unit of height moves a point's shadow by
+    ``offset`` ((2,), along the plane; cells ``cell`` wide)."""
+    moved = cells + np.rint(heights[:, None] * offset[None, :] / cell).astype(np.int64)
+    return cv2.convexHull(np.concatenate([cells, moved]).astype(np.int32))
 
 
 def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit: np.ndarray, side: int,
@@ -2149,9 +2156,16 @@ def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit
                               for found in (shown, lit))
 
     def fit(azimuth: float, elevation: float) -> tuple[float, float]:
-        outline, shadow = _cast_shadow(points, lifted, _shadow_offset(azimuth, elevation), side, cell)
+        outline = _shadow_outline(points, lifted, _shadow_offset(azimuth, elevation), cell)
+        # Drawn and counted within the shadow's box alone, a cell wider for the erosion: beyond it are no
+        # shadow's cells, and (the counts being whole numbers) the sums are the grid's.
+        x, y, w, h = cv2.boundingRect(outline)
+        x0, y0, x1, y1 = max(x - 1, 0), max(y - 1, 0), min(x + w + 1, side), min(y + h + 1, side)
+        shadow = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        cv2.fillConvexPoly(shadow, outline - np.array([x0, y0], np.int32), 1)
         inner = cv2.erode(shadow, _SMALL)
-        return (float(np.sum(lit_count, where=inner > 0) - np.sum(shown_count, where=shadow > 0)),
+        box = (slice(y0, y1), slice(x0, x1))
+        return (float(np.sum(lit_count[box], where=inner > 0) - np.sum(shown_count[box], where=shadow > 0)),
                 cv2.contourArea(outline))
 
     tried = {(azimuth, elevation): fit(azimuth, elevation)
