@@ -1642,14 +1642,24 @@ def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float | np
 
 
 def _in_silhouette(view: _View, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) bool: whether world ``points`` (N, 3) fall in ``mask`` (0/255), the view's coarse silhouette."""
+    """(N,) bool: whether world ``points`` (N, 3) fall in ``mask`` (0/255), the view's coarse silhouette; a
+    point the view does not see is not in it."""
+    return _projected_into(view, mask, points, unseen_hit=False)[3]
+
+
+def _projected_into(view: _View, mask: np.ndarray, points: np.ndarray,
+                    unseen_hit: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """World ``points`` (N, 3) projected into the view's coarse image of ``mask`` (0/255): (N, 2) int64 their
+    nearest coarse pixels (column, row), (N,) bool whether the view sees them (in front of the camera, within
+    the image), (N,) their depths, and (N,) bool whether they fall in ``mask``, ``unseen_hit`` for those it
+    does not see (a silhouette's point must be seen; a hull is not carved by a view that does not see it)."""
     uv, depth = view.project(points)
     coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
     height, width = mask.shape
-    inside = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
-    hit = np.zeros(len(points), bool)
-    hit[inside] = mask[coarse[inside, 1], coarse[inside, 0]] > 0
-    return hit
+    seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    hit = np.full(len(points), unseen_hit)
+    hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+    return coarse, seen, depth, hit
 
 
 def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -3231,11 +3241,13 @@ class _Hulls:
         grid[..., 1] = aim[1] + steps[None, :, None]
         grid[..., 2] = aim[2] + steps[None, None, :]
         grid = grid.reshape(-1, 3)
+        self.height: np.ndarray | None = None
         if plane is not None:
-            grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
+            height = grid @ plane[:3] + plane[3]
+            kept = height >= -radius / _HULL_GRID
+            grid, self.height = grid[kept], height[kept]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
         self.grid = grid
-        self.height = None if plane is None else grid @ plane[:3] + plane[3]
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -3250,13 +3262,8 @@ class _Hulls:
                                   coarse, seen, depth, hit)
                 seen, hit = seen.view(bool), hit.view(bool)
             else:
-                uv, depth = view.project(grid)
-                coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-                cw, ch = view.coarse_size
-                seen = ((depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw)
-                        & (coarse[:, 1] < ch))
-                hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
-                hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+                # A voxel out of a view's image is not carved by it.
+                coarse, seen, depth, hit = _projected_into(view, mask, grid, unseen_hit=True)
             self.inside.append(hit)
             self.pixels.append((coarse, seen, depth))
         self.shape = [mask.shape for mask in masks]
