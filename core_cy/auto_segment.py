@@ -1546,9 +1546,7 @@ def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], p
         return masks
     height = float(np.nanmin(heights))
     points, spacing = _plane_samples(plane, aim, height, reach)
-    outlined = np.ones(len(points), bool)
-    for view, mask in zip(views, masks):
-        outlined &= _under_silhouettes(view, mask, points, plane)
+    outlined = _under_every_silhouette(views, masks, points, plane)
     top = outlined.copy()
     for j in found:
         top &= _in_silhouette(views[j], masks[j], points)
@@ -1670,8 +1668,36 @@ def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane:
     heights = points @ normal + plane[3]
     met = np.zeros(len(points), bool)
     for share in np.linspace(0.0, 1.0, _COLUMN_SAMPLES):
-        met |= _in_silhouette(view, mask, points - (share * heights)[:, None] * normal)
+        # A column met already is not looked down any further.
+        asked = _to_project(~met)
+        if asked is None:
+            break
+        met[asked] |= _in_silhouette(view, mask, points[asked] - (share * heights[asked])[:, None] * normal)
     return met
+
+
+def _under_every_silhouette(views: Sequence[_View], masks: Sequence[np.ndarray], points: np.ndarray,
+                            plane: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether the column under each world point (N, 3) meets every one of the views' silhouettes
+    ``masks`` (:func:`_under_silhouettes`); a view is asked only of the points under all the silhouettes
+    before it."""
+    under = np.ones(len(points), bool)
+    for view, mask in zip(views, masks):
+        asked = _to_project(under)
+        if asked is None:
+            break
+        under[asked] &= _under_silhouettes(view, mask, points[asked], plane)
+    return under
+
+
+def _to_project(wanted: np.ndarray) -> np.ndarray | None:
+    """(N,) bool: which of N points to project when ``wanted`` (N,) bool are asked about; None if none is.
+    A single point is projected with all the others: NumPy multiplies a matrix of one row by another way
+    than one of many rows, whose last bits differ, and every point is to be projected as in one call."""
+    count = np.count_nonzero(wanted)
+    if count == 0:
+        return None
+    return wanted if count >= 2 else np.ones_like(wanted)
 
 
 def _reach(views: Sequence[_View], masks: Sequence[np.ndarray], aim: np.ndarray) -> float:
@@ -1709,11 +1735,9 @@ def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane
     heights = np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach)
     # Every height's points at once: the rays are traced once, each other view looked into once.
     points = _on_plane(view, plane, uv, heights).reshape(-1, 3)
-    inside_all = np.ones(len(points), bool)
-    for j, (other, mask) in enumerate(zip(views, masks)):
-        if j != i:
-            inside_all &= _under_silhouettes(other, mask, points, plane)
-    within = inside_all.reshape(len(heights), len(xs))
+    others = [j for j in range(len(views)) if j != i]
+    within = _under_every_silhouette([views[j] for j in others], [masks[j] for j in others], points,
+                                     plane).reshape(len(heights), len(xs))
     if not within.any():
         return float("nan")
     # Per rim pixel, the last height (the highest) at which its ray lies within; NaN where it never does.
