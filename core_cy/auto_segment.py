@@ -1548,9 +1548,7 @@ def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], p
         return masks
     height = float(np.nanmin(heights))
     points, spacing = _plane_samples(plane, aim, height, reach)
-    outlined = np.ones(len(points), bool)
-    for view, mask in zip(views, masks):
-        outlined &= _under_silhouettes(view, mask, points, plane)
+    outlined = _under_every_silhouette(views, masks, points, plane)
     top = outlined.copy()
     for j in found:
         top &= _in_silhouette(views[j], masks[j], points)
@@ -1634,23 +1632,34 @@ def _beyond_the_upper_rim(view: _View, plane: np.ndarray, mask: np.ndarray) -> n
     return _moved(_upper_rim(view, plane, mask), _RIM_STEP * up) & ~(mask > 0)
 
 
-def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float = 0.0) -> np.ndarray:
-    """(N, 3) where the rays through full-resolution pixels ``uv`` (N, 2) meet the plane raised by ``height``."""
+def _on_plane(view: _View, plane: np.ndarray, uv: np.ndarray, height: float | np.ndarray = 0.0) -> np.ndarray:
+    """(N, 3) where the rays through full-resolution pixels ``uv`` (N, 2) meet the plane raised by ``height``;
+    (H, N, 3) for ``height`` an (H,) array of heights, each ray traced once for all of them."""
     rays = view.rays(uv)
     normal = np.asarray(plane[:3], np.float64)
-    above = float(normal @ view.camera.center + plane[3]) - height
-    return view.camera.center - (above / (rays @ normal))[:, None] * rays
+    above = float(normal @ view.camera.center + plane[3]) - np.asarray(height, np.float64)[..., None]
+    return view.camera.center - (above / (rays @ normal))[..., None] * rays
 
 
 def _in_silhouette(view: _View, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) bool: whether world ``points`` (N, 3) fall in ``mask`` (0/255), the view's coarse silhouette."""
+    """(N,) bool: whether world ``points`` (N, 3) fall in ``mask`` (0/255), the view's coarse silhouette; a
+    point the view does not see is not in it."""
+    return _projected_into(view, mask, points, unseen_hit=False)[3]
+
+
+def _projected_into(view: _View, mask: np.ndarray, points: np.ndarray,
+                    unseen_hit: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """World ``points`` (N, 3) projected into the view's coarse image of ``mask`` (0/255): (N, 2) int64 their
+    nearest coarse pixels (column, row), (N,) bool whether the view sees them (in front of the camera, within
+    the image), (N,) their depths, and (N,) bool whether they fall in ``mask``, ``unseen_hit`` for those it
+    does not see (a silhouette's point must be seen; a hull is not carved by a view that does not see it)."""
     uv, depth = view.project(points)
     coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
     height, width = mask.shape
-    inside = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
-    hit = np.zeros(len(points), bool)
-    hit[inside] = mask[coarse[inside, 1], coarse[inside, 0]] > 0
-    return hit
+    seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    hit = np.full(len(points), unseen_hit)
+    hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+    return coarse, seen, depth, hit
 
 
 def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -1661,8 +1670,36 @@ def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane:
     heights = points @ normal + plane[3]
     met = np.zeros(len(points), bool)
     for share in np.linspace(0.0, 1.0, _COLUMN_SAMPLES):
-        met |= _in_silhouette(view, mask, points - (share * heights)[:, None] * normal)
+        # A column met already is not looked down any further.
+        asked = _to_project(~met)
+        if asked is None:
+            break
+        met[asked] |= _in_silhouette(view, mask, points[asked] - (share * heights[asked])[:, None] * normal)
     return met
+
+
+def _under_every_silhouette(views: Sequence[_View], masks: Sequence[np.ndarray], points: np.ndarray,
+                            plane: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether the column under each world point (N, 3) meets every one of the views' silhouettes
+    ``masks`` (:func:`_under_silhouettes`); a view is asked only of the points under all the silhouettes
+    before it."""
+    under = np.ones(len(points), bool)
+    for view, mask in zip(views, masks):
+        asked = _to_project(under)
+        if asked is None:
+            break
+        under[asked] &= _under_silhouettes(view, mask, points[asked], plane)
+    return under
+
+
+def _to_project(wanted: np.ndarray) -> np.ndarray | None:
+    """(N,) bool: which of N points to project when ``wanted`` (N,) bool are asked about; None if none is.
+    A single point is projected with all the others: NumPy multiplies a matrix of one row by another way
+    than one of many rows, whose last bits differ, and every point is to be projected as in one call."""
+    count = np.count_nonzero(wanted)
+    if count == 0:
+        return None
+    return wanted if count >= 2 else np.ones_like(wanted)
 
 
 def _reach(views: Sequence[_View], masks: Sequence[np.ndarray], aim: np.ndarray) -> float:
@@ -1697,15 +1734,17 @@ def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane
     if not len(xs):
         return float("nan")
     uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
-    highest = np.full(len(xs), np.nan)
-    for height in np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach):
-        points = _on_plane(view, plane, uv, height)
-        within = np.ones(len(xs), bool)
-        for j, (other, mask) in enumerate(zip(views, masks)):
-            if j != i:
-                within &= _under_silhouettes(other, mask, points, plane)
-        highest[within] = height
-    return float(np.nanmedian(highest)) if np.isfinite(highest).any() else float("nan")
+    heights = np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach)
+    # Every height's points at once: the rays are traced once, each other view looked into once.
+    points = _on_plane(view, plane, uv, heights).reshape(-1, 3)
+    others = [j for j in range(len(views)) if j != i]
+    within = _under_every_silhouette([views[j] for j in others], [masks[j] for j in others], points,
+                                     plane).reshape(len(heights), len(xs))
+    if not within.any():
+        return float("nan")
+    # Per rim pixel, the last height (the highest) at which its ray lies within; NaN where it never does.
+    last = len(heights) - 1 - np.argmax(within[::-1], axis=0)
+    return float(np.nanmedian(np.where(within.any(axis=0), heights[last], np.nan)))
 
 
 def _plane_axes(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -2108,15 +2147,22 @@ def _cast_shadow(cells: np.ndarray, heights: np.ndarray, offset: np.ndarray, sid
                  penumbra: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """On the plane's grid (``side`` cells a side, ``cell`` wide), the shadow that points at ``cells`` (M, 2)
     and ``heights`` (M,) cast where a unit of height moves a point's shadow by ``offset`` ((2,), along the
-    plane): the convex outline of their feet and their shadows ((K, 1, 2) int32) and its cells, with
-    ``penumbra`` cells round it ((side, side) uint8 0/1)."""
-    moved = cells + np.rint(heights[:, None] * offset[None, :] / cell).astype(np.int64)
-    outline = cv2.convexHull(np.concatenate([cells, moved]).astype(np.int32))
+    plane): the convex outline of their feet and their shadows ((K, 1, 2) int32, :func:`_shadow_outline`) and
+    its cells, with ``penumbra`` cells round it ((side, side) uint8 0/1)."""
+    outline = _shadow_outline(cells, heights, offset, cell)
     shadow = np.zeros((side, side), np.uint8)
     cv2.fillConvexPoly(shadow, outline, 1)
     if penumbra:
         cv2.polylines(shadow, [outline], True, 1, thickness=2 * penumbra + 1)
     return outline, shadow
+
+
+def _shadow_outline(cells: np.ndarray, heights: np.ndarray, offset: np.ndarray, cell: float) -> np.ndarray:
+    """The convex outline ((K, 1, 2) int32, on the plane's grid) of the feet at ``cells`` (M, 2) of points
+    ``heights`` (M,) high and of the shadows they cast where a unit of height moves a point's shadow by
+    ``offset`` ((2,), along the plane; cells ``cell`` wide)."""
+    moved = cells + np.rint(heights[:, None] * offset[None, :] / cell).astype(np.int64)
+    return cv2.convexHull(np.concatenate([cells, moved]).astype(np.int32))
 
 
 def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit: np.ndarray, side: int,
@@ -2146,9 +2192,16 @@ def _light_fitted(cells: np.ndarray, heights: np.ndarray, shown: np.ndarray, lit
                               for found in (shown, lit))
 
     def fit(azimuth: float, elevation: float) -> tuple[float, float]:
-        outline, shadow = _cast_shadow(points, lifted, _shadow_offset(azimuth, elevation), side, cell)
+        outline = _shadow_outline(points, lifted, _shadow_offset(azimuth, elevation), cell)
+        # Drawn and counted within the shadow's box alone, a cell wider for the erosion: beyond it are no
+        # shadow's cells, and (the counts being whole numbers) the sums are the grid's.
+        x, y, w, h = cv2.boundingRect(outline)
+        x0, y0, x1, y1 = max(x - 1, 0), max(y - 1, 0), min(x + w + 1, side), min(y + h + 1, side)
+        shadow = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        cv2.fillConvexPoly(shadow, outline - np.array([x0, y0], np.int32), 1)
         inner = cv2.erode(shadow, _SMALL)
-        return (float(np.sum(lit_count, where=inner > 0) - np.sum(shown_count, where=shadow > 0)),
+        box = (slice(y0, y1), slice(x0, x1))
+        return (float(np.sum(lit_count[box], where=inner > 0) - np.sum(shown_count[box], where=shadow > 0)),
                 cv2.contourArea(outline))
 
     tried = {(azimuth, elevation): fit(azimuth, elevation)
@@ -3240,11 +3293,13 @@ class _Hulls:
         grid[..., 1] = aim[1] + steps[None, :, None]
         grid[..., 2] = aim[2] + steps[None, None, :]
         grid = grid.reshape(-1, 3)
+        self.height: np.ndarray | None = None
         if plane is not None:
-            grid = grid[grid @ plane[:3] + plane[3] >= -radius / _HULL_GRID]
+            height = grid @ plane[:3] + plane[3]
+            kept = height >= -radius / _HULL_GRID
+            grid, self.height = grid[kept], height[kept]
         self.voxel = 2 * radius / (_HULL_GRID - 1)
         self.grid = grid
-        self.height = None if plane is None else grid @ plane[:3] + plane[3]
         self.views = views
         self.inside: list[np.ndarray] = []
         self.pixels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -3259,13 +3314,8 @@ class _Hulls:
                                   coarse, seen, depth, hit)
                 seen, hit = seen.view(bool), hit.view(bool)
             else:
-                uv, depth = view.project(grid)
-                coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-                cw, ch = view.coarse_size
-                seen = ((depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw)
-                        & (coarse[:, 1] < ch))
-                hit = np.ones(len(grid), bool)  # a voxel out of a view's image is not carved by it
-                hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
+                # A voxel out of a view's image is not carved by it.
+                coarse, seen, depth, hit = _projected_into(view, mask, grid, unseen_hit=True)
             self.inside.append(hit)
             self.pixels.append((coarse, seen, depth))
         self.shape = [mask.shape for mask in masks]
