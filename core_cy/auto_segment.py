@@ -210,6 +210,19 @@ class _View:
         """Full-resolution pixel coordinates (N, 2) to coarse ones (pixel centres on integers)."""
         return np.column_stack([(uv[:, 0] + 0.5) / self.sx - 0.5, (uv[:, 1] + 0.5) / self.sy - 0.5])
 
+    def from_coarse(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """Coarse pixel coordinates (columns ``xs``, rows ``ys``, (N,) each) to full-resolution ones (N, 2)."""
+        return np.column_stack([(xs + 0.5) * self.sx - 0.5, (ys + 0.5) * self.sy - 0.5])
+
+    def coarse_pixels(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World ``points`` (N, 3) at their nearest coarse pixels: (N, 2) int64 (column, row), (N,) bool whether
+        the view sees them (in front of the camera, within the coarse image), and (N,) their depths."""
+        uv, depth = self.project(points)
+        coarse = np.rint(self.to_coarse(uv)).astype(np.int64)
+        cw, ch = self.coarse_size
+        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
+        return coarse, seen, depth
+
     def coarse_grid(self) -> np.ndarray:
         """Full-resolution coordinates (N, 2) of every coarse pixel's centre, row by row."""
         cw, ch = self.coarse_size
@@ -1561,7 +1574,7 @@ def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], p
     # The top a view lost for the table's look has that look where the views that found it see it: a top of
     # another look (a print, a bottle's shoulder) the lost view would have told from the table.
     for j in found:
-        seen = cv2.bitwise_and(_projected_points(views[j], points[top], spacing, masks[j].shape), masks[j]) > 0
+        seen = cv2.bitwise_and(_projected_points(views[j], points[top], spacing), masks[j]) > 0
         if not seen.any() or not _of_the_table_s_look(views[j].coarse, brightness[j], seen, rounds[j]):
             return masks
     # The top's edges are where the views' rims meet its height (the near edges of the views that lost it, the
@@ -1570,7 +1583,7 @@ def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], p
     top &= _within_the_rims(views, masks, plane, height, points)
     added = list(masks)
     for i in lost:
-        section = _projected_points(views[i], points[top], spacing, masks[i].shape)
+        section = _projected_points(views[i], points[top], spacing)
         beyond = cv2.bitwise_and(section, cv2.bitwise_not(masks[i]))
         # The rim and the height read off it are known to a coarse pixel or two: the section's near edge may
         # stop that short of the rim, and the gap between them is the top's too.
@@ -1608,7 +1621,7 @@ def _up_in_silhouette(view: _View, plane: np.ndarray, region: np.ndarray) -> np.
     """(2,) the unit direction in the coarse image in which the plane's normal points, at the table point
     under the centre of ``region`` (bool or 0/255, not empty)."""
     ys, xs = np.nonzero(region)
-    centre = np.array([[(xs.mean() + 0.5) * view.sx - 0.5, (ys.mean() + 0.5) * view.sy - 0.5]])
+    centre = view.from_coarse(np.array([xs.mean()]), np.array([ys.mean()]))
     ray = view.rays(centre)[0]
     normal = np.asarray(plane[:3], np.float64)
     height = float(normal @ view.camera.center + plane[3])
@@ -1653,10 +1666,7 @@ def _projected_into(view: _View, mask: np.ndarray, points: np.ndarray,
     nearest coarse pixels (column, row), (N,) bool whether the view sees them (in front of the camera, within
     the image), (N,) their depths, and (N,) bool whether they fall in ``mask``, ``unseen_hit`` for those it
     does not see (a silhouette's point must be seen; a hull is not carved by a view that does not see it)."""
-    uv, depth = view.project(points)
-    coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-    height, width = mask.shape
-    seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    coarse, seen, depth = view.coarse_pixels(points)
     hit = np.full(len(points), unseen_hit)
     hit[seen] = mask[coarse[seen, 1], coarse[seen, 0]] > 0
     return coarse, seen, depth, hit
@@ -1733,7 +1743,7 @@ def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane
     ys, xs = np.nonzero(_upper_rim(view, plane, masks[i]))
     if not len(xs):
         return float("nan")
-    uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
+    uv = view.from_coarse(xs, ys)
     heights = np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach)
     # Every height's points at once: the rays are traced once, each other view looked into once.
     points = _on_plane(view, plane, uv, heights).reshape(-1, 3)
@@ -1763,7 +1773,7 @@ def _within_the_rims(views: Sequence[_View], masks: Sequence[np.ndarray], plane:
     rims = []
     for view, mask in zip(views, masks):
         ys, xs = np.nonzero(_upper_rim(view, plane, mask))
-        uv = np.column_stack([(xs + 0.5) * view.sx - 0.5, (ys + 0.5) * view.sy - 0.5])
+        uv = view.from_coarse(xs, ys)
         rims.append(_on_plane(view, plane, uv, height) @ axes)
     outline = cv2.convexHull(np.concatenate(rims).astype(np.float32))
     return np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), False) >= 0 for x, y in points @ axes])
@@ -1780,13 +1790,11 @@ def _plane_samples(plane: np.ndarray, aim: np.ndarray, height: float, reach: flo
     return centre + u * across + v * along, _HEIGHT_STEP * reach
 
 
-def _projected_points(view: _View, points: np.ndarray, spacing: float, shape: tuple[int, ...]) -> np.ndarray:
+def _projected_points(view: _View, points: np.ndarray, spacing: float) -> np.ndarray:
     """(h, w) 0/255: the world ``points`` (N, 3), sampled ``spacing`` apart, projected into the view's coarse
     image and closed over the gaps between their pixels."""
-    uv, depth = view.project(points)
-    coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
-    height, width = shape[:2]
-    inside = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width) & (coarse[:, 1] < height)
+    coarse, inside, depth = view.coarse_pixels(points)
+    width, height = view.coarse_size
     drawn = np.zeros((height, width), np.uint8)
     drawn[coarse[inside, 1], coarse[inside, 0]] = 255
     if not inside.any():
@@ -2300,10 +2308,8 @@ def _foot_found(views: Sequence[_View], masks: list[np.ndarray], scores: Sequenc
         if score is None:
             continue
         view = views[i]
-        uv, depth = view.project(column)
-        coarse = np.rint(view.to_coarse(uv)).astype(np.int64)
+        coarse, seen, depth = view.coarse_pixels(column)
         cw, ch = view.coarse_size
-        seen = (depth > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < cw) & (coarse[:, 1] < ch)
         picture = np.zeros((ch, cw), np.uint8)
         picture[coarse[seen, 1], coarse[seen, 0]] = 255
         footprint = hulls.voxel * view.camera.focal_length / float(np.median(depth[seen])) / min(view.sx, view.sy) \
@@ -4316,10 +4322,10 @@ def _log_ratio_of(image: np.ndarray, empty: np.ndarray) -> np.ndarray:
     return np.log((image + _RATIO_OFFSET) / (empty + _RATIO_OFFSET)).astype(np.float32)
 
 
-def _change_noise(view: _View, change: np.ndarray) -> float:
-    """The noise of the view's ``change`` against the empty workspace (:func:`_log_ratio`'s magnitudes summed
-    over the channels, of the pictures before their rounding) on the table, as the coarse pictures rounded to
-    whole grey levels give it, unless their rounding made that estimate too high; then as ``change`` gives it.
+def _change_noise(view: _View, unrounded: float) -> float:
+    """The noise of the view's change against the empty workspace (:func:`_log_ratio`'s magnitudes summed
+    over the channels) on the table, as the coarse pictures rounded to whole grey levels give it, unless their
+    rounding made that estimate too high; then ``unrounded``, as the pictures before their rounding give it.
 
     Rounding moves each channel of either image by half a grey level at most, so the rounded change lies
     within a grey level's step of the unrounded one, and so would its noise. On a dark, flat table it does
@@ -4333,7 +4339,6 @@ def _change_noise(view: _View, change: np.ndarray) -> float:
     (:func:`_clearly_changed`)."""
     assert view.background is not None
     rounded = _noise_level(np.abs(_log_ratio_of(view.coarse, view.background)).sum(axis=2))
-    unrounded = _noise_level(change)
     # The empty workspace's grey levels are whole (unless the light was evened): the kernel's median counts them.
     table = np.array([median(np.ascontiguousarray(view.background[..., k]).ravel()) for k in range(3)],
                      view.background.dtype)
@@ -4399,9 +4404,10 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # A face as bright as the table changed its tint only (the other views judge whether the table
         # itself took that tint: the glow of a coloured object beside it).
         beside_the_change = np.maximum(textures[view.index], _tint_change(view))
-        score = np.maximum(change / max(_change_noise(view, change), _BACKGROUND_NOISE_FLOOR), beside_the_change)
+        unrounded = _noise_level(change)
+        score = np.maximum(change / max(_change_noise(view, unrounded), _BACKGROUND_NOISE_FLOOR), beside_the_change)
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-        clearly[view.index] = _clearly_changed(change, beside_the_change)
+        clearly[view.index] = _clearly_changed(change, unrounded, beside_the_change)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
@@ -4421,10 +4427,10 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     return _background_cut(views, aim, scores, standing, clearly)
 
 
-def _clearly_changed(change: np.ndarray, beside_the_change: np.ndarray) -> np.ndarray:
+def _clearly_changed(change: np.ndarray, unrounded: float, beside_the_change: np.ndarray) -> np.ndarray:
     """(h, w) 0/255: where a view changed against the empty workspace beyond its noise as the pictures before
-    their rounding give it (``change``, :func:`_background_cuts`'), or where its grain or tint did
-    (``beside_the_change``, in units of their noise).
+    their rounding give it (``change``, :func:`_background_cuts`', and its noise ``unrounded``,
+    :func:`_noise_level`), or where its grain or tint did (``beside_the_change``, in units of their noise).
 
     What changed at all is judged against :func:`_change_noise`, which on a flat, dark table reads the rounded
     pictures' steps and comes out 0 (over half the pixels unchanged): the floor then lies well under the
@@ -4434,7 +4440,7 @@ def _clearly_changed(change: np.ndarray, beside_the_change: np.ndarray) -> np.nd
     joined the object within its convex outline and grew it over the table (34/rubber-mat-tin-tin: 0.490,
     0.289, 0.896). Read before the rounding, the noise does not collapse (0.13 there, over the far table's
     99th percentile, 0.11); a piece the table's noise could have made holds no pixel beyond it."""
-    clear = np.maximum(change / max(_noise_level(change), _BACKGROUND_NOISE_FLOOR), beside_the_change) > 2.5
+    clear = np.maximum(change / max(unrounded, _BACKGROUND_NOISE_FLOOR), beside_the_change) > 2.5
     return np.where(clear, 255, 0).astype(np.uint8)
 
 
