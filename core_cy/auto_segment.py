@@ -1775,8 +1775,20 @@ def _within_the_rims(views: Sequence[_View], masks: Sequence[np.ndarray], plane:
         ys, xs = np.nonzero(_upper_rim(view, plane, mask))
         uv = view.from_coarse(xs, ys)
         rims.append(_on_plane(view, plane, uv, height) @ axes)
-    outline = cv2.convexHull(np.concatenate(rims).astype(np.float32))
-    return np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), False) >= 0 for x, y in points @ axes])
+    outline = cv2.convexHull(np.concatenate(rims).astype(np.float32))[:, 0].astype(np.float64)
+    return _in_convex(outline, points @ axes)
+
+
+def _in_convex(outline: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether each of ``points`` (N, 2) lies within or on the convex polygon ``outline`` (M, 2),
+    its corners in order either way round: on the inner side of every edge, as all the edges turn."""
+    left = np.ones(len(points), bool)
+    right = np.ones(len(points), bool)
+    for corner, edge in zip(outline, np.roll(outline, -1, axis=0) - outline):
+        turn = edge[0] * (points[:, 1] - corner[1]) - edge[1] * (points[:, 0] - corner[0])
+        left &= turn >= 0
+        right &= turn <= 0
+    return left | right
 
 
 def _plane_samples(plane: np.ndarray, aim: np.ndarray, height: float, reach: float) -> tuple[np.ndarray, float]:
