@@ -2417,10 +2417,23 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
 
 
 def _parallax_score(views: Sequence[_View], masks: Sequence[np.ndarray], i: int, plane: np.ndarray) -> np.ndarray:
-    """View ``i``'s :func:`_colour_parallax` against the other views, their silhouettes ``masks`` hiding the
-    table behind them, with :data:`_HIDDEN` where no other view sees the table point."""
+    """View ``i``'s :func:`_colour_parallax` against the other views, or its :func:`_tint_parallax` where that
+    says more, their silhouettes ``masks`` hiding the table behind them, with :data:`_HIDDEN` where no other
+    view sees the table point."""
     others = [view for view in views if view is not views[i]]
-    parallax = _colour_parallax(views[i], others, plane, [masks[view.index] for view in others])
+    hiding = [masks[view.index] for view in others]
+    parallax = _colour_parallax(views[i], others, plane, hiding)
+    # The tint through the plane too, as the first cut without an empty workspace counts it: a dark can's top
+    # of its mat's brightness but not its tint changes too little against the empty workspace to count as
+    # changed there, nor, a little darker than it, as a tint no shadow's (_tint_change); the table point
+    # behind it, seen from the other views, has the mat's tint.
+    tint_score = _tint_parallax(views[i], others, plane, hiding)
+    # JPEG keeps the colour at half the resolution, so an object's tint runs onto the table beside its outline
+    # (up to half a colour block), which the other views see clean at that table point: the tint says nothing
+    # there (a printed ellipsoid's or a tin's colour beside it on a dark mat).
+    bleed = _dilated(masks[i], int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / views[i].scale))) > 0
+    tint_score[bleed & (masks[i] == 0)] = 0.0
+    parallax = np.where(np.isnan(parallax), parallax, np.fmax(parallax, tint_score))
     return np.where(np.isnan(parallax), _HIDDEN, parallax)
 
 
@@ -3705,9 +3718,8 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         # of the colour difference. Measured apart, against its own noise, the tint stands out. Only on the
         # second look: on the first, the other views' objects are known only in part, and the table beside
         # this object's foot, which they see behind their object, takes that object's tint.
-        tint = _parallax_evidence(view, [v for v in views if v is not view], plane,
-                                  [standing[v.index] for v in views if v is not view], _chroma_difference)
-        tint_score = _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
+        tint_score = _tint_parallax(view, [v for v in views if v is not view], plane,
+                                    [standing[v.index] for v in views if v is not view])
         score = np.where(np.isnan(score), score, np.fmax(score, tint_score))
     texture_score = None
     if plane is not None and view.background is None:
@@ -3822,6 +3834,16 @@ def _with_faces_of_grain(view: _View, cut: np.ndarray, region: np.ndarray, score
 _TINT_NOISE_FLOOR = 1.0
 #: The side of JPEG's colour blocks, full-resolution px (8 samples of colour at half the resolution).
 _JPEG_COLOUR_BLOCK = 16
+
+
+def _tint_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
+                   hiding: Sequence[np.ndarray | None]) -> np.ndarray:
+    """How far each coarse pixel's tint differs from the other views' at its table point through the plane
+    (:func:`_parallax_evidence`, their silhouettes ``hiding`` the table behind them), in units of its noise,
+    where it stands out over a JPEG colour block (:func:`_over_a_block`), 0 elsewhere and where no other view
+    sees the table point."""
+    tint = _parallax_evidence(view, others, plane, hiding, _chroma_difference)
+    return _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
 
 
 def _over_a_block(view: _View, tint_score: np.ndarray) -> np.ndarray:
@@ -4502,10 +4524,7 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
             # the table's glow beside a coloured object, and a shadow under a coloured lamp, are the same
             # from every view; a face as bright as the table is not. Once the objects in the other views
             # are known: before, the table beside this object's foot takes their object's tint.
-            tint = _parallax_evidence(view, others, plane, [occluders[v.index] for v in others],
-                                      _chroma_difference)
-            score = np.maximum(score, _over_a_block(view, np.nan_to_num(
-                tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))))
+            score = np.maximum(score, _tint_parallax(view, others, plane, [occluders[v.index] for v in others]))
         if colour:
             assert occluders is not None
             # A dark face (a box's side turned from the lamp, a can's lower body) changes against the empty
