@@ -2399,7 +2399,7 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # any number of views (_faces_beyond_outline says why).
             parallax = _parallax_score(views, masks, i, plane)
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, parallax,
-                                              views[i].shadow_look)
+                                              views[i].shadow_look, plane=plane)
             looked[i] = _faces_standing_out(views[i], looked[i], parallax, hull, seen_alike)
     return looked
 
@@ -2896,18 +2896,17 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 if view.background is None:
                     piece = piece & ~ask.confirmed_shadow(piece, _BAY * area_found)
                 grown[piece] = 255
-            elif (view.background is None and ask.lit_as_the_table(piece)
+            elif (ask.lit_as_the_table(piece)
                   and ask.seen_alike_over(piece, _ALL_BUT_RIM) and ask.on_a_side(piece)):
                 # A top of the table's colour and light (a dark can's on its dark mat) looks as the table point
                 # behind it does, so its parallax says nothing either way; but the other views see it alike,
                 # over all of it but its rim, where their hull holds it. The shadow beside the foot is seen
                 # alike too where the object behind it is as dark (the can's side), but it is darker than the
-                # lit table, which a face turned up to the lamp is not. From the images alone only: with the
-                # empty workspace, pieces so taken lost more than they gained on the printed set (nine views
-                # down by over 0.02, one up), and the empty workspace's own cues decide there. The top sits
-                # on the object's side, darker than a face turned up; a stretch of table lit alike beyond a
-                # box's own top does not (oak behind an oak-coloured box, which the others see alike because
-                # the box behind it has the oak's colour).
+                # lit table, which a face turned up to the lamp is not. The top sits on the object's side,
+                # darker than a face turned up; a stretch of table lit alike beyond a box's own top does not
+                # (oak behind an oak-coloured box, which the others see alike because the box behind it has
+                # the oak's colour). With the empty workspace too: such a top changes it by no more than the
+                # table's noise (a white box's top on white laminate), so its cues say nothing there either.
                 grown[piece] = 255
             else:
                 # The cut may give a face and the table beside it one piece (a dark can's side in shade and
