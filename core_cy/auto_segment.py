@@ -1307,6 +1307,13 @@ def _excess_on_plane(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> b
 _ON_PLANE = 0.95
 
 
+def _excess_surely_standing_out(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> bool:
+    """Whether over half of a silhouette's pixels outside a hull stand out by the view's own evidence beyond
+    :data:`_SURE` (in units of its noise): far beyond what a tint or the noise makes on the table."""
+    outside = (mask > 0) & (hull == 0)
+    return bool(outside.any() and 2 * np.count_nonzero(score[outside] > _SURE) > np.count_nonzero(outside))
+
+
 def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
     """The share of a silhouette outside a hull, in units of :data:`_DISAGREEMENT` (above 1: too much)."""
     area = max(cv2.countNonZero(mask), 1)
@@ -1326,7 +1333,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     own view's evidence (:func:`_excess_on_plane`): with three views, leaving any one out clears the
     others' excess, and the view reaching out is the one to blame;
     failing that, the view that reaches out most is cut again with what lies outside marked table (a
-    view seeded by its own evidence only when no other view reaches out);
+    view seeded by its own evidence only when no other view reaches out, and what reaches out does not
+    stand out surely by that evidence: :func:`_excess_surely_standing_out`);
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
     others' hull is cut again within it.
     """
@@ -1376,9 +1384,15 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
         # all see empty space where it sees more (a tint that JPEG put on the table in that view alone). Nor does
         # a view know better whose silhouette lies mostly beyond the others' hull where they, left without it,
-        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too.
+        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too. But a view
+        # alone in its excess that stands out there surely by its own evidence (a box's side against the empty
+        # workspace) is not told by a tint: there the others missed what it sees (a box of the table's colour,
+        # whose top two views left out), and it keeps its silhouette.
+        sure = {i for i, score in enumerate(scores) if score is not None and excess[i] > 1.0
+                and _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), score)}
         candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
-            scores[i] is None or _alone_in_excess(i, excess) or _mostly_beyond(i, masks, hulls, excess))]
+            scores[i] is None or (_alone_in_excess(i, excess) and i not in sure)
+            or _mostly_beyond(i, masks, hulls, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
