@@ -1307,6 +1307,13 @@ def _excess_on_plane(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> b
 _ON_PLANE = 0.95
 
 
+def _excess_surely_standing_out(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> bool:
+    """Whether over half of a silhouette's pixels outside a hull stand out by the view's own evidence beyond
+    :data:`_SURE` (in units of its noise): far beyond what a tint or the noise makes on the table."""
+    outside = (mask > 0) & (hull == 0)
+    return bool(outside.any() and 2 * np.count_nonzero(score[outside] > _SURE) > np.count_nonzero(outside))
+
+
 def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
     """The share of a silhouette outside a hull, in units of :data:`_DISAGREEMENT` (above 1: too much)."""
     area = max(cv2.countNonZero(mask), 1)
@@ -1326,7 +1333,8 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
     own view's evidence (:func:`_excess_on_plane`): with three views, leaving any one out clears the
     others' excess, and the view reaching out is the one to blame;
     failing that, the view that reaches out most is cut again with what lies outside marked table (a
-    view seeded by its own evidence only when no other view reaches out);
+    view seeded by its own evidence only when no other view reaches out, and what reaches out does not
+    stand out surely by that evidence: :func:`_excess_surely_standing_out`);
     when all agree, a view seeded by the aim alone that covers under :data:`_TOO_SMALL` of the
     others' hull is cut again within it.
     """
@@ -1376,9 +1384,15 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
         # all see empty space where it sees more (a tint that JPEG put on the table in that view alone). Nor does
         # a view know better whose silhouette lies mostly beyond the others' hull where they, left without it,
-        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too.
+        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too. But a view
+        # alone in its excess that stands out there surely by its own evidence (a box's side against the empty
+        # workspace) is not told by a tint: there the others missed what it sees (a box of the table's colour,
+        # whose top two views left out), and it keeps its silhouette.
+        sure = {i for i, score in enumerate(scores) if score is not None and excess[i] > 1.0
+                and _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), score)}
         candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
-            scores[i] is None or _alone_in_excess(i, excess) or _mostly_beyond(i, masks, hulls, excess))]
+            scores[i] is None or (_alone_in_excess(i, excess) and i not in sure)
+            or _mostly_beyond(i, masks, hulls, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -2411,7 +2425,7 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             # any number of views (_faces_beyond_outline says why).
             parallax = _parallax_score(views, masks, i, plane)
             looked[i] = _faces_beyond_outline(views[i], looked[i], score, hull, seen_alike, parallax,
-                                              views[i].shadow_look)
+                                              views[i].shadow_look, plane=plane)
             looked[i] = _faces_standing_out(views[i], looked[i], parallax, hull, seen_alike)
     return looked
 
@@ -2921,18 +2935,17 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
                 if view.background is None:
                     piece = piece & ~ask.confirmed_shadow(piece, _BAY * area_found)
                 grown[piece] = 255
-            elif (view.background is None and ask.lit_as_the_table(piece)
+            elif (ask.lit_as_the_table(piece)
                   and ask.seen_alike_over(piece, _ALL_BUT_RIM) and ask.on_a_side(piece)):
                 # A top of the table's colour and light (a dark can's on its dark mat) looks as the table point
                 # behind it does, so its parallax says nothing either way; but the other views see it alike,
                 # over all of it but its rim, where their hull holds it. The shadow beside the foot is seen
                 # alike too where the object behind it is as dark (the can's side), but it is darker than the
-                # lit table, which a face turned up to the lamp is not. From the images alone only: with the
-                # empty workspace, pieces so taken lost more than they gained on the printed set (nine views
-                # down by over 0.02, one up), and the empty workspace's own cues decide there. The top sits
-                # on the object's side, darker than a face turned up; a stretch of table lit alike beyond a
-                # box's own top does not (oak behind an oak-coloured box, which the others see alike because
-                # the box behind it has the oak's colour).
+                # lit table, which a face turned up to the lamp is not. The top sits on the object's side,
+                # darker than a face turned up; a stretch of table lit alike beyond a box's own top does not
+                # (oak behind an oak-coloured box, which the others see alike because the box behind it has
+                # the oak's colour). With the empty workspace too: such a top changes it by no more than the
+                # table's noise (a white box's top on white laminate), so its cues say nothing there either.
                 grown[piece] = 255
             else:
                 # The cut may give a face and the table beside it one piece (a dark can's side in shade and
