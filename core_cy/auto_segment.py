@@ -1295,11 +1295,16 @@ _LIGHT_FIELD_BEYOND = 0.2
 _LIGHT_FIELD_AT_MOST = 1.0
 
 
+def _excess_evidence(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """The view's own evidence ``score`` at a silhouette's pixels outside a hull, (N,)."""
+    return score[(mask > 0) & (hull == 0)]
+
+
 def _excess_on_plane(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> bool:
     """Whether at least :data:`_ON_PLANE` of a silhouette's pixels outside a hull are the plane by the view's
     own evidence (a score under 1: they do not stand out from the table, nor is their table point hidden)."""
-    outside = (mask > 0) & (hull == 0)
-    return bool(outside.any()) and float(np.mean(score[outside] < 1.0)) >= _ON_PLANE
+    evidence = _excess_evidence(mask, hull, score)
+    return bool(evidence.size) and float(np.mean(evidence < 1.0)) >= _ON_PLANE
 
 
 #: A view's excess is taken to be on the plane when this share of it is by the view's own evidence: a
@@ -1310,8 +1315,8 @@ _ON_PLANE = 0.95
 def _excess_surely_standing_out(mask: np.ndarray, hull: np.ndarray, score: np.ndarray) -> bool:
     """Whether over half of a silhouette's pixels outside a hull stand out by the view's own evidence beyond
     :data:`_SURE` (in units of its noise): far beyond what a tint or the noise makes on the table."""
-    outside = (mask > 0) & (hull == 0)
-    return bool(outside.any() and 2 * np.count_nonzero(score[outside] > _SURE) > np.count_nonzero(outside))
+    evidence = _excess_evidence(mask, hull, score)
+    return bool(evidence.size and 2 * np.count_nonzero(evidence > _SURE) > evidence.size)
 
 
 def _excess(mask: np.ndarray, hull: np.ndarray) -> float:
@@ -1388,10 +1393,10 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # alone in its excess that stands out there surely by its own evidence (a box's side against the empty
         # workspace) is not told by a tint: there the others missed what it sees (a box of the table's colour,
         # whose top two views left out), and it keeps its silhouette.
-        sure = {i for i, score in enumerate(scores) if score is not None and excess[i] > 1.0
-                and _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), score)}
         candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
-            scores[i] is None or (_alone_in_excess(i, excess) and i not in sure)
+            (evidence := scores[i]) is None
+            or (_alone_in_excess(i, excess)
+                and not _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), evidence))
             or _mostly_beyond(i, masks, hulls, excess))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
@@ -2445,7 +2450,7 @@ def _parallax_score(views: Sequence[_View], masks: Sequence[np.ndarray], i: int,
     # JPEG keeps the colour at half the resolution, so an object's tint runs onto the table beside its outline
     # (up to half a colour block), which the other views see clean at that table point: the tint says nothing
     # there (a printed ellipsoid's or a tin's colour beside it on a dark mat).
-    bleed = _dilated(masks[i], int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / views[i].scale))) > 0
+    bleed = _dilated(masks[i], _half_a_colour_block(views[i])) > 0
     tint_score[bleed & (masks[i] == 0)] = 0.0
     parallax = np.where(np.isnan(parallax), parallax, np.fmax(parallax, tint_score))
     return np.where(np.isnan(parallax), _HIDDEN, parallax)
@@ -3859,12 +3864,17 @@ def _tint_parallax(view: _View, others: Sequence[_View], plane: np.ndarray,
     return _over_a_block(view, tint / max(_noise_level(tint), _TINT_NOISE_FLOOR))
 
 
+def _half_a_colour_block(view: _View) -> int:
+    """Half a JPEG colour block, in the view's coarse pixels (rounded up): how far a colour runs in JPEG."""
+    return int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale))
+
+
 def _over_a_block(view: _View, tint_score: np.ndarray) -> np.ndarray:
     """A tint's score (in units of its noise) where it stands out over a JPEG colour block at least, 0
     elsewhere. JPEG keeps the colour in blocks, at half the resolution: a coloured object's tint runs onto
     the table beside it, and a block's tint goes astray here and there. A tint that stands out over less
     than a block is JPEG's, not a face's."""
-    block = 2 * int(np.ceil(0.5 * _JPEG_COLOUR_BLOCK / view.scale)) + 1
+    block = 2 * _half_a_colour_block(view) + 1
     wide = cv2.morphologyEx(np.where(tint_score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN,
                             cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (block, block)))
     return np.where(wide > 0, tint_score, 0.0).astype(np.float32)
