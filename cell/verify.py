@@ -75,7 +75,7 @@ from robocell.core_cy.auto_segment import auto_silhouettes
 from robocell.core_cy.camera import Camera, undistort_mask
 from robocell.core_cy.errors import CoreError
 from robocell.core_cy.gripper import Gripper
-from robocell.core_cy.model_check import grasp_problem, model_iou
+from robocell.core_cy.model_check import MIN_VIEW_IOU, grasp_problem, model_iou
 from robocell.core_cy.segment import Segmentation, segment
 from robocell.core_cy.superquadric import Superquadric as CoreSuperquadric
 from robocell.wire.segmentation import core_segmentation
@@ -87,9 +87,6 @@ from .job import Picture
 __all__ = ["Verdict", "Evidence", "MIN_VIEW_IOU", "REDUCTION", "job_evidence", "check_answer", "verify_answer",
            "verify_reconstruction", "check_model", "check_grasp", "reduced_silhouettes", "reduced_camera", "model_iou"]
 
-#: The least intersection over union of the model's projection and the daemon's own silhouette,
-#: in every view, at a quarter scale.
-MIN_VIEW_IOU = 0.3
 #: The pictures are decoded at 1/REDUCTION of their size.
 REDUCTION = 4
 

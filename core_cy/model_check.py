@@ -25,7 +25,12 @@ from ._grasp_cy import union_inside as _union_inside
 from .gripper import Gripper
 from .superquadric import Superquadric, surface_points
 
-__all__ = ["model_iou", "grasp_problem", "MODEL_SLACK"]
+__all__ = ["model_iou", "grasp_problem", "MODEL_SLACK", "MIN_VIEW_IOU"]
+
+#: The least intersection over union of a model's projection and a view's silhouette for the model to be of
+#: what that view saw: the worst view of a correct model scores about 0.5 (an L of two boxes, a plate), a
+#: model of something else under 0.2 (measured in ``robocell.cell.verify``, which holds answers to it).
+MIN_VIEW_IOU = 0.3
 
 _SUBPIXEL_BITS = 4
 # How far the grasp's claimed width may fall short of the model's width between the pads: a share of

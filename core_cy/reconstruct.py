@@ -15,8 +15,9 @@ import numpy as np
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
 from .edges import about_samples, edge_samples, samples_near
-from .errors import FitError, GeometryError, ImageError
+from .errors import FitError, GeometryError, ImageError, SilhouetteError
 from .images import checked_size
+from .model_check import MIN_VIEW_IOU
 from .auto_segment import auto_silhouettes, unsure_pixels
 from .parts import MAX_PARTS, explains_more, fit_parts, union_ious
 from .quality import outline_distances, radial_residual
@@ -432,6 +433,14 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
             if len(parts) == 1:
                 superquadric = parts[0]
         lap("fit")
+    if found and min(ious) < MIN_VIEW_IOU:
+        # The silhouettes auto found contradict each other (two views that took in a stretch of table agree on a
+        # slab over it, against the third): no model agrees with them all, and the one fitted is of none of them.
+        # An error, not a model of the table; which view is wrong the agreements alone do not say.
+        raise SilhouetteError("the views' silhouettes contradict each other: the model agrees with them only "
+                              + ", ".join(f"{iou:.2f}" for iou in ious) + f" (at least {MIN_VIEW_IOU} each is "
+                              "needed; a stretch of table or shadow taken for the object?): give the views "
+                              "pictures of the empty workspace, or masks")
     residual = radial_residual(superquadric, points)
     timings["total"] = (clock() - start) * 1e3
     return Reconstruction(superquadric, centre, radius, points, silhouettes, ious, residual, timings, parts,
