@@ -4300,15 +4300,19 @@ def _filled_region(binary: np.ndarray, view: _View, holding: np.ndarray | None =
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         raise SilhouetteError(_NOTHING, view=view.index)
-    fills = []
-    for contour in contours:
-        fill = np.zeros_like(binary)
-        cv2.drawContours(fill, [contour], -1, 255, thickness=cv2.FILLED)
-        fills.append(fill)
-    held = [0 if holding is None else cv2.countNonZero(cv2.bitwise_and(fill, holding)) for fill in fills]
-    if max(held) > 0:
-        return fills[int(np.argmax(held))]
-    return fills[max(range(len(contours)), key=lambda k: cv2.contourArea(contours[k]))]
+    if holding is not None:
+        best, most = None, 0
+        for contour in contours:
+            fill = np.zeros_like(binary)
+            cv2.drawContours(fill, [contour], -1, 255, thickness=cv2.FILLED)
+            held = cv2.countNonZero(cv2.bitwise_and(fill, holding))
+            if held > most:
+                best, most = fill, held
+        if best is not None:
+            return best
+    filled = np.zeros_like(binary)
+    cv2.drawContours(filled, [max(contours, key=cv2.contourArea)], -1, 255, thickness=cv2.FILLED)
+    return filled
 
 
 def _cut_again_around_aim(views: Sequence[_View], masks: Sequence[np.ndarray], index: int, hull: np.ndarray,

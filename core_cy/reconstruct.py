@@ -237,7 +237,10 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     Raises
     ------
     CoreError
-        A subclass naming the view and what is wrong with it.
+        A subclass naming the view and what is wrong with it; or, where the
+        silhouettes ``auto`` found contradict each other (the model agrees
+        with one of them under ``MIN_VIEW_IOU``), a SilhouetteError giving
+        every view's agreement.
     """
     views = list(views)
     if len(views) < 2:
@@ -435,7 +438,7 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         lap("fit")
     if found and min(ious) < MIN_VIEW_IOU:
         # The silhouettes auto found contradict each other (two views that took in a stretch of table agree on a
-        # slab over it, against the third): no model agrees with them all, and the one fitted is of none of them.
+        # slab over it, against the third): no model agrees with them all, and the fit is of none of them.
         # An error, not a model of the table; which view is wrong the agreements alone do not say.
         raise SilhouetteError("the views' silhouettes contradict each other: the model agrees with them only "
                               + ", ".join(f"{iou:.2f}" for iou in ious) + f" (at least {MIN_VIEW_IOU} each is "
