@@ -351,6 +351,30 @@ def test_a_worker_frozen_mid_job_loses_it_to_another_and_the_job_succeeds(tmp_pa
     _run(scenario())
 
 
+def test_a_wait_begun_while_the_client_s_link_is_down_waits_for_it_and_the_job(tmp_path):
+    """A program waits on a job just after the router restarted, before its own link is back: the wait asked
+    the job's status first, and that raised LinkDown (seen in CI: a job queued across a router restart). The
+    job goes on without the client; the wait goes on until the link is back, and returns the job's end."""
+    config = _config(tmp_path)
+
+    async def scenario() -> None:
+        network = MemoryNetwork()
+        workers = Workers(network, config)
+        await workers.reconstructor("r1")
+        async with daemon(network, config) as client:
+            status = await client.submit(ScanRequest(target=target_from_config(config.sim)))
+            client._transport.set_link(False)
+            waiting = asyncio.create_task(client.wait(status.job_id, timeout=30, poll_s=0.1))
+            await asyncio.sleep(0.5)
+            assert not waiting.done(), waiting.exception()
+            client._transport.set_link(True)
+            final = await waiting
+        await workers.close()
+        assert final.state is JobState.SUCCEEDED, final
+
+    _run(scenario())
+
+
 @pytest.mark.parametrize("end", ["cancelled"])
 def test_a_cancel_reaches_the_store_before_anyone_hears_of_it(tmp_path, end):
     """Whoever hears of an end and asks the store finds it there."""

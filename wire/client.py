@@ -260,8 +260,14 @@ class AsyncCellClient:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         try:
-            # Asked after subscribing: an end in between is not missed.
-            state = JobState.QUEUED if heard_from_start else (await self.status(job_id)).state
+            # Asked after subscribing: an end in between is not missed. With the router away (restarting), the
+            # job goes on without this client; the wait asks again, as it polls, once the link is back.
+            state = JobState.QUEUED
+            if not heard_from_start:
+                try:
+                    state = (await self.status(job_id)).state
+                except LinkDown:
+                    pass
             if state.finished:
                 return await self._ended(job_id, state, want_result, answer)
             while True:
