@@ -245,6 +245,14 @@ class AsyncCellClient:
         if not queues:
             del self._listeners[job_id]
 
+    async def _state_unless_away(self, job_id: str, known: JobState) -> JobState:
+        """The job's state as the daemon tells it; ``known`` while the link to the router is down (restarting):
+        the job goes on without this client, and a wait goes on and asks again once the link is back."""
+        try:
+            return (await self.status(job_id)).state
+        except LinkDown:
+            return known
+
     async def _wait_finished(self, job_id: str, *, timeout: float, on_event: Callable[[JobEvent], None] | None,
                              poll_s: float, heard_from_start: bool = False, want_result: bool = False,
                              answer: asyncio.Future[Reply] | None = None) -> JobStatus | ScanResult:
@@ -260,14 +268,8 @@ class AsyncCellClient:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         try:
-            # Asked after subscribing: an end in between is not missed. With the router away (restarting), the
-            # job goes on without this client; the wait asks again, as it polls, once the link is back.
-            state = JobState.QUEUED
-            if not heard_from_start:
-                try:
-                    state = (await self.status(job_id)).state
-                except LinkDown:
-                    pass
+            # Asked after subscribing: an end in between is not missed.
+            state = JobState.QUEUED if heard_from_start else await self._state_unless_away(job_id, JobState.QUEUED)
             if state.finished:
                 return await self._ended(job_id, state, want_result, answer)
             while True:
@@ -278,10 +280,7 @@ class AsyncCellClient:
                     async with asyncio.timeout(min(poll_s, remaining)):
                         event = await queue.get()
                 except TimeoutError:
-                    try:
-                        state = (await self.status(job_id)).state  # a lost event cannot make this wait for ever
-                    except LinkDown:
-                        pass  # the router is away: the job goes on, and so does the wait
+                    state = await self._state_unless_away(job_id, state)  # a lost event cannot make this wait for ever
                     if state.finished:
                         return await self._ended(job_id, state, want_result, answer)
                     continue
