@@ -23,7 +23,7 @@ from .parts import MAX_PARTS, explains_more, fit_parts, union_ious
 from .quality import outline_distances, radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import _NOISE_PX, fit_to_silhouettes
-from .sphere import enclosing_sphere, fibonacci_sphere
+from .sphere import CHECK_THE_POSES, enclosing_sphere, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric, resting_on, start_superquadrics, upright_box
 
 __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
@@ -240,7 +240,8 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         A subclass naming the view and what is wrong with it; or, where the
         silhouettes ``auto`` found contradict each other (the model agrees
         with one of them under ``MIN_VIEW_IOU``), a SilhouetteError giving
-        every view's agreement.
+        every view's agreement; where they put the object apart in one view,
+        a SilhouetteError naming it.
     """
     views = list(views)
     if len(views) < 2:
@@ -291,7 +292,17 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
                                       camera=view.camera, on_edge=index in found))
             lap("edges")
     cameras = [view.camera for view in views]
-    centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
+    try:
+        centre, radius = enclosing_sphere(silhouettes, cameras, margin=options.radius_margin, known_boxes=boxes)
+    except GeometryError as error:
+        if error.view not in found:
+            raise
+        # The silhouettes auto found put the object apart in this view: far likelier a view that missed it
+        # (of the table's own colour) than poses wrong by as much, which the plane's parallax would have shown.
+        reason = str(error).removeprefix(f"view {error.view}: ").replace(f"; {CHECK_THE_POSES}", "")
+        raise SilhouetteError(f"{reason}; the silhouette found in this view's image may have missed the object: "
+                              "give the views pictures of the empty workspace, or masks (or check the poses' "
+                              "direction and units)", view=error.view) from error
     plane = None if support_plane is None else check_support_plane(support_plane, centre, radius)
     if plane is not None:
         centre = lift_above_plane(centre, radius, plane)

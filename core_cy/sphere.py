@@ -15,7 +15,10 @@ import numpy as np
 from .camera import Camera  # noqa: F401  (the examples in the docstrings use it)
 from .errors import GeometryError
 
-__all__ = ["enclosing_sphere", "fibonacci_sphere"]
+__all__ = ["CHECK_THE_POSES", "enclosing_sphere", "fibonacci_sphere"]
+
+#: What the views' disagreement about where the object is asks of the user, where the silhouettes are theirs.
+CHECK_THE_POSES = "check the poses' direction (camera-to-world) and units"
 
 # Below this, the rays through the centroids are (nearly) parallel and their
 # closest point runs off along them.
@@ -82,7 +85,7 @@ def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25, known_boxes=
             raise GeometryError(
                 "the views disagree about where the object is: the centre seen by all views projects "
                 f"outside this view's silhouette ({centre_uv[0]:.0f}, {centre_uv[1]:.0f} px; silhouette "
-                f"x {x}-{x + w}, y {y}-{y + h}); check the poses' direction (camera-to-world) and units",
+                f"x {x}-{x + w}, y {y}-{y + h}); {CHECK_THE_POSES}",
                 view=view,
             )
         corners = np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], dtype=np.float64)
