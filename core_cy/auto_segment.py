@@ -1387,17 +1387,14 @@ def _agreed(views: Sequence[_View], masks: list[np.ndarray], scores: Sequence[np
         # it (the plane's parallax, the empty workspace) knows better than a hull that another view's miss
         # carved too small (on the benchmark's printed scenes every such cut lost), unless it is the only
         # one that reaches out: then two or more views, which agree with each other and with it elsewhere,
-        # all see empty space where it sees more (a tint that JPEG put on the table in that view alone). Nor does
-        # a view know better whose silhouette lies mostly beyond the others' hull where they, left without it,
-        # nearly agree (:func:`_mostly_beyond`), even where another view reaches out a little too. But a view
+        # all see empty space where it sees more (a tint that JPEG put on the table in that view alone). But a view
         # alone in its excess that stands out there surely by its own evidence (a box's side against the empty
         # workspace) is not told by a tint: there the others missed what it sees (a box of the table's colour,
         # whose top two views left out), and it keeps its silhouette.
         candidates = [i for i in everyone - done - refused if excess[i] > 1.0 and (
             (evidence := scores[i]) is None
             or (_alone_in_excess(i, excess)
-                and not _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), evidence))
-            or _mostly_beyond(i, masks, hulls, excess))]
+                and not _excess_surely_standing_out(masks[i], hulls.of(everyone - {i}), evidence)))]
         if not candidates:
             # All agree, but a view seeded by the aim alone may still hold only part of the object.
             small = {i: cv2.countNonZero(masks[i]) / max(cv2.countNonZero(hulls.of(everyone - {i})), 1)
@@ -2274,32 +2271,6 @@ _UNDER_OBJECT = 0.7
 def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
     """Whether view ``index`` is the only one of three or more that reaches out of the others' hull."""
     return len(excess) > 2 and all(share <= 1.0 for other, share in excess.items() if other != index)
-
-
-def _mostly_beyond(index: int, masks: Sequence[np.ndarray], hulls: _Hulls, excess: dict[int, float]) -> bool:
-    """Whether view ``index``'s silhouette lies over :data:`_MOSTLY_BEYOND` of it out of the other views' hull
-    (of three or more) while they, left without it, nearly agree: what reaches out of each one's hull of the
-    rest is under :data:`_NEARLY_AGREED` times :data:`_DISAGREEMENT` of it.
-
-    Two views' hull is looser than the object they found: for a view that reaches mostly beyond it to be
-    right, both others would have to have missed most of the object, and missed it alike. Such a view took in
-    a stretch of table: a band of lighter grain beside a box of the table's colour, four times the box
-    (52/oak-table-colour-box 2: 0.23, and the fit followed it into a slab a twentieth of a millimetre thin).
-    A view that missed part of the object makes another reach out of the hull a little too, so the first was
-    not alone in its excess; but leaving it out, not the view that reaches out a little, brings the others to
-    agree."""
-    if len(excess) < 3 or excess[index] * _DISAGREEMENT <= _MOSTLY_BEYOND:
-        return False
-    others = set(excess) - {index}
-    return all(_excess(masks[j], hulls.into(others - {j}, j)) < _NEARLY_AGREED for j in others)
-
-
-#: A view whose silhouette lies over this share of it out of the others' hull has taken in mostly table, if
-#: they nearly agree without it (:func:`_mostly_beyond`).
-_MOSTLY_BEYOND = 0.5
-#: Views nearly agree when what reaches out of each one's hull of the rest is under this many times
-#: :data:`_DISAGREEMENT` of it.
-_NEARLY_AGREED = 2.0
 
 
 def _floats(hulls: _Hulls) -> np.ndarray | None:
@@ -3807,10 +3778,8 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
     standing_out = cv2.bitwise_and(region, differs)
     if cv2.countNonZero(cv2.bitwise_and(cut, standing_out)) < _KEPT_BY_CUT * cv2.countNonZero(standing_out):
         # The colour models could not tell object from table (an object of the table's own colour and
-        # grain): the evidence alone draws the silhouette, its region that holds the most of what the cut
-        # kept, if the cut kept anything (a stretch of wooden table whose fine grain moires in a low view
-        # stands out by its grain beside a can, larger than it: the largest region, it replaced the can).
-        cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view, cut)
+        # grain): the evidence alone draws the silhouette.
+        cut = _filled_region(cv2.morphologyEx(region, cv2.MORPH_CLOSE, _CLOSING), view)
     if texture_score is not None:
         cut = _with_faces_of_grain(view, cut, region, score, np.nan_to_num(texture_score))
     return cut, score
@@ -4294,22 +4263,11 @@ def _run_grabcut(view: _View, mask: np.ndarray, box: tuple[int, int, int, int],
     return _filled_region(result, view)
 
 
-def _filled_region(binary: np.ndarray, view: _View, holding: np.ndarray | None = None) -> np.ndarray:
-    """The largest region of a coarse binary image, holes filled; or, given ``holding`` (0/255) that overlaps
-    it, the region that holds the most of ``holding``."""
+def _filled_region(binary: np.ndarray, view: _View) -> np.ndarray:
+    """The largest region of a coarse binary image, holes filled."""
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         raise SilhouetteError(_NOTHING, view=view.index)
-    if holding is not None:
-        best, most = None, 0
-        for contour in contours:
-            fill = np.zeros_like(binary)
-            cv2.drawContours(fill, [contour], -1, 255, thickness=cv2.FILLED)
-            held = cv2.countNonZero(cv2.bitwise_and(fill, holding))
-            if held > most:
-                best, most = fill, held
-        if best is not None:
-            return best
     filled = np.zeros_like(binary)
     cv2.drawContours(filled, [max(contours, key=cv2.contourArea)], -1, 255, thickness=cv2.FILLED)
     return filled

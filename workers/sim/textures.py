@@ -96,6 +96,25 @@ def _line_coverage(coord: F32, period: float, width: float, footprint: F32) -> F
 
 # --- tables ------------------------------------------------------------------------------------
 
+# The oak's latewood across one growth ring (its phase in [0, 1)): none, rising, dark, fading into the
+# next ring's earlywood. Its integral over the ring, tabulated finely, averages it over any span.
+_RING_GRID = np.linspace(0.0, 1.0, 4097)
+_LATEWOOD = np.interp(_RING_GRID, [0.0, 0.55, 0.75, 0.88, 1.0], [0.0, 0.0, 1.0, 1.0, 0.0])
+_LATEWOOD_INTEGRAL = np.concatenate([[0.0], np.cumsum((_LATEWOOD[1:] + _LATEWOOD[:-1]) / 2 * np.diff(_RING_GRID))])
+
+
+def _latewood_over(phase: F32, span: F32) -> F32:
+    """The latewood's share averaged over ``span`` rings centred on ``phase`` (in rings): an exact box
+    filter, so a pixel that spans several rings reads their mean instead of whichever it happens to hit."""
+    def integral(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        whole = np.floor(x)
+        return whole * _LATEWOOD_INTEGRAL[-1] + np.interp(x - whole, _RING_GRID, _LATEWOOD_INTEGRAL)
+
+    x = phase.astype(np.float64)
+    half = np.maximum(span.astype(np.float64), 1e-3) / 2  # a thousandth of a ring: a point sample
+    return ((integral(x + half) - integral(x - half)) / (2 * half)).astype(np.float32)
+
+
 def table_pattern(kind: str, base_bgr: ArrayLike, xy: F32, footprint: F32, grain_angle: float,
                   phase: float) -> F32:
     """BGR albedo (N, 3) in the 0-255 scale of ``base_bgr`` at table points ``xy`` (N, 2), metres.
@@ -125,8 +144,12 @@ def table_pattern(kind: str, base_bgr: ArrayLike, xy: F32, footprint: F32, grain
         radius = np.sqrt((in_board - pith) ** 2 + depth**2)
         spacing = np.float32(0.0035) + np.float32(0.002) * _hash(ib, zero + 5, seed)
         phase = radius / spacing + 0.6 * fbm(radius / np.float32(0.012), board * 3.1, seed + 9, 2)
-        f = phase % 1.0
-        late = np.clip((f - 0.55) / 0.2, 0, 1) * np.clip((1.0 - f) / 0.12, 0, 1)
+        # A pixel spans footprint * |grad radius| / spacing rings; the latewood is averaged over that span,
+        # as a camera's pixel averages the light that falls on it, so that fine rings in a view low over
+        # the table grow even instead of aliasing into moire bands. The radius grows across the board
+        # (its growth along the board, with the cut's depth, is slow).
+        rings_spanned = footprint * np.abs(in_board - pith) / np.maximum(radius, np.float32(1e-6)) / spacing
+        late = _latewood_over(phase, rings_spanned)
         pores = np.clip((value_noise(along / np.float32(0.004), across / np.float32(0.0005), seed + 5) - 0.75) * 4,
                         0, 1)
         tone = 0.9 + 0.16 * _hash(ib, zero + 7, seed) + 0.05 * fbm(along / np.float32(0.3), across / np.float32(0.1),
