@@ -198,31 +198,37 @@ def test_a_thin_strip_of_foot_shadow_that_the_views_contradict_does_not_pull_the
     assert _judged_from_images(printed_scene, 16, "laminate-white-box") > 0.945
 
 
+def _images_alone(printed_scene, seed: int, name: str):
+    """A printed scene's bundle, its views from their images alone (no empty workspace), and its true
+    silhouettes (0/255), one a view."""
+    _, directory = printed_scene(seed, name)
+    bundle = load_bundle(directory)
+    views = [dataclasses.replace(view, background=None) for view in bundle.views]
+    truths = [cv2.imread(str(directory / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(len(views))]
+    return bundle, views, truths
+
+
+def _auto_finds(monkeypatch, silhouettes) -> None:
+    """Within ``reconstruct``, auto finds ``silhouettes`` (0/255, one a view) whatever the images show."""
+    import robocell.core_cy.reconstruct as reconstruct_module
+    from robocell.core_cy.segment import mask_with_outline
+
+    monkeypatch.setattr(reconstruct_module, "auto_silhouettes", lambda images, cameras, **_: [
+        mask_with_outline(mask, view=index) for index, mask in enumerate(silhouettes)])
+
+
 def test_silhouettes_that_contradict_each_other_are_an_error_not_a_model_of_the_table(printed_scene, monkeypatch):
     """Two views that took in a stretch of table beside the object agree with each other on a slab over it,
     and against the third view, which found the object: a model fitted to the three agrees with none of them
     (a sheet 0.37 m long and a hundredth of a millimetre thick, 0.15 / 0.42 / 0.50 of its silhouettes, on a
     scene where auto did just that). It is an error saying so, not a model."""
-    import robocell.core_cy.reconstruct as reconstruct_module
-    from robocell.core_cy.segment import mask_with_outline
-
-    _, directory = printed_scene(3, "oak-mustard-bottle")
-    bundle = load_bundle(directory)
-    views = [dataclasses.replace(view, background=None) for view in bundle.views]
-    truths = [cv2.imread(str(directory / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(len(views))]
-
-    def two_views_take_the_table(images, cameras, **_):
-        found = []
-        for index, truth in enumerate(truths):
-            mask = truth.copy()
-            if index > 0:  # the table from the object's foot down to the image's bottom, the object within it
-                ys, _ = np.nonzero(truth)
-                mask[int(ys.max()) - 5:, :] = 255
-                mask[int(ys.min()):, int(0.2 * mask.shape[1]):int(0.8 * mask.shape[1])] = 255
-            found.append(mask_with_outline(mask, view=index))
-        return found
-
-    monkeypatch.setattr(reconstruct_module, "auto_silhouettes", two_views_take_the_table)
+    bundle, views, truths = _images_alone(printed_scene, 3, "oak-mustard-bottle")
+    silhouettes = [truth.copy() for truth in truths]
+    for mask in silhouettes[1:]:  # the table from the object's foot down to the image's bottom, the object within it
+        ys, _ = np.nonzero(mask)
+        mask[int(ys.max()) - 5:, :] = 255
+        mask[int(ys.min()):, int(0.2 * mask.shape[1]):int(0.8 * mask.shape[1])] = 255
+    _auto_finds(monkeypatch, silhouettes)
     with pytest.raises(SilhouetteError, match=r"^the views' silhouettes contradict each other: the model agrees "
                                               r"with them only [0-9.]+, [0-9.]+, [0-9.]+ \(at least 0.3"):
         reconstruct(views, segmentation=bundle.segmentation, support_plane=bundle.support_plane)
@@ -237,19 +243,12 @@ def test_a_silhouette_found_apart_from_the_others_is_an_error_naming_its_view_no
     table's colour it could not tell): the views disagree about where the object is. The poses are right;
     the error names the view whose silhouette was found apart and says what to give, where it blamed the
     poses. The same silhouettes given as masks are the user's own: the poses are what to check."""
-    import robocell.core_cy.reconstruct as reconstruct_module
-    from robocell.core_cy.segment import mask_with_outline
-
-    _, directory = printed_scene(3, "oak-mustard-bottle")
-    bundle = load_bundle(directory)
-    views = [dataclasses.replace(view, background=None) for view in bundle.views]
-    truths = [cv2.imread(str(directory / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(len(views))]
+    bundle, views, truths = _images_alone(printed_scene, 3, "oak-mustard-bottle")
     beside = np.zeros_like(truths[1])
     ys, xs = np.nonzero(truths[1])
     beside[int(ys.max()) + 40:int(ys.max()) + 70, int(xs.max()) + 40:int(xs.max()) + 80] = 255  # table only
     silhouettes = [truths[0], beside, *truths[2:]]
-    monkeypatch.setattr(reconstruct_module, "auto_silhouettes", lambda images, cameras, **_: [
-        mask_with_outline(mask, view=index) for index, mask in enumerate(silhouettes)])
+    _auto_finds(monkeypatch, silhouettes)
     with pytest.raises(SilhouetteError, match=r"^view 1: the views disagree about where the object is: .*silhouette"
                                               r" found in this view's image may have missed the object: give the "
                                               r"views pictures of the empty workspace, or masks"):
