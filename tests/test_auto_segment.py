@@ -335,13 +335,13 @@ def test_a_top_of_the_table_s_colour_on_a_side_is_kept_with_the_empty_workspace_
 
 
 def test_a_view_that_alone_sees_a_box_of_the_table_s_colour_surely_is_not_cut_back_to_the_others(printed_scene):
-    """A box of the oak table's colour, with the empty workspace: two views miss much of it (0.55 and 0.62
-    at first), and the third, which found it (0.96 at first), alone reaches
-    out of the hull the two carve. It was cut back to that hull (0.82 at the end). What reaches out changed
-    against its empty workspace beyond any tint or noise over most of it: the others missed it, and the view
+    """A tall white-and-blue box on white laminate, with the empty workspace: one view misses part of it (0.76
+    at first), and another, which found it (0.93 at first), alone reaches out of the hull the two others
+    carve. It was cut back to that hull (0.877 at the end). What reaches out changed against its empty
+    workspace beyond any tint or noise over most of it (0.76 of it): the others missed it, and the view
     keeps its silhouette."""
-    ious = _printed_scene_ious(printed_scene, 57, "oak-table-colour-box", backgrounds=True)
-    assert ious[1] > 0.93, ious
+    ious = _printed_scene_ious(printed_scene, 30, "laminate-sugar-box-tall-box", backgrounds=True)
+    assert ious[1] > 0.91, ious
 
 
 def test_hidden_table_alone_near_the_aim_is_not_taken_for_where_the_object_stands(printed_scene):
@@ -451,11 +451,11 @@ def test_a_noisy_camera_s_noise_is_no_grain(tmp_path):
 def test_a_face_of_the_table_s_own_grain_that_the_colour_models_drop_is_kept(printed_scene):
     """A box printed with its oak table's own pattern: from one view its top is of the table's colour and
     light, and stands out through the plane by its grain alone (another stretch of the oak than the table
-    point behind it). The colour models give it to the table, and the view lost its top (0.665 before). A
+    point behind it). The colour models give it to the table, and the view lost its top (0.614 before). A
     piece that the grain alone carries, wider than the band the grain's window leaves along any edge and
     touching the silhouette, is a face: kept."""
-    ious = _printed_scene_ious(printed_scene, 1, "oak-table-colour-box", backgrounds=False)
-    assert ious[0] > 0.85 and min(ious) > 0.78, ious
+    ious = _printed_scene_ious(printed_scene, 97, "oak-table-colour-box", backgrounds=False)
+    assert ious[1] > 0.8 and min(ious) > 0.88, ious
 
 
 def test_a_shadow_that_no_other_view_sees_keeps_a_grain_too_faint_for_one_pixel(printed_scene):
@@ -852,10 +852,10 @@ def test_a_view_whose_excess_its_own_evidence_puts_on_the_plane_is_the_one_cut_b
     """A box of its table's colour, from the images alone: one view's first cut took in the box's shadow and
     reaches out of the others' hull. With three views, leaving any one out of the carving clears the others'
     excess, so another view was blamed for holding too little and cut again within the others' hull, shadow
-    and all (0.60 before). The reaching view's own evidence puts all of its excess on the plane: it is the
+    and all (0.79 before). The reaching view's own evidence puts all of its excess on the plane: it is the
     one cut back."""
     ious = _printed_scene_ious(printed_scene, 5, "oak-table-colour-box", backgrounds=False)
-    assert ious[1] > 0.68 and min(ious[0], ious[2]) > 0.78, ious
+    assert ious[1] > 0.84 and min(ious[0], ious[2]) > 0.78, ious
 
 
 def test_a_lit_top_of_the_table_s_colour_is_kept_where_it_stands_out_and_the_others_see_it_alike(printed_scene):
@@ -888,21 +888,21 @@ def test_a_face_in_shade_that_hides_the_grain_the_other_views_see_is_kept_from_t
     """A box of its table's colour, from the images alone: in one view the cut within the other views' hull
     finds the box's faces turned from the lamp, bordered by lit table, but their colour matches the table
     in the box's shadow behind them, which the other views see, so the colour evidence called them table
-    (0.63 before). The other views see the oak's grain at those table points; mapped through the plane it
+    (0.76 before). The other views see the oak's grain at those table points; mapped through the plane it
     is gone from the faces, which a shadow on the table keeps: faces, kept."""
-    ious = _printed_scene_ious(printed_scene, 4, "oak-table-colour-box", backgrounds=False)
-    assert ious[1] > 0.88 and min(ious) > 0.9, ious
+    ious = _printed_scene_ious(printed_scene, 270, "oak-table-colour-box", backgrounds=False)
+    assert ious[1] > 0.85 and min(ious) > 0.85, ious
 
 
 def test_a_face_in_shade_as_dark_as_the_shadow_is_kept_where_the_others_see_the_table_behind_it(printed_scene):
-    """A box of its table's colour, from the images alone: in one view only its lit top was found (0.51
+    """A box of its table's colour, from the images alone: in one view only its lit top was found (0.61
     before). The cut within the other views' hull finds its two faces turned from the lamp, which hide the
     oak's grain the other views see at the table points behind them, but they are as dark as the box's
     shadow, most of which lies within that hull too, so the open shadow left beside it was a strip of its
     soft edge, and the faces were taken for the table under an overhang. That table is hidden from the
     other views by the object above it; the table behind these faces is not: kept."""
-    ious = _printed_scene_ious(printed_scene, 14, "oak-table-colour-box", backgrounds=False)
-    assert ious[0] > 0.75 and min(ious[1:]) > 0.8, ious
+    ious = _printed_scene_ious(printed_scene, 110, "oak-table-colour-box", backgrounds=False)
+    assert ious[0] > 0.76 and min(ious[1:]) > 0.88, ious
 
 
 def test_a_face_in_shade_that_the_cut_gave_to_the_shadow_beside_it_is_split_off_by_the_grain(printed_scene):
@@ -963,11 +963,11 @@ def test_a_face_that_hides_the_grain_is_kept_without_the_lit_table_joined_to_it(
 
 def test_lit_table_that_stands_out_no_more_than_the_table_round_the_hull_is_left_out(printed_scene):
     """A mustard bottle on oak, from the images alone: the cut within the other views' hull took a stretch of
-    lit oak beside the bottle, and its plane parallax (1.2 times its noise over the stretch, the median) was
-    over 1, so it was kept for a face (0.78 before). The oak round the hull stands out by as much there (1.8,
+    lit oak beside the bottle, and its plane parallax (1.45 times its noise over the stretch, the median) was
+    over 1, so it was kept for a face (0.93 before). The oak round the hull stands out by more there (1.79,
     its 0.9 quantile): a piece is a face where it stands out over what the table round it does."""
     ious = _printed_scene_ious(printed_scene, 13, "oak-mustard-bottle", backgrounds=False)
-    assert ious[1] > 0.9, ious
+    assert ious[1] > 0.955, ious
 
 
 def test_the_table_beside_a_lying_can_that_the_others_see_alike_over_half_of_it_is_left_out(printed_scene):
@@ -1023,23 +1023,23 @@ def test_the_table_beyond_a_box_s_own_top_that_the_others_see_alike_is_not_taken
     """An oak-coloured box on oak, from the images alone: beyond the box's top, as one view sees it, lies a
     stretch of lit oak that the other views see alike (the box behind it in theirs has the oak's colour) and
     that is lit as the table, because it is the table; taken for a top of the table's colour, it lowered the
-    view to 0.828. A top seen from above sits on the object's side, which the lamp above lights less than a
+    view to 0.867. A top seen from above sits on the object's side, which the lamp above lights less than a
     face turned up; the silhouette below this stretch is the box's own top, lit as the table: not a top."""
-    ious = _printed_scene_ious(printed_scene, 16, "oak-table-colour-box", backgrounds=False)
-    assert ious[2] > 0.87, ious
+    ious = _printed_scene_ious(printed_scene, 221, "oak-table-colour-box", backgrounds=False)
+    assert ious[0] > 0.9, ious
 
 
 def test_faces_in_shade_whose_table_points_the_object_hides_from_the_others_are_kept(printed_scene):
-    """An oak-coloured box on oak, from the images alone: from one view the box's two faces in shade are the
-    oak darkened, as its shadow is, and the colour models gave them to the table (0.609). The table points
-    behind them lie behind the box from the other views, so neither the plane's parallax nor the grain they
-    map says anything there; but those views see the faces alike (over 0.6 of them), where a shadow on the
-    table at a point they cannot see would stand in the air before the box's other faces, and the faces are
-    as dark as the shadow cast in the open, neither lighter (its soft edge) nor darker (under an overhang),
+    """An oak-coloured box on oak, from the images alone: from one view the box's face in shade is the oak
+    darkened, as its shadow is, and the colour models gave it to the table (0.567). The table points behind
+    it lie behind the box from the other views, so neither the plane's parallax nor the grain they map says
+    anything there; but those views see the face alike (over 0.6 of it), where a shadow on the table at a
+    point they cannot see would stand in the air before the box's other faces, and the face is as dark as
+    the shadow cast in the open, neither lighter (its soft edge) nor darker (under an overhang),
     and darker than the lit table by more than the light varies over a table (not so on fabric, whose shadow
     is faint and whose table seen alike beside an ellipsoid was taken)."""
-    ious = _printed_scene_ious(printed_scene, 12, "oak-table-colour-box", backgrounds=False)
-    assert ious[2] > 0.85, ious
+    ious = _printed_scene_ious(printed_scene, 26, "oak-table-colour-box", backgrounds=False)
+    assert ious[0] > 0.73, ious
 
 
 def test_a_lit_top_parted_from_the_silhouette_by_the_box_s_edge_is_kept(printed_scene):
@@ -1100,23 +1100,23 @@ def test_the_shadow_by_the_foot_joined_to_a_face_in_shade_is_left_out(printed_sc
 def test_a_lit_face_whose_table_points_the_object_hides_from_the_others_is_kept(printed_scene):
     """An oak-coloured box on oak, from the images alone: from one view the box's face lit by the lamp is of
     the oak's colour and light, and the colour models gave it to the table with the face in shade beside it
-    (0.573). The table points behind the face lie behind the box from the other views, so neither the plane's
+    (0.789). The table points behind the face lie behind the box from the other views, so neither the plane's
     parallax nor the grain they map says anything there; but they see the face alike over 0.6 of it, as a
     face standing on the object is seen, where the table at a point they cannot see would stand in the air
     before the box's other faces: kept, as a face in shade as dark as the open shadow is, for it is lit by
     the lamp, brighter than the open shadow, and lies below the box's top, not beyond it."""
-    ious = _printed_scene_ious(printed_scene, 9, "oak-table-colour-box", backgrounds=False)
-    assert ious[1] > 0.75, ious
+    ious = _printed_scene_ious(printed_scene, 254, "oak-table-colour-box", backgrounds=False)
+    assert ious[2] > 0.85, ious
 
 
 def test_the_lit_table_before_a_side_s_foot_is_not_taken_for_the_object(printed_scene):
     """An oak-coloured box on oak, from the images alone: from one view the lit oak just before the foot of
     the box's side lies behind the box from the other views, so nothing but its look tells it from the box,
-    and the colour models, holding the box's top lit as the oak, took it (0.845). Below a side (darker than the
+    and the colour models, holding the box's top lit as the oak, took it (0.666). Below a side (darker than the
     lit table), at the silhouette's rim, the box's surface goes on down to its foot, turned from the lamp:
     what lies there lit as the table and of its colour is the table before the side's foot."""
-    ious = _printed_scene_ious(printed_scene, 7, "oak-table-colour-box", backgrounds=False)
-    assert ious[1] > 0.9, ious
+    ious = _printed_scene_ious(printed_scene, 18, "oak-table-colour-box", backgrounds=False)
+    assert ious[2] > 0.81, ious
 
 
 def test_the_table_behind_a_top_that_the_others_confirm_with_its_grain_is_not_taken(printed_scene):
@@ -1175,10 +1175,11 @@ def test_no_lamp_is_fitted_to_a_low_ring_round_the_footprint():
 
 def test_no_lamp_is_fitted_to_a_hull_that_a_view_missing_the_object_carved_short(printed_scene):
     """A box of its oak table's colour, from the images alone: one view's colour models gave most of the box
-    to the table (0.28), and the hull it carved holds only part of the box. The other views' face in shade
-    beyond that part lies low under the hull, where a shadow taken in would, and a lamp fitted to it (from
-    the wrong side) dropped it (0.852 and 0.771 fell to 0.723 and 0.655). A view that misses much of the
-    other views' hull says the hull's tall part is not the object's: no lamp is fitted to it."""
-    ious = _printed_scene_ious(printed_scene, 28, "oak-table-colour-box", backgrounds=False)
-    assert ious[1] > 0.8 and ious[2] > 0.75, ious
+    to the table (0.37; it misses 0.80 of the other views' hull), and the hull it carved holds only part of
+    the box. Another view's face in shade beyond that part lies low under the hull, where a shadow taken in
+    would, and a lamp fitted to it (azimuth 335 degrees, elevation 48; the scene's lamp 272, 66) dropped it
+    (0.954 fell to 0.867). A view that misses much of the other views' hull says the hull's tall part is not
+    the object's: no lamp is fitted to it."""
+    ious = _printed_scene_ious(printed_scene, 82, "oak-table-colour-box", backgrounds=False)
+    assert ious[1] > 0.91, ious
 
