@@ -462,14 +462,17 @@ def add_relit_grain(const float[:, ::1] own not None, const float[:, ::1] own_li
 def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[:, :] table not None,
                        double dimmer, unsigned char[:, ::1] found not None):
     """Set ``found`` ((h, w) uint8) to 1 at the ``table`` pixels of ``image`` ((h, w, 3) float32 BGR) whose
-    chromaticity lies near the table pixels' median one and whose brightness is under ``dimmer`` times their
-    median (:func:`auto_segment._shadow_like`); the rest are left alone. In float32, in NumPy's order:
+    chromaticity lies near the table pixels' median one (within 0.12, or as far as nine in ten of the lit
+    table's pixels lie from it, whichever is more, up to 0.3), and whose brightness is under ``dimmer`` times
+    their median (:func:`auto_segment._shadow_like`); the rest are left alone. In float32, in NumPy's order:
 
         pixels = image[table]; brightness = pixels.sum(axis=1) + 3; chroma = pixels / brightness[:, None]
-        found[table] = ((abs(chroma - median of each channel of chroma).sum(axis=1) * 3 < 0.12)
-                        & (brightness < dimmer * median(brightness)))"""
-    cdef Py_ssize_t height = image.shape[0], width = image.shape[1], r, c, k, n, count = 0
-    cdef float three = 3.0, near = 0.12, bright, limit, off
+        off = abs(chroma - median of each channel of chroma).sum(axis=1) * 3
+        dark = brightness < dimmer * median(brightness)
+        spread = sorted(off[~dark])[(count(~dark) - 1) * 9 // 10]   # 0 where none is lit
+        found[table] = (off < min(max(0.12, spread), 0.3)) & dark"""
+    cdef Py_ssize_t height = image.shape[0], width = image.shape[1], r, c, k, n, count = 0, lit
+    cdef float three = 3.0, near = 0.12, widest = 0.3, bright, limit, off
     cdef float table_chroma[3]
     if image.shape[2] != 3 or table.shape[0] != height or table.shape[1] != width:
         raise ValueError("image must be (h, w, 3) and table (h, w)")
@@ -503,6 +506,20 @@ def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[
             table_chroma[k] = _median_in_place(&scratch[0], count)
         scratch[:] = brightness
         limit = <float>(dimmer * <double>_median_in_place(&scratch[0], count))
+        # A textured table (a cutting mat's grid, a print) has many colours, and its shadow keeps each of
+        # them darkened: a pixel of its shadow lies as far from the median colour as the lit table's do
+        # (nine in ten of them), where that is farther than the noise's 0.12; but no farther than 0.3, or
+        # a colour as far from the table's as an object's (a blue box's on a green grid) would pass for it.
+        lit = 0
+        for n in range(count):
+            if not brightness[n] < limit:
+                off = fabsf(chroma[0, n] - table_chroma[0]) + fabsf(chroma[1, n] - table_chroma[1])
+                off = off + fabsf(chroma[2, n] - table_chroma[2])
+                scratch[lit] = off * three
+                lit += 1
+        if lit:
+            _select(&scratch[0], lit, (lit - 1) * 9 // 10)
+            near = min(max(near, scratch[(lit - 1) * 9 // 10]), widest)
         n = 0
         for r in range(height):
             for c in range(width):

@@ -239,6 +239,14 @@ def test_nearest_indices_pick_what_cv2_resize_picks(size, to):
     assert np.array_equal(image[rows[5:40]][:, columns[3:17]], resized[5:40, 3:17])
 
 
+def _within(off: np.ndarray) -> np.float32:
+    """How far from the table's median colour a shadow's may lie: 0.12, or as far as nine in ten of the lit
+    table's colours lie (``off``, their distances; the value nine tenths up them sorted), whichever is more,
+    up to 0.3."""
+    spread = np.sort(off)[(len(off) - 1) * 9 // 10] if len(off) else np.float32(0.0)
+    return min(max(np.float32(0.12), spread), np.float32(0.3))
+
+
 def test_shadow_like_asks_only_the_table_pixels_what_the_whole_image_formula_says():
     rng = np.random.default_rng(2)
     for trial in range(50):
@@ -250,8 +258,9 @@ def test_shadow_like_asks_only_the_table_pixels_what_the_whole_image_formula_say
         expected = np.zeros((30, 40), bool)
         if table.any():
             table_chroma = np.array([np.median(chroma[..., k][table]) for k in range(3)], np.float32)
-            expected = ((np.abs(chroma - table_chroma).sum(axis=2) * 3.0 < 0.12)
-                        & (brightness < 0.92 * np.float32(np.median(brightness[table]))))
+            off = np.abs(chroma - table_chroma).sum(axis=2) * np.float32(3.0)
+            dark = brightness < 0.92 * np.float32(np.median(brightness[table]))
+            expected = (off < _within(off[table & ~dark])) & dark
         assert np.array_equal(auto_segment._shadow_like(image, table), expected & table)
 
 
@@ -259,6 +268,10 @@ def test_shadow_like_pixels_is_the_numpy_it_replaced_on_a_crop():
     rng = np.random.default_rng(5)
     for trial in range(200):
         whole = (rng.random((50, 60, 3)) * 255).astype(np.float32)
+        if trial % 3 == 0:  # a plain table, whose colours lie within 0.12 of their median
+            whole = (rng.uniform(40, 220, 3) + rng.normal(0.0, 2.0, (50, 60, 3))).astype(np.float32)
+        elif trial % 3 == 1:  # a textured one, whose colours lie farther, and not all beyond 0.3
+            whole = (rng.uniform(40, 220, 3) * rng.uniform(0.85, 1.15, (50, 60, 3))).astype(np.float32)
         shade = rng.random((50, 60)) < 0.5
         whole[shade] *= rng.uniform(0.3, 1.0)  # darkened alike: a shadow's look
         crop = (slice(int(rng.integers(0, 10)), int(rng.integers(20, 50))),
@@ -272,8 +285,9 @@ def test_shadow_like_pixels_is_the_numpy_it_replaced_on_a_crop():
             brightness = pixels.sum(axis=1) + 3.0
             chroma = pixels / brightness[:, None]
             table_chroma = np.array([median(np.ascontiguousarray(chroma[:, k])) for k in range(3)], chroma.dtype)
-            expected[table] = ((np.abs(chroma - table_chroma).sum(axis=1) * 3.0 < 0.12)
-                               & (brightness < 0.92 * median(brightness)))
+            off = np.abs(chroma - table_chroma).sum(axis=1) * np.float32(3.0)
+            dark = brightness < 0.92 * median(brightness)
+            expected[table] = (off < _within(off[~dark])) & dark
         found = np.zeros(table.shape, bool)
         shadow_like_pixels(image, table.view(np.uint8), 0.92, found.view(np.uint8))
         np.testing.assert_array_equal(found, expected)
