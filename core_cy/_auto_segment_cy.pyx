@@ -508,7 +508,7 @@ def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[
         limit = <float>(dimmer * <double>_median_in_place(&scratch[0], count))
         # A textured table (a cutting mat's grid, a print) has many colours, and its shadow keeps each of
         # them darkened: a pixel of its shadow lies as far from the median colour as the lit table's do
-        # (nine in ten of them), where that is farther than the noise's 0.12; but no farther than 0.3, or
+        # (nine in ten of them), where that is farther than a plain table's 0.12; but no farther than 0.3, or
         # a colour as far from the table's as an object's (a blue box's on a green grid) would pass for it.
         lit = 0
         for n in range(count):

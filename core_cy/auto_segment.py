@@ -4092,7 +4092,7 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     """The ``table`` pixels of the same chromaticity as their median and darker than it: a shadow. Only
     they are asked about (the graph cut marks a shadow among the pixels the other views confirm), so the
     rest of the image is not looked at. The same chromaticity is as near the median as most of the lit
-    table's (nine in ten), or the noise's, up to a limit an object's other colour lies beyond: a textured
+    table's (nine in ten), or a plain table's, up to a limit an object's other colour lies beyond: a textured
     table (a cutting mat's grid) has many colours, and its shadow keeps each of them."""
     found = np.zeros(table.shape, bool)
     shadow_like_pixels(image, table.view(np.uint8), _SHADOW_DIMMER, found.view(np.uint8))
