@@ -459,6 +459,12 @@ def add_relit_grain(const float[:, ::1] own not None, const float[:, ::1] own_li
 
 
 
+cdef inline float _chroma_distance(float blue, float green, float red, const float* table_chroma) noexcept nogil:
+    """The L1 distance of a pixel's chromaticity from the table's, summed in NumPy's channel order."""
+    cdef float distance = fabsf(blue - table_chroma[0]) + fabsf(green - table_chroma[1])
+    return distance + fabsf(red - table_chroma[2])
+
+
 def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[:, :] table not None,
                        double dimmer, unsigned char[:, ::1] found not None):
     """Set ``found`` ((h, w) uint8) to 1 at the ``table`` pixels of ``image`` ((h, w, 3) float32 BGR) whose
@@ -513,9 +519,7 @@ def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[
         lit = 0
         for n in range(count):
             if not brightness[n] < limit:
-                off = fabsf(chroma[0, n] - table_chroma[0]) + fabsf(chroma[1, n] - table_chroma[1])
-                off = off + fabsf(chroma[2, n] - table_chroma[2])
-                scratch[lit] = off * three
+                scratch[lit] = _chroma_distance(chroma[0, n], chroma[1, n], chroma[2, n], table_chroma) * three
                 lit += 1
         if lit:
             _select(&scratch[0], lit, (lit - 1) * 9 // 10)
@@ -524,8 +528,7 @@ def shadow_like_pixels(const float[:, :, :] image not None, const unsigned char[
         for r in range(height):
             for c in range(width):
                 if table[r, c]:
-                    off = fabsf(chroma[0, n] - table_chroma[0]) + fabsf(chroma[1, n] - table_chroma[1])
-                    off = off + fabsf(chroma[2, n] - table_chroma[2])
+                    off = _chroma_distance(chroma[0, n], chroma[1, n], chroma[2, n], table_chroma)
                     found[r, c] = off * three < near and brightness[n] < limit
                     n += 1
 
