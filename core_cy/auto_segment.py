@@ -1192,10 +1192,11 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
     plane's parallax compares one view's table with another's through the plane and takes any
     difference for something standing there. So each view's field, a plane per channel in its log over
     its own image's coordinates, is fitted to the log ratios of every pair of views at the table points
-    they share, robustly (what differs much from the fit, the object, its parallax, their edges, is left
-    out of the next fit). A view's field is known where it shares table points with another; beyond
-    them it is held at the values found there, not extrapolated. Within exp(+-_LIGHT_FIELD_BEYOND) the
-    cues' noise floors take the difference in their stride, and the pictures are left as they are."""
+    they share, robustly (the half that differs most from the fit, where the object, its parallax and
+    their edges are, is left out of the next fit). A view's field is known where it shares table points
+    with another; beyond them it is held at the values found there, not extrapolated. Within
+    exp(+-_LIGHT_FIELD_BEYOND) the cues' noise floors take the difference in their stride, and the
+    pictures are left as they are."""
     rows_of_pairs = []
     for view in views:
         for other in views:
@@ -1232,16 +1233,18 @@ def _even_the_light(views: Sequence[_View], plane: np.ndarray) -> None:
     # Only ratios are seen: the fields' overall level is free, and is held at no change on average.
     design[-1, ::terms] = 1.0
     # Started from each pair's median ratio (one gain per pair), which the object and its parallax, less
-    # than half of the table the two share, cannot pull far; each fit is made of the samples close to
-    # the one before.
+    # than half of the table the two share, cannot pull far; each fit is made of the half of the samples
+    # closest to the one before (least trimmed squares). An object near the camera and its parallax come
+    # near half of what two views share, and a textured table's misregistration spreads the table's own
+    # residuals: a bound of three spreads about their median took the object's in, and they pulled the
+    # field to them (a box filling an eighth of each view, on a grid, under even light: fields of
+    # e^-0.7 to e^0.9, and every view lost).
     fitted = np.concatenate([np.broadcast_to(np.median(ratio, axis=0), ratio.shape)
                              for *_, ratio in rows_of_pairs] + [np.zeros((1, 3))])
     coefficients = np.zeros((columns, 3))
     for _ in range(4):
         residual = np.abs(log_ratio - fitted).sum(axis=1)
-        centre = float(np.median(residual[:-1]))
-        spread = 1.4826 * float(np.median(np.abs(residual[:-1] - centre)))
-        keep = residual < centre + max(3.0 * spread, _LIGHT_FIELD_TOLERANCE)
+        keep = residual <= max(float(np.median(residual[:-1])), _LIGHT_FIELD_TOLERANCE)
         keep[-1] = True
         # The normal equations (a few columns a view against thousands of samples), held solvable where a
         # view shares too little table with any other to have rows: its field stays 1.
