@@ -52,6 +52,7 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_core.py
 	$(BIN)/python bench/bench_segment.py
+	$(BIN)/python bench/bench_segment_apart.py
 
 bench-cell: $(STAMP)
 	$(BIN)/python bench/bench_cell.py
