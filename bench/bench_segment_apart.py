@@ -10,12 +10,13 @@ with a label or grained like wood, of any colour (one in five the table's own); 
 flat, wood-grained or a mat with a grid; the lamp anywhere from 35 to 80 degrees up; the ambient light; the
 noise; three views at 640x480, about half of the scans near (at the distance at which the object fills
 eight tenths of a picture's height, about 6 % to 14 % of each picture: a camera on the wrist comes that
-near), the others far (1.5 to 2 times as far: about 1 % to 5 %). Three ways, as bench_segment's:
+near), the others far (1.5 to 2 times as far: about 1 % to 5 %); half of the scans' views 35-55 degrees
+above the table (as the simulator's), a quarter low (15-30), a quarter high (60-80). Three ways, as bench_segment's:
 "default" (the images, poses and support plane), "+ background" (each view also with a picture of the
 empty workspace, rendered without the object) and "true masks" (the ceiling).
 
 (a) silhouette IoU per view against the true silhouette, mean / worst / views under 0.85, per table, per
-    print, per shape, for objects of the table's colour or not, and near or far;
+    print, per shape, for objects of the table's colour or not, near or far, and per band of elevation;
 (b) volumetric IoU of the model against the true box or cylinder (workers/sim/judge.py's Monte Carlo
     union_iou; the truth as a superquadric of exponent 0.1, which the true masks' ceiling shares), the
     same groups.
@@ -47,9 +48,13 @@ from bench_core import model_parts  # noqa: E402
 from robocell.core_cy.camera import Camera  # noqa: E402
 from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
 from robocell.workers.sim.judge import Part, union_iou  # noqa: E402
-from tests.seg_scenes import Scene, render_scan, render_view  # noqa: E402
+from robocell.workers.sim.scans import default_K, plan_views  # noqa: E402
+from tests.seg_scenes import Scene, render_view  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
+#: The bands of elevation (degrees above the table) a scan's three views are taken from: the simulator's
+#: scans are all in the middle one.
+ELEVATIONS = {"low views": (15.0, 30.0), "middle views": (35.0, 55.0), "high views": (60.0, 80.0)}
 SIZE = (640, 480)
 FOCAL = 600.0
 
@@ -59,8 +64,9 @@ def _bgr(hue: float, saturation: float, value: float) -> tuple[float, float, flo
     return 255 * blue, 255 * green, 255 * red
 
 
-def scene_of(number: int) -> tuple[Scene, float, bool]:
-    """Scan ``number``'s scene, its camera distance (m) and whether that is near, drawn from its own generator."""
+def scene_of(number: int) -> tuple[Scene, float, bool, str]:
+    """Scan ``number``'s scene, its camera distance (m), whether that is near, and the band of elevations its
+    views are taken from (a key of :data:`ELEVATIONS`), drawn from its own generator."""
     rng = np.random.default_rng([number, 77])
     shape = "box" if rng.random() < 0.55 else "cylinder"
     if shape == "box":
@@ -85,7 +91,8 @@ def scene_of(number: int) -> tuple[Scene, float, bool]:
     radius = float(np.linalg.norm(size))
     fills = max(0.3, radius / np.sin(np.arctan(0.8 * SIZE[1] / 2 / FOCAL) - np.radians(2.0)))
     near = bool(rng.random() < 0.5)
-    return scene, fills * (1.0 if near else rng.uniform(1.5, 2.0)), near
+    distance = fills * (1.0 if near else rng.uniform(1.5, 2.0))
+    return scene, distance, near, str(rng.choice(list(ELEVATIONS), p=[0.25, 0.5, 0.25]))
 
 
 def truth_of(scene: Scene) -> list[Part]:
@@ -99,14 +106,17 @@ def truth_of(scene: Scene) -> list[Part]:
 
 def score(number: int) -> dict:
     """Scan ``number``: what it is, and per way its volumetric IoU, silhouette IoU per view and error."""
-    scene, distance, near = scene_of(number)
-    images, truths, poses = render_scan(scene, views=3, size=SIZE, seed=number, distance=distance)
+    scene, distance, near, band = scene_of(number)
+    K = default_K(SIZE, FOCAL)
+    poses = plan_views(scene.centre, 3, (distance, distance * 1.15), ELEVATIONS[band],
+                       float(np.random.default_rng(number).uniform(0, 360)), np.random.default_rng([number, 1]))
+    images, truths = zip(*(render_view(scene, T, K, SIZE, number * 100 + i) for i, T in enumerate(poses)))
     empty = Scene(**{**scene.__dict__, "with_object": False})
-    backgrounds = [render_view(empty, T, K, SIZE, number * 100 + 50 + i)[0] for i, (K, T) in enumerate(poses)]
-    cameras = [Camera(K, T, view=i) for i, (K, T) in enumerate(poses)]
+    backgrounds = [render_view(empty, T, K, SIZE, number * 100 + 50 + i)[0] for i, T in enumerate(poses)]
+    cameras = [Camera(K, T, view=i) for i, T in enumerate(poses)]
     same_colour = float(np.abs(np.subtract(scene.object_bgr, scene.table_bgr)).max()) < 30
     record: dict = {"shape": scene.shape, "print": scene.object_print, "table": scene.table_texture,
-                    "table's colour": same_colour, "near": near,
+                    "table's colour": same_colour, "near": near, "views from": band,
                     "share": float(np.mean([np.mean(t > 0) for t in truths]))}
     for way in WAYS:
         if way == "true masks":
@@ -141,6 +151,7 @@ def tables(records: list[dict]) -> None:
         groups[record["shape"]].append(record)
         groups["the table's colour" if record["table's colour"] else "another colour"].append(record)
         groups["near" if record["near"] else "far"].append(record)
+        groups[record["views from"]].append(record)
     groups = {name: groups[name] for name in sorted(groups)}
     groups["all"] = records
     seeing = WAYS[:2]
