@@ -270,8 +270,9 @@ class AsyncCellClient:
         try:
             # Asked after subscribing: an end in between is not missed.
             state = JobState.QUEUED if heard_from_start else await self._state_unless_away(job_id, JobState.QUEUED)
-            if state.finished:
-                return await self._ended(job_id, state, want_result, answer)
+            ended = await self._ended_unless_away(job_id, state, want_result, answer) if state.finished else None
+            if ended is not None:
+                return ended
             while True:
                 remaining = deadline - loop.time()
                 if remaining <= 0:
@@ -281,13 +282,17 @@ class AsyncCellClient:
                         event = await queue.get()
                 except TimeoutError:
                     state = await self._state_unless_away(job_id, state)  # a lost event cannot make this wait for ever
-                    if state.finished:
-                        return await self._ended(job_id, state, want_result, answer)
+                    ended = await self._ended_unless_away(job_id, state, want_result, answer) if state.finished else None
+                    if ended is not None:
+                        return ended
                     continue
                 if event.state.finished:
                     # An event is anyone's to publish on an open router: an end is believed only
-                    # once the daemon confirms it (a forged one is dropped, and the wait goes on).
-                    final = await self._ended(job_id, event.state, want_result, answer)
+                    # once the daemon confirms it (a forged one is dropped, and the wait goes on),
+                    # and while the link is down it cannot: the polling asks again once it is back.
+                    final = await self._ended_unless_away(job_id, event.state, want_result, answer)
+                    if final is None:
+                        continue
                     confirmed = final.state if isinstance(final, JobStatus) else JobState.SUCCEEDED
                     if confirmed is not event.state:
                         log.warning("ignoring a %s event for job %s, which the daemon says is %s",
@@ -304,6 +309,14 @@ class AsyncCellClient:
                 state = event.state
         finally:
             self._unlisten(job_id, queue)
+
+    async def _ended_unless_away(self, job_id: str, state: JobState, want_result: bool,
+                                 answer: asyncio.Future[Reply] | None = None) -> JobStatus | ScanResult | None:
+        """:meth:`_ended`, or None while the link to the router is down: the wait goes on, and asks again."""
+        try:
+            return await self._ended(job_id, state, want_result, answer)
+        except LinkDown:
+            return None
 
     async def _ended(self, job_id: str, state: JobState, want_result: bool,
                      answer: asyncio.Future[Reply] | None = None) -> JobStatus | ScanResult:
