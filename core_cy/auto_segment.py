@@ -4419,7 +4419,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures, tables, shades, clearly = {}, {}, {}, {}, {}
+    changed, textures, tables, shades, clearly, unlike = {}, {}, {}, {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
         texture, grain_kept, view.grain_sums = _texture_change(view, _coarse_aim(view, aim))
@@ -4438,15 +4438,19 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # itself took that tint: the glow of a coloured object beside it).
         beside_the_change = np.maximum(textures[view.index], _tint_change(view))
         unrounded = _noise_level(change)
+        unlike[view.index] = change / max(unrounded, _BACKGROUND_NOISE_FLOOR)
         score = np.maximum(change / max(_change_noise(view, unrounded), _BACKGROUND_NOISE_FLOOR), beside_the_change)
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
         clearly[view.index] = _clearly_changed(change, unrounded, beside_the_change)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, None)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, None, None)
+    # From the second look on, what another view confirms must look like a shadow to be one (_unlike_a_shadow):
+    # the first look's confirmed shadow says how a shadow looks in each view.
+    unlike = {view.index: _unlike_a_shadow(view, scores[view.index], unlike[view.index]) for view in views}
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
-    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders)
+    scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, unlike, occluders)
     # The last evidence, with the silhouettes cut hiding the most of the table behind them, counts the
     # colour's parallax too (_stands_out), for the last cut only: fed back as what hides the table in the
     # next look, the colour found at one view's foot makes the table beside the others' feet stand out.
@@ -4455,9 +4459,41 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         occluders = {view.index: cv2.bitwise_or(cv2.dilate(standing[view.index], _SMALL, iterations=_OCCLUSION_MARGIN),
                                                 cv2.erode(cut, _SMALL))
                      for view, (cut, _) in zip(views, cuts)}
-        scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, occluders,
+        scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, unlike, occluders,
                                        colour=round_ == _OCCLUSION_ROUNDS)
     return _background_cut(views, aim, scores, standing, clearly)
+
+
+def _unlike_a_shadow(view: _View, score: np.ndarray, change: np.ndarray) -> np.ndarray:
+    """``change`` (the view's against the empty workspace, in units of its noise before the rounding) where it
+    clearly changed (2.5 noises), darker than the empty workspace but unlike a shadow; 0 elsewhere.
+
+    A shadow darkens the table (as :func:`_shadow_of_table` reads it, to no less than a tenth) and keeps about
+    its chromaticity: within :data:`_LAMP_HUE_SHIFT` (a warm lamp's tint leaves it), or moved no more than
+    :data:`_SHADOW_HUE_SPREAD` times the median move of the shadow the view confirms (``score``, its evidence
+    on the first look: darker pixels that changed alike in another view at the same table point). On a green
+    cutting mat under a tinted lamp that median is 0.04 to 0.1, and a shadow's pixels move up to 0.2; on the
+    other tables the median is 0.01 to 0.03. A face that two views confirm for each other is the smaller part
+    of what they confirm and leaves the median to the shadow: a dark teal top on a blue mat moves by 0.15 to
+    0.19, its views' confirmed medians are 0.02 to 0.03. What is brighter than the table (a coloured object's
+    glow on it, which every view sees alike) is left to the other views' likeness. The noise is the one before
+    the rounding (:func:`_clearly_changed`): on a flat dark mat the rounded one reads nothing, and the mat's
+    noise would stand out."""
+    assert view.background is not None
+    image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
+    brightness, ground = _brightness(image), _brightness(empty)
+    hue = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
+    darker = brightness < 0.97 * ground
+    dimmed = darker & (brightness > 0.1 * ground)
+    confirmed = dimmed & (score > 0) & (score < 1.0)
+    tolerance = _LAMP_HUE_SHIFT
+    if np.count_nonzero(confirmed) >= _SPECK:
+        tolerance = max(tolerance, _SHADOW_HUE_SPREAD * float(np.median(hue[confirmed])))
+    return np.where(darker & ~(dimmed & (hue < tolerance)) & (change > 2.5), change, 0.0).astype(np.float32)
+
+
+#: A shadow's chromaticity moves at most this many times the median move of the shadow a view confirms.
+_SHADOW_HUE_SPREAD = 3.0
 
 
 def _clearly_changed(change: np.ndarray, unrounded: float, beside_the_change: np.ndarray) -> np.ndarray:
@@ -4490,7 +4526,7 @@ _OCCLUDER_ITERATIONS = 1
 
 def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.ndarray],
                 textures: dict[int, np.ndarray], tables: dict[int, np.ndarray],
-                shades: dict[int, np.ndarray], changed: dict[int, np.ndarray],
+                shades: dict[int, np.ndarray], changed: dict[int, np.ndarray], unlike: dict[int, np.ndarray] | None,
                 occluders: dict[int, np.ndarray] | None,
                 colour: bool = False) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per view, the evidence that a changed pixel stands above the plane (in units of its noise) and
@@ -4499,6 +4535,8 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
     ``tables``, per view, where the table is seen in a shadow by the view itself (its grain kept);
     ``shades``, per view, where it has a shadow's look but its grain is too faint for a pixel's window to
     tell (such a shadow is told over a piece whole by the view's ``grain_sums``, :func:`_texture_change`);
+    ``unlike``, per view, its change where it is unlike a shadow's (:func:`_unlike_a_shadow`), which no other
+    view's likeness makes a shadow, or None;
     ``colour``, whether the colour against the other views' through the plane counts too where it clearly
     stands (:func:`_background_cuts` says when)."""
     scores, standing = {}, {}
@@ -4518,6 +4556,12 @@ def _stands_out(views: Sequence[_View], plane: np.ndarray, ratios: dict[int, np.
                                                       _fine_per_coarse(view))
         score = np.where(hidden, np.where(table, 0.0, _HIDDEN), score)
         score = np.maximum(score, textures[view.index])
+        if unlike is not None:
+            # Two views that both lost a face in front of the same table points (a dark teal box's top, seen from
+            # high up over a blue mat) see it change alike there, as a shadow would; but its colour changed,
+            # which a shadow's does not. Only where another view sees the table point: a pixel hidden from
+            # them all is asked by its grain and look above.
+            score = np.where(hidden, score, np.maximum(score, unlike[view.index]))
         if occluders is not None:
             # The tint against the other views' through the plane, as without a background (_first_cut):
             # the table's glow beside a coloured object, and a shadow under a coloured lamp, are the same

@@ -197,14 +197,15 @@ def _shaded(scene: Scene, origin: np.ndarray, rays: np.ndarray) -> tuple[np.ndar
 
 
 def render_scan(scene: Scene, *, views: int = 3, size: tuple[int, int] = (320, 240), seed: int = 0,
-                distance: float | None = None):
-    """(images, true masks, cameras as (K, T_world_cam) pairs, jpeg bytes) of a scan around the object."""
+                distance: float | None = None, elevations: tuple[float, float] = (35.0, 55.0)):
+    """(images, true masks, cameras as (K, T_world_cam) pairs, jpeg bytes) of a scan around the object,
+    its views ``elevations`` (degrees) above the table."""
     f = 600.0 * size[0] / 640
     K = default_K(size, f)
     radius = float(np.linalg.norm(scene.size))
     if distance is None:
         distance = max(0.3, radius / np.sin(np.arctan(0.8 * size[1] / 2 / f) - np.radians(2.0)))
-    poses = plan_views(scene.centre, views, (distance, distance * 1.15), (35.0, 55.0),
+    poses = plan_views(scene.centre, views, (distance, distance * 1.15), elevations,
                        float(np.random.default_rng(seed).uniform(0, 360)), np.random.default_rng([seed, 1]))
     images, masks = [], []
     for i, T in enumerate(poses):
