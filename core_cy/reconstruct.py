@@ -7,7 +7,7 @@ decode -> segment -> edge samples -> enclosing sphere -> carve -> support plane
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -15,7 +15,7 @@ import numpy as np
 from .camera import Camera, undistort_mask
 from .carve import carve, check_support_plane, clip_to_plane, lift_above_plane, occupancy
 from .edges import about_samples, edge_samples, samples_near
-from .errors import FitError, GeometryError, ImageError, SilhouetteError
+from .errors import CoreError, FitError, GeometryError, ImageError, SilhouetteError
 from .images import checked_size
 from .model_check import MIN_VIEW_IOU
 from .auto_segment import auto_silhouettes, unsure_pixels
@@ -128,6 +128,9 @@ class Reconstruction:
     ``evaluations`` counts the silhouette fits' evaluations of their cost, each part of a union
     counted: ``"fit"`` the one superquadric's, ``"parts"`` the search's beyond it. Their work, which
     unlike their time does not depend on the machine (not part of :meth:`to_dict`).
+    ``backgrounds_set_aside``: None, or why the views' pictures of the empty workspace were set aside
+    (what the reconstruction with them raised; :func:`reconstruct`), the model then found from the images
+    alone.
     """
 
     superquadric: Superquadric
@@ -140,6 +143,7 @@ class Reconstruction:
     timings_ms: dict[str, float] = field(default_factory=dict)
     parts: tuple[Superquadric, ...] = ()
     evaluations: dict[str, int] = field(default_factory=dict)
+    backgrounds_set_aside: str | None = None
 
     def __post_init__(self) -> None:
         if not self.parts:
@@ -154,6 +158,8 @@ class Reconstruction:
             "silhouette_iou": [round(iou, 4) for iou in self.silhouette_iou],
             "residual": self.residual,
         }
+        if self.backgrounds_set_aside is not None:
+            result["backgrounds_set_aside"] = self.backgrounds_set_aside
         if points:
             result["points"] = self.points.tolist()
         return result
@@ -242,10 +248,43 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
         with one of them under ``MIN_VIEW_IOU``), a SilhouetteError giving
         every view's agreement; where they put the object apart in one view,
         a SilhouetteError naming it.
+
+    Notes
+    -----
+    With ``auto``, views that come with a picture of the empty workspace are
+    segmented against it. Where the silhouettes so found fail the
+    reconstruction (they contradict each other, put the object apart in one
+    view, or nothing stands out in one), the pictures may no longer show the
+    workspace as it is (the light changed, the table moved), or two views may
+    agree on a change that is not a shadow: the views are segmented again from
+    their images alone, and the result's ``backgrounds_set_aside`` gives the
+    first error (its ``timings_ms`` the first attempt's as ``with_backgrounds``,
+    counted in the total). If that fails too, the first error is raised.
     """
     views = list(views)
     if len(views) < 2:
         raise GeometryError(f"need at least 2 views, got {len(views)}")
+    began = time.perf_counter()
+    try:
+        return _reconstructed(views, segmentation, support_plane, options, backgrounds=True)
+    except (SilhouetteError, GeometryError, FitError) as error:
+        if segmentation.method != "auto" or all(view.background is None or view.mask is not None for view in views):
+            raise
+        with_backgrounds = error
+    attempt_ms = (time.perf_counter() - began) * 1e3
+    try:
+        result = _reconstructed(views, segmentation, support_plane, options, backgrounds=False)
+    except CoreError:
+        raise with_backgrounds from None
+    # The attempt with the backgrounds counts in the total: the caller waited for it too.
+    timings = {**result.timings_ms, "with_backgrounds": attempt_ms}
+    timings["total"] = timings.get("total", 0.0) + attempt_ms
+    return replace(result, backgrounds_set_aside=str(with_backgrounds), timings_ms=timings)
+
+
+def _reconstructed(views: list[View], segmentation: Segmentation, support_plane, options: Options, *,
+                   backgrounds: bool) -> Reconstruction:
+    """:func:`reconstruct`, the views' pictures of the empty workspace used by ``auto`` or not (``backgrounds``)."""
     clock = time.perf_counter
     timings: dict[str, float] = {}
     start = last = clock()
@@ -263,12 +302,12 @@ def reconstruct(views, *, segmentation: Segmentation = AUTO, support_plane=None,
     if segmentation.method == "auto":
         # auto sees all the views at once: the plane's parallax and the hull need every view.
         pictured = [index for index, (_, is_mask) in enumerate(decoded) if not is_mask]
-        backgrounds = [_background(index, views[index]) for index in pictured]
+        empty = [_background(index, views[index]) if backgrounds else None for index in pictured]
         lap("decode")
         if pictured:
             found = dict(zip(pictured, auto_silhouettes(
                 [decoded[index][0] for index in pictured], [views[index].camera for index in pictured],
-                support_plane=support_plane, backgrounds=backgrounds,
+                support_plane=support_plane, backgrounds=empty,
                 aim_cameras=[view.camera for view in views])))
             lap("segment")
     for index, view in enumerate(views):

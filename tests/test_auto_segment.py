@@ -216,6 +216,46 @@ def test_an_empty_table_names_the_view():
         auto_silhouettes(empty, _cameras(cams), support_plane=TABLE)
 
 
+def _views_with_backgrounds(scene, images, cams, seed):
+    empty = Scene(**{**scene.__dict__, "with_object": False})
+    size = images[0].shape[1::-1]
+    return [View(camera, image=image, background=render_view(empty, camera.T_world_cam, camera.K, size,
+                                                             seed * 100 + 50 + index)[0])
+            for index, (camera, image) in enumerate(zip(_cameras(cams), images))]
+
+
+def test_backgrounds_whose_silhouettes_fail_the_reconstruction_are_set_aside():
+    # A box of its table's colour and light, seen from 60-80 degrees up with the empty workspace: its top does
+    # not change against the table, and the silhouettes cut against the empty workspace put the object under
+    # the table. From the images alone they are found (the plane's parallax of its sides and of the shadow
+    # behind its top), and the result says why the backgrounds were set aside.
+    scene = Scene(size=(0.045, 0.032, 0.036), position=(-0.01, 0.009), yaw=0.31, object_bgr=(169, 164, 196),
+                  table_bgr=(172, 169, 202), light=(0.22, 0.40, 0.89), ambient=0.3, noise=2.5)
+    images, truths, cams = render_scan(scene, seed=0, size=(640, 480), elevations=(60.0, 80.0))
+    result = reconstruct(_views_with_backgrounds(scene, images, cams, 0), support_plane=TABLE)
+    assert result.backgrounds_set_aside.startswith("the support plane puts the object under the table")
+    assert result.to_dict()["backgrounds_set_aside"] == result.backgrounds_set_aside
+    assert result.timings_ms["total"] > result.timings_ms["with_backgrounds"] > 0
+    ious = [_iou(silhouette, truth) for silhouette, truth in zip(result.silhouettes, truths)]
+    assert min(ious) > 0.9, ious
+
+
+def test_backgrounds_are_not_set_aside_for_a_shadow_alone():
+    # Found from the images alone, a shadow is no object either: the first error stands, naming the view.
+    scene = Scene(shadow_only=True)
+    images, _, cams = render_scan(scene, seed=3)
+    with pytest.raises(SilhouetteError, match=r"^view \d: nothing stands on the table near the views' aim"):
+        reconstruct(_views_with_backgrounds(scene, images, cams, 3), support_plane=TABLE)
+
+
+def test_a_reconstruction_that_uses_its_backgrounds_says_none_was_set_aside(scans):
+    images, truths, cams = scans["printed can on wood"]
+    scene = SCENES["printed can on wood"]
+    result = reconstruct(_views_with_backgrounds(scene, images, cams, 1), support_plane=TABLE)
+    assert result.backgrounds_set_aside is None and "backgrounds_set_aside" not in result.to_dict()
+    assert min(_iou(silhouette, truth) for silhouette, truth in zip(result.silhouettes, truths)) > 0.9
+
+
 def test_a_background_of_another_size_names_the_view(scans):
     images, _, cams = scans["red box on a beige table"]
     backgrounds = [None, np.zeros((10, 10, 3), np.uint8), None]
