@@ -72,6 +72,27 @@ _HULL_GRID = 40
 _SPECK = 12
 
 
+def _matched_exposure(view: _View) -> None:
+    """Bring the view's coarse background to its image's exposure and white balance.
+
+    The empty workspace is taken before the object is put there, and a camera may set its exposure and white
+    balance anew for each picture (the object, dark or bright, changes what it meters): the whole table then
+    differs by one gain per channel, which the comparison with the background would take for a change
+    everywhere. Most of the picture is table, so the median of each channel's log ratio of image to background
+    is that gain. Within :data:`_EXPOSURE_MATCHED` of 1 the pictures are left as they are: the same camera's
+    pictures of the same table give 0 (the grey levels' rounding), and so every scene of the benchmarks."""
+    assert view.background is not None
+    ratio = np.log((view.coarse + _RATIO_OFFSET) / (view.background + _RATIO_OFFSET)).reshape(-1, 3)
+    gain = np.array([median(np.ascontiguousarray(ratio[:, k])) for k in range(3)], np.float32)
+    if np.abs(gain).max() > _EXPOSURE_MATCHED:
+        view.background_gain = np.exp(gain).astype(np.float32)
+        view.background = view.background * view.background_gain
+
+
+#: A background within this of the image's exposure, in the log of each channel's gain, is left as it is.
+_EXPOSURE_MATCHED = 0.03
+
+
 def aim_point(cameras: Sequence[Camera]) -> np.ndarray:
     """(3,) the point closest, in least squares, to all the cameras' optical axes.
 
@@ -121,6 +142,9 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
+        # Per channel, what the background was multiplied by to match the image's exposure, if it was
+        # (_matched_exposure).
+        self.background_gain: np.ndarray | None = None
         # The smooth light field the coarse pictures were divided by (_even_the_light), if they were.
         self.light_field: np.ndarray | None = None
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
@@ -157,6 +181,8 @@ class _View:
         assert self.full_background is not None
         image, empty = (cv2.resize(picture.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA)
                         for picture in (self.image, self.full_background))
+        if self.background_gain is not None:
+            empty = empty * self.background_gain
         if self.light_field is None:
             return image, empty
         return image / self.light_field, empty / self.light_field
@@ -342,7 +368,14 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
             grey = cv2.resize(grey, (round(width / view.fine_scale), round(height / view.fine_scale)),
                               interpolation=cv2.INTER_AREA)
         view.fine[key] = grey.astype(np.float32)
+        if background and view.background_gain is not None:
+            # Brought to the image's exposure as the coarse background is (_matched_exposure), in grey's weights.
+            view.fine[key] *= float(np.dot(_GREY_WEIGHTS, view.background_gain))
     return view.fine[key]
+
+
+#: OpenCV's weights of the blue, green and red channels in grey.
+_GREY_WEIGHTS = np.array([0.114, 0.587, 0.299], np.float32)
 
 
 def _sensor_noise(view: _View) -> float:
@@ -917,6 +950,8 @@ def auto_silhouettes(images: Sequence[np.ndarray], cameras: Sequence[Camera], *,
                 raise ImageError(f"the background is {background.shape[1]}x{background.shape[0]} pixels, but its "
                                  f"image is {image.shape[1]}x{image.shape[0]}", view=index)
         views.append(_View(index, image, camera, background))
+        if background is not None:
+            _matched_exposure(views[-1])
     aim = aim_point(cameras if aim_cameras is None else aim_cameras)
     plane = None
     if support_plane is not None:
