@@ -21,7 +21,8 @@ empty workspace, rendered without the object) and "true masks" (the ceiling).
     union_iou; the truth as a superquadric of exponent 0.1, which the true masks' ceiling shares), the
     same groups.
 
-A reconstruction that fails scores 0 and is counted. Prints tables; asserts nothing.
+A reconstruction that fails scores 0 and is counted; the scans whose backgrounds were set aside (reconstruct's
+backgrounds_set_aside: the silhouettes cut against them failed) are listed. Prints tables; asserts nothing.
 """
 
 from __future__ import annotations
@@ -124,12 +125,13 @@ def score(number: int) -> dict:
         else:
             views = [View(camera, image=image, background=background if way == "+ background" else None)
                      for camera, image, background in zip(cameras, images, backgrounds)]
-        entry: dict = {"iou": 0.0, "views": [0.0] * len(truths), "error": None}
+        entry: dict = {"iou": 0.0, "views": [0.0] * len(truths), "error": None, "set aside": None}
         try:
             result = reconstruct(views, support_plane=[0.0, 0.0, 1.0, 0.0])
         except Exception as exc:  # a failed reconstruction scores 0; its message is shown
             entry["error"] = f"{type(exc).__name__}: {exc}"
         else:
+            entry["set aside"] = result.backgrounds_set_aside
             entry["iou"] = union_iou(model_parts(result), truth_of(scene))
             entry["views"] = [float(((s > 0) & (t > 0)).sum() / max(1, ((s > 0) | (t > 0)).sum()))
                               for s, t in zip(result.silhouettes, truths)]
@@ -167,6 +169,11 @@ def tables(records: list[dict]) -> None:
     print(f"{'':<28}" + "".join(f"{'mean':>9}{'worst':>8}{'under':>7}" for _ in WAYS))
     for name, group in groups.items():
         print(f"{name:<22}{len(group):>6}" + "".join(_cells([r[way]["iou"] for r in group]) for way in WAYS))
+    set_aside = [(r["number"], r["+ background"]["set aside"]) for r in records if r["+ background"].get("set aside")]
+    if set_aside:
+        print("\nbackgrounds set aside (the silhouettes cut against them failed; found from the images alone):")
+        for number, message in set_aside:
+            print(f"  scan {number}: {message[:110]}")
     errors = [(r["number"], way, r[way]["error"]) for r in records for way in WAYS if r[way]["error"]]
     if errors:
         print("\nfailures:")
