@@ -73,7 +73,7 @@ _SPECK = 12
 
 
 def _matched_exposure(view: _View) -> None:
-    """Bring the view's coarse background to its image's exposure and white balance.
+    """Bring the view's background to its image's exposure and white balance.
 
     The empty workspace is taken before the object is put there, and a camera may set its exposure and white
     balance anew for each picture (the object, dark or bright, changes what it meters): the whole table then
@@ -81,12 +81,14 @@ def _matched_exposure(view: _View) -> None:
     everywhere. Most of the picture is table, so the median of each channel's log ratio of image to background
     is that gain. Within :data:`_EXPOSURE_MATCHED` of 1 the pictures are left as they are: the same camera's
     pictures of the same table give 0 (the grey levels' rounding), and so every scene of the benchmarks."""
-    assert view.background is not None
+    assert view.background is not None and view.full_background is not None
     ratio = np.log((view.coarse + _RATIO_OFFSET) / (view.background + _RATIO_OFFSET)).reshape(-1, 3)
     gain = np.array([median(np.ascontiguousarray(ratio[:, k])) for k in range(3)], np.float32)
     if np.abs(gain).max() > _EXPOSURE_MATCHED:
-        view.background_gain = np.exp(gain).astype(np.float32)
-        view.background = view.background * view.background_gain
+        # Both pictures of the empty workspace, the coarse one and the one the finer scales are read from.
+        scale = np.exp(gain).astype(np.float32)
+        view.background = view.background * scale
+        view.full_background = view.full_background * scale
 
 
 #: A background within this of the image's exposure, in the log of each channel's gain, is left as it is.
@@ -142,9 +144,6 @@ class _View:
         self.background = None if background is None else cv2.resize(
             background, self.coarse_size, interpolation=cv2.INTER_AREA).astype(np.float32)
         self.full_background = background
-        # Per channel, what the background was multiplied by to match the image's exposure, if it was
-        # (_matched_exposure).
-        self.background_gain: np.ndarray | None = None
         # The smooth light field the coarse pictures were divided by (_even_the_light), if they were.
         self.light_field: np.ndarray | None = None
         self.fine_scale = max(1.0, max(width, height) / FINE_SIDE)
@@ -181,8 +180,6 @@ class _View:
         assert self.full_background is not None
         image, empty = (cv2.resize(picture.astype(np.float32), self.coarse_size, interpolation=cv2.INTER_AREA)
                         for picture in (self.image, self.full_background))
-        if self.background_gain is not None:
-            empty = empty * self.background_gain
         if self.light_field is None:
             return image, empty
         return image / self.light_field, empty / self.light_field
@@ -368,14 +365,7 @@ def _fine_grey(view: _View, background: bool = False) -> np.ndarray:
             grey = cv2.resize(grey, (round(width / view.fine_scale), round(height / view.fine_scale)),
                               interpolation=cv2.INTER_AREA)
         view.fine[key] = grey.astype(np.float32)
-        if background and view.background_gain is not None:
-            # Brought to the image's exposure as the coarse background is (_matched_exposure), in grey's weights.
-            view.fine[key] *= float(np.dot(_GREY_WEIGHTS, view.background_gain))
     return view.fine[key]
-
-
-#: OpenCV's weights of the blue, green and red channels in grey.
-_GREY_WEIGHTS = np.array([0.114, 0.587, 0.299], np.float32)
 
 
 def _sensor_noise(view: _View) -> float:
@@ -3726,9 +3716,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
             mapped = _parallax_evidence(view, [v for v in views if v is not view], plane,
                                         [standing[v.index] for v in views if v is not view])
             mapped_score = np.nan_to_num(mapped, nan=np.inf) / max(_noise_level(mapped), _NOISE_FLOOR)
-            image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
-            brightness, ground = _brightness(image), _brightness(empty)
-            hue_shift = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
+            brightness, ground, hue_shift = _hue_shift(view)
             shadow = (brightness < 0.95 * ground) & (hue_shift < _LAMP_HUE_SHIFT) & (mapped_score < 1.5)
             evidence = np.where(shadow, np.minimum(evidence, mapped), evidence)
     elif plane is not None:
@@ -4454,7 +4442,7 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
     of the empty workspace and there is a support plane: what changed against the empty workspace, less what
     changed alike in another view at the same table point (a shadow)."""
     ratios = {view.index: _log_ratio(view) for view in views}
-    changed, textures, tables, shades, clearly, unlike = {}, {}, {}, {}, {}, {}
+    changed, textures, tables, shades, clearly, clear_change = {}, {}, {}, {}, {}, {}
     for view in views:
         change = np.abs(ratios[view.index]).sum(axis=2)
         texture, grain_kept, view.grain_sums = _texture_change(view, _coarse_aim(view, aim))
@@ -4473,17 +4461,17 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         # itself took that tint: the glow of a coloured object beside it).
         beside_the_change = np.maximum(textures[view.index], _tint_change(view))
         unrounded = _noise_level(change)
-        unlike[view.index] = change / max(unrounded, _BACKGROUND_NOISE_FLOOR)
+        clear_change[view.index] = change / max(unrounded, _BACKGROUND_NOISE_FLOOR)
         score = np.maximum(change / max(_change_noise(view, unrounded), _BACKGROUND_NOISE_FLOOR), beside_the_change)
         changed[view.index] = cv2.morphologyEx(np.where(score > 2.5, 255, 0).astype(np.uint8), cv2.MORPH_OPEN, _SMALL)
-        clearly[view.index] = _clearly_changed(change, unrounded, beside_the_change)
+        clearly[view.index] = _clearly_changed(clear_change[view.index], beside_the_change)
     # First with nothing taken to stand anywhere, then with what stood out hiding the table points behind it
     # (a view that sees the object there cannot confirm a shadow); then, twice, with the silhouettes cut
     # from it hiding them too (a face that looked like a shadow in every view is found by its neighbours).
     scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, None, None)
     # From the second look on, what another view confirms must look like a shadow to be one (_unlike_a_shadow):
     # the first look's confirmed shadow says how a shadow looks in each view.
-    unlike = {view.index: _unlike_a_shadow(view, scores[view.index], unlike[view.index]) for view in views}
+    unlike = {view.index: _unlike_a_shadow(view, scores[view.index], clear_change[view.index]) for view in views}
     occluders = {i: cv2.dilate(mask, _SMALL, iterations=_OCCLUSION_MARGIN) for i, mask in standing.items()}
     scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, unlike, occluders)
     # The last evidence, with the silhouettes cut hiding the most of the table behind them, counts the
@@ -4497,6 +4485,16 @@ def _background_cuts(views: Sequence[_View], plane: np.ndarray,
         scores, standing = _stands_out(views, plane, ratios, textures, tables, shades, changed, unlike, occluders,
                                        colour=round_ == _OCCLUSION_ROUNDS)
     return _background_cut(views, aim, scores, standing, clearly)
+
+
+def _hue_shift(view: _View) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each coarse pixel's brightness and the empty workspace's (the channels summed, :data:`_CHROMA_OFFSET`
+    added to each), and how far its chromaticity moved from the empty workspace's (the channels' shares'
+    differences summed): a shadow darkens the table and keeps about its chromaticity."""
+    assert view.background is not None
+    image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
+    brightness, ground = _brightness(image), _brightness(empty)
+    return brightness, ground, np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
 
 
 def _unlike_a_shadow(view: _View, score: np.ndarray, change: np.ndarray) -> np.ndarray:
@@ -4514,10 +4512,7 @@ def _unlike_a_shadow(view: _View, score: np.ndarray, change: np.ndarray) -> np.n
     glow on it, which every view sees alike) is left to the other views' likeness. The noise is the one before
     the rounding (:func:`_clearly_changed`): on a flat dark mat the rounded one reads nothing, and the mat's
     noise would stand out."""
-    assert view.background is not None
-    image, empty = view.coarse + _CHROMA_OFFSET, view.background + _CHROMA_OFFSET
-    brightness, ground = _brightness(image), _brightness(empty)
-    hue = np.abs(image / brightness[..., None] - empty / ground[..., None]).sum(axis=2)
+    brightness, ground, hue = _hue_shift(view)
     darker = brightness < 0.97 * ground
     dimmed = darker & (brightness > 0.1 * ground)
     confirmed = dimmed & (score > 0) & (score < 1.0)
@@ -4531,10 +4526,10 @@ def _unlike_a_shadow(view: _View, score: np.ndarray, change: np.ndarray) -> np.n
 _SHADOW_HUE_SPREAD = 3.0
 
 
-def _clearly_changed(change: np.ndarray, unrounded: float, beside_the_change: np.ndarray) -> np.ndarray:
+def _clearly_changed(change: np.ndarray, beside_the_change: np.ndarray) -> np.ndarray:
     """(h, w) 0/255: where a view changed against the empty workspace beyond its noise as the pictures before
-    their rounding give it (``change``, :func:`_background_cuts`', and its noise ``unrounded``,
-    :func:`_noise_level`), or where its grain or tint did (``beside_the_change``, in units of their noise).
+    their rounding give it (``change``, :func:`_background_cuts`', in units of that noise, :func:`_noise_level`),
+    or where its grain or tint did (``beside_the_change``, in units of their noise).
 
     What changed at all is judged against :func:`_change_noise`, which on a flat, dark table reads the rounded
     pictures' steps and comes out 0 (over half the pixels unchanged): the floor then lies well under the
@@ -4544,7 +4539,7 @@ def _clearly_changed(change: np.ndarray, unrounded: float, beside_the_change: np
     joined the object within its convex outline and grew it over the table (34/rubber-mat-tin-tin: 0.490,
     0.289, 0.896). Read before the rounding, the noise does not collapse (0.13 there, over the far table's
     99th percentile, 0.11); a piece the table's noise could have made holds no pixel beyond it."""
-    clear = np.maximum(change / max(unrounded, _BACKGROUND_NOISE_FLOOR), beside_the_change) > 2.5
+    clear = np.maximum(change, beside_the_change) > 2.5
     return np.where(clear, 255, 0).astype(np.uint8)
 
 
