@@ -158,6 +158,9 @@ class _View:
         # Without an empty workspace: the brightness over the table's of the shadow that the view's first cut
         # saw in the open (_open_shadow_seen), None if it saw none.
         self.shadow_seen: np.ndarray | None = None
+        # Without an empty workspace, with a plane: the coarse pixels whose table point no other view's picture
+        # holds (_first_cut). Geometry alone, the same for every look.
+        self.unconfirmable: np.ndarray | None = None
         # The last graph cut's box's shadow without an empty workspace (_shadow_in_box), and what it was of.
         self.box_shadow: tuple | None = None
         self.noise: float | None = None  # the sensor's noise in the fine grey image (_sensor_noise)
@@ -1600,20 +1603,31 @@ def _tops_beyond_a_side_added(views: Sequence[_View], masks: list[np.ndarray], p
     if not lost or not found:
         return masks
     reach = _reach(views, masks, aim)
-    heights = [_upper_rim_height(views, masks, plane, i, reach) for i in lost]
-    if not any(np.isfinite(heights)):
+    highest, lowest = np.array([_upper_rim_height(views, masks, plane, i, reach) for i in lost]).T
+    if not np.isfinite(highest).any():
         return masks
-    height = float(np.nanmin(heights))
-    points, spacing = _plane_samples(plane, aim, height, reach)
-    outlined = _under_every_silhouette(views, masks, points, plane)
-    top = outlined.copy()
-    for j in found:
-        top &= _in_silhouette(views[j], masks[j], points)
-    # A top at that height fits, whole, in the silhouettes of the views that found it: they hold over half of
+    # One top: its near edge lies within every lost view's span of heights, at or below the highest.
+    height, floor = float(np.nanmin(highest)), float(np.nanmax(lowest))
+    # A top at its height fits, whole, in the silhouettes of the views that found it: they hold over half of
     # the section the side outlines allow (the rest, the corners three views' outlines leave, lies beyond its
     # far edge). A section taken above the top (a can's far rim, dark, in views that found its top) reaches
-    # beyond the rim of the views that see the top lower: they hold its near part alone.
-    if np.count_nonzero(top) <= _FITS_WHOLE * np.count_nonzero(outlined):
+    # beyond the rim of the views that see the top lower: they hold its near part alone. Where two views or
+    # more found the top, their silhouettes, each holding all of it, let the rim's rays in above it
+    # (23/laminate-sugar-box-tall-box 0: 0.188 m read off the rim, the top at 0.172 m, and the section there
+    # held by 0.11): the top is the highest section down the span that fits. Where one view found it, a
+    # section below the height read fits that one silhouette above the top as well (a dark can's far rim:
+    # 0.123 m fitted, the top at 0.110 m), and the height read is the only one asked.
+    step = _HEIGHT_STEP * reach
+    below: list[float] = np.arange(height - step, floor, -step).tolist() if len(found) > 1 else []
+    for height in [height, *below]:
+        points, spacing = _plane_samples(plane, aim, height, reach)
+        outlined = _under_every_silhouette(views, masks, points, plane)
+        top = outlined.copy()
+        for j in found:
+            top &= _in_silhouette(views[j], masks[j], points)
+        if np.count_nonzero(top) > _FITS_WHOLE * np.count_nonzero(outlined):
+            break
+    else:
         return masks
     # The top a view lost for the table's look has that look where the views that found it see it: a top of
     # another look (a print, a bottle's shoulder) the lost view would have told from the table.
@@ -1779,14 +1793,16 @@ def _of_the_table_s_look(image: np.ndarray, brightness: np.ndarray, region: np.n
 
 
 def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane: np.ndarray, i: int,
-                      reach: float) -> float:
-    """The median over view ``i``'s upper rim of the highest height at which the ray through a rim pixel lies
-    within every other view's silhouette swept down to the table (:func:`_under_silhouettes`); NaN where no
-    ray does. A top's near edge lies there: above it the ray passes in front of the object."""
+                      reach: float) -> tuple[float, float]:
+    """The medians over view ``i``'s upper rim of the highest and of the lowest height at which the ray through a
+    rim pixel lies within every other view's silhouette swept down to the table (:func:`_under_silhouettes`);
+    NaN where no ray does. A top's near edge lies between the two: above the highest the ray passes in front
+    of the object, below the lowest behind it. The other views' silhouettes are looser than the object, the
+    more so the more of it they found, so the near edge may lie below the highest."""
     view = views[i]
     ys, xs = np.nonzero(_upper_rim(view, plane, masks[i]))
     if not len(xs):
-        return float("nan")
+        return float("nan"), float("nan")
     uv = view.from_coarse(xs, ys)
     heights = np.arange(0.0, 2.0 * reach, _HEIGHT_STEP * reach)
     # Every height's points at once: the rays are traced once, each other view looked into once.
@@ -1795,10 +1811,14 @@ def _upper_rim_height(views: Sequence[_View], masks: Sequence[np.ndarray], plane
     within = _under_every_silhouette([views[j] for j in others], [masks[j] for j in others], points,
                                      plane).reshape(len(heights), len(xs))
     if not within.any():
-        return float("nan")
-    # Per rim pixel, the last height (the highest) at which its ray lies within; NaN where it never does.
+        return float("nan"), float("nan")
+    # Per rim pixel, the last height (the highest) and the first (the lowest) at which its ray lies within; NaN
+    # where it never does.
+    crossed = within.any(axis=0)
     last = len(heights) - 1 - np.argmax(within[::-1], axis=0)
-    return float(np.nanmedian(np.where(within.any(axis=0), heights[last], np.nan)))
+    first = np.argmax(within, axis=0)
+    return (float(np.nanmedian(np.where(crossed, heights[last], np.nan))),
+            float(np.nanmedian(np.where(crossed, heights[first], np.nan))))
 
 
 def _plane_axes(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -3759,6 +3779,7 @@ def _first_cut(view: _View, views: Sequence[_View], plane: np.ndarray | None, ai
         for other in views:
             if other is not view:
                 seen |= view.sees(other, plane)[1]
+        view.unconfirmable = ~seen
         near = _component_near(differs, centre, reach=0.25 * np.hypot(cw, ch))
         if near is not None:
             _, _, w, h = cv2.boundingRect(near)
@@ -4082,6 +4103,11 @@ def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) ->
     key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
     if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
         image, low = view.coarse[crop], score[crop] < 1.0
+        if view.unconfirmable is not None:
+            # Evidence there is 0 for want of any (:func:`_parallax_evidence`), not the table confirmed: a dark
+            # face there (a box's top seen from low views, near, whose table point lies far behind it, out of
+            # the others' pictures) would pass for the confirmed shadow, table for sure in the graph cut.
+            low &= ~view.unconfirmable[crop]
         shadow = low & _shadow_like(image, low)
         view.box_shadow = (view.coarse, key, shadow, _shadow_seen(image, low, shadow, score[crop] == _HIDDEN))
     return view.box_shadow[2], view.box_shadow[3]
