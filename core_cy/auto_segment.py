@@ -4094,8 +4094,9 @@ def _open_shadow_seen(view: _View, region: np.ndarray, score: np.ndarray) -> np.
 
 
 def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) -> tuple[np.ndarray, _ShadowSeen | None]:
-    """Within the graph cut's box ``crop``: the table the other views confirm (``score`` under 1) that looks
-    like a shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
+    """Within the graph cut's box ``crop``: the table the other views confirm (``score`` under 1 where some
+    other view's picture holds the table point; not the view's ``unconfirmable`` pixels) that looks like a
+    shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
     (``score`` :data:`_HIDDEN`) asked: the one way to ask it, for the first cut's graph cut and the shadow it
     sees in the open, the open shadow round a silhouette, and the table under the object's overhang. A first
     cut asks it twice of one box and one evidence: the view keeps its last one. Read only."""
