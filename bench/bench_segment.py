@@ -171,9 +171,9 @@ def _decode_ms(jpegs: list[list[bytes]], repeat: int = 5) -> float:
     return float(np.median(times))
 
 
-def _outside_ms(dirs: list[Path], pin: list[str], lines: int = 30) -> tuple[float, int]:
-    """Median wall time (ms) between `robocell reconstruct`'s output lines over ``lines`` bundles, and
-    how many of the lines were errors."""
+def _outside_ms(dirs: list[Path], pin: list[str], lines: int = 30) -> tuple[np.ndarray, int]:
+    """The wall times (ms) between `robocell reconstruct`'s output lines over ``lines`` bundles (each one
+    bundle's reconstruction), and how many of the lines were errors."""
     robocell = Path(sys.executable).with_name("robocell")
     args = [str(d) for d in (dirs * (lines // len(dirs) + 1))[:lines]]
     process = subprocess.Popen([*pin, str(robocell), "reconstruct", *args], stdout=subprocess.PIPE,
@@ -184,7 +184,7 @@ def _outside_ms(dirs: list[Path], pin: list[str], lines: int = 30) -> tuple[floa
         stamps.append(time.perf_counter())
         errors += "error" in json.loads(line)
     process.wait()
-    return float(np.median(np.diff(stamps))) * 1e3, errors
+    return np.diff(stamps) * 1e3, errors
 
 
 def masks_bundle(plain: Path, out: Path) -> Path:
@@ -208,9 +208,10 @@ def timing(groups: dict[str, tuple[list[Path], list[Path]]]) -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {0})  # the decode runs on the same core as the reconstructions
     print(f"\n(c) `robocell reconstruct` from outside{', one core (taskset -c 0)' if pin else ''}, 3 views of "
-          "640x480 JPEG a bundle: wall time between output lines (median over 30), beside OpenCV decoding the "
-          "same three JPEGs on the same core just before and after (median)")
-    print(f"{'bundles':<34}{'reconstruct ms':>16}{'decode ms':>12}{'ratio':>8}{'errors':>8}")
+          "640x480 JPEG a bundle: wall time between output lines (over 30: median, mean and worst), beside OpenCV "
+          "decoding the same three JPEGs on the same core just before and after (median); the ratio is the "
+          "median's")
+    print(f"{'bundles':<34}{'reconstruct ms':>16}{'mean':>9}{'worst':>9}{'decode ms':>12}{'ratio':>8}{'errors':>8}")
     for name, (dirs, decoded) in groups.items():
         if not dirs:
             continue
@@ -219,9 +220,11 @@ def timing(groups: dict[str, tuple[list[Path], list[Path]]]) -> None:
             scan = json.loads((d / "scan.json").read_text())
             jpegs.append([(d / v["image"]).read_bytes() for v in scan["views"]])
         before = _decode_ms(jpegs)
-        outside, errors = _outside_ms(dirs, pin)
+        times, errors = _outside_ms(dirs, pin)
+        outside = float(np.median(times))
         decode = (before + _decode_ms(jpegs)) / 2
-        print(f"{name:<34}{outside:>16.2f}{decode:>12.2f}{outside / decode:>8.2f}{errors:>8}")
+        print(f"{name:<34}{outside:>16.2f}{times.mean():>9.2f}{times.max():>9.2f}{decode:>12.2f}"
+              f"{outside / decode:>8.2f}{errors:>8}")
     print("  (decode: the three views' JPEGs; a bundle with backgrounds has three more to read; the true masks'\n"
           "   bundles are the default's with the true silhouettes, PNG, in place of the images: the fit's own cost,\n"
           "   beside the decode of the images they stand for)")

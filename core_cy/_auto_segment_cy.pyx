@@ -611,3 +611,70 @@ def channel_sum(const floating[:, :, :] image not None, floating[:, ::1] brightn
             for c in range(width):
                 brightness[r, c] = image[r, c, 0] + image[r, c, 1]
                 brightness[r, c] = brightness[r, c] + image[r, c, 2]
+
+
+
+
+
+cdef inline bint _column_sample(const double[:, ::1] projection, const double[::1] plane, double x, double y,
+                                double z, double drop, double share, double sx, double sy, double* u,
+                                double* v) noexcept nogil:
+    """The nearest coarse pixel (``u`` column, ``v`` row; rounded half to even) by a pinhole ``projection`` (3, 4)
+    of the point ``share`` of the way from world point (x, y, z) down the normal of ``plane`` to its foot
+    (``drop`` below it), and whether that point lies in front of the camera. The point is taken as NumPy's
+    ``point - (share * drop) * normal`` gives it."""
+    cdef double step = share * drop, hu, hv, hz
+    x, y, z = x - step * plane[0], y - step * plane[1], z - step * plane[2]
+    hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
+    hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
+    hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
+    u[0] = rint((hu / hz + 0.5) / sx - 0.5)
+    v[0] = rint((hv / hz + 0.5) / sy - 0.5)
+    return hz > 0
+
+
+def columns_meet_mask(const double[:, ::1] points not None, const double[::1] plane not None,
+                      const double[:, ::1] projection not None, double sx, double sy,
+                      const unsigned char[:, ::1] mask not None, const double[::1] shares not None,
+                      unsigned char[::1] met not None):
+    """Fill ``met`` (N,) with 1 where the column under world point ``points[k]`` (N, 3), down the normal of
+    ``plane`` (4,: unit normal, then offset) to the plane, meets ``mask`` (h, w) in the coarse image of a
+    pinhole ``projection`` (3, 4) (coarse pixels ``sx`` x ``sy`` full-resolution ones, centres on integers): a
+    sample of the column, at any of ``shares`` (of the point's height: 0 the point, 1 its foot), that the view
+    sees (in front of the camera, within the image) at a pixel (the nearest, rounded half to even) inside the
+    mask; 0 where none does. A column stops at its first sample in the mask.
+
+    A column whose two ends, in front of the camera, fall beside the mask's bounding box on one side is not
+    sampled between them: a pinhole maps a segment in front of it onto a segment, so every sample falls there
+    too (the box is widened by a pixel for the rounding of the samples' own coordinates)."""
+    cdef Py_ssize_t n = points.shape[0], count = shares.shape[0], k, s, r, c
+    cdef Py_ssize_t height = mask.shape[0], width = mask.shape[1]
+    cdef double left = width, right = -1, top = height, bottom = -1
+    cdef double x, y, z, drop, u, v, u_end, v_end
+    if points.shape[1] != 3 or plane.shape[0] != 4 or projection.shape[0] != 3 or projection.shape[1] != 4:
+        raise ValueError("points must be (N, 3), plane (4,) and projection (3, 4)")
+    if met.shape[0] != n:
+        raise ValueError("met must be (N,)")
+    with nogil:
+        for r in range(height):
+            for c in range(width):
+                if mask[r, c]:
+                    left, right, top, bottom = min(left, c), max(right, c), min(top, r), max(bottom, r)
+        left, right, top, bottom = left - 1, right + 1, top - 1, bottom + 1
+        for k in range(n):
+            met[k] = 0
+            if right < 0 or count == 0:  # an empty mask, or no sample
+                continue
+            x, y, z = points[k, 0], points[k, 1], points[k, 2]
+            drop = x * plane[0] + y * plane[1] + z * plane[2] + plane[3]
+            if (_column_sample(projection, plane, x, y, z, drop, shares[0], sx, sy, &u, &v)
+                    and _column_sample(projection, plane, x, y, z, drop, shares[count - 1], sx, sy, &u_end, &v_end)
+                    and ((u < left and u_end < left) or (u > right and u_end > right)
+                         or (v < top and v_end < top) or (v > bottom and v_end > bottom))):
+                continue
+            for s in range(count):
+                if (_column_sample(projection, plane, x, y, z, drop, shares[s], sx, sy, &u, &v)
+                        and isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height
+                        and mask[<Py_ssize_t>v, <Py_ssize_t>u]):
+                    met[k] = 1
+                    break

@@ -40,9 +40,9 @@ import cv2
 import numpy as np
 from scipy.special import erfinv
 
-from ._auto_segment_cy import (add_relit_grain, any_within, channel_sum, median, median_and_spread,
-                               plane_homography_maps, project_into_mask, ratio_disagreement, shadow_like_pixels,
-                               shadow_look, windowed_correlation)
+from ._auto_segment_cy import (add_relit_grain, any_within, channel_sum, columns_meet_mask, median,
+                               median_and_spread, plane_homography_maps, project_into_mask, ratio_disagreement,
+                               shadow_like_pixels, shadow_look, windowed_correlation)
 from ._edges_cy import smoothest_path
 from .camera import Camera
 from .carve import check_support_plane
@@ -1733,11 +1733,19 @@ def _projected_into(view: _View, mask: np.ndarray, points: np.ndarray,
 def _under_silhouettes(view: _View, mask: np.ndarray, points: np.ndarray, plane: np.ndarray) -> np.ndarray:
     """(N,) bool: whether the column under each world point (N, 3), down the plane's normal to the plane, meets
     the view's silhouette ``mask`` (0/255): the silhouette swept down to the table, which its side outlines
-    bound whatever the view missed of its top."""
+    bound whatever the view missed of its top. Each column is sampled at :data:`_COLUMN_SAMPLES` points."""
+    shares = np.linspace(0.0, 1.0, _COLUMN_SAMPLES)
+    if view.camera.dist is None:
+        # A pinhole's columns in one pass, each stopped at its first sample in the silhouette (the sections of a
+        # lost top are asked at many heights, each of thousands of columns); a lens's below, share by share.
+        met = np.empty(len(points), np.uint8)
+        columns_meet_mask(np.ascontiguousarray(points, np.float64), np.asarray(plane, np.float64),
+                          view.camera.projection, view.sx, view.sy, np.ascontiguousarray(mask), shares, met)
+        return met.view(bool)
     normal = np.asarray(plane[:3], np.float64)
     heights = points @ normal + plane[3]
     met = np.zeros(len(points), bool)
-    for share in np.linspace(0.0, 1.0, _COLUMN_SAMPLES):
+    for share in shares:
         # A column met already is not looked down any further.
         asked = _to_project(~met)
         if asked is None:

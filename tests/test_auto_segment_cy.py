@@ -9,9 +9,10 @@ import pytest
 from robocell.core_cy import auto_segment
 from robocell.core_cy.camera import Camera
 
-from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, channel_sum, median, median_and_spread,
-                                               plane_homography_maps, project_into_mask, ratio_disagreement,
-                                               shadow_like_pixels, shadow_look, windowed_correlation)
+from robocell.core_cy._auto_segment_cy import (add_relit_grain, any_within, channel_sum, columns_meet_mask, median,
+                                               median_and_spread, plane_homography_maps, project_into_mask,
+                                               ratio_disagreement, shadow_like_pixels, shadow_look,
+                                               windowed_correlation)
 
 
 def _reference(values: np.ndarray) -> tuple[float, float] | None:
@@ -140,6 +141,69 @@ def test_project_into_mask_is_the_numpy_projection_and_lookup_on_random_points()
         np.testing.assert_array_equal(seen.astype(bool), expected_seen)
         np.testing.assert_array_equal(hit.astype(bool), expected_hit)
         np.testing.assert_array_equal(pixels[expected_seen], inside)
+
+
+def _columns_meet_by_numpy(points, plane, projection, sx, sy, mask, shares):
+    """Every sample of every column, projected and looked up one share after another."""
+    normal = plane[:3]
+    drop = points @ normal + plane[3]
+    met = np.zeros(len(points), bool)
+    height, width = mask.shape
+    for share in shares:
+        samples = points - (share * drop)[:, None] * normal
+        homogeneous = samples @ projection[:, :3].T + projection[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            coarse = np.rint((homogeneous[:, :2] / homogeneous[:, 2:] + 0.5) / [sx, sy] - 0.5)
+            seen = ((homogeneous[:, 2] > 0) & (coarse[:, 0] >= 0) & (coarse[:, 1] >= 0) & (coarse[:, 0] < width)
+                    & (coarse[:, 1] < height))
+        inside = coarse[seen].astype(np.int64)
+        met[np.flatnonzero(seen)[mask[inside[:, 1], inside[:, 0]] > 0]] = True
+    return met
+
+
+def test_columns_meet_mask_is_every_sample_looked_up_on_random_columns():
+    # Cameras over a table, masks of a few blobs (or none), columns from random points down to the table: some
+    # far from the mask (passed over by its bounding box), some behind the camera in part.
+    rng = np.random.default_rng(1)
+    met_somewhere = missed_somewhere = 0
+    for trial in range(40):
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        plane = np.append(normal, rng.normal())
+        projection = rng.normal(size=(3, 4))
+        projection[2, 3] += 2.0 * (trial % 4 != 0)  # every fourth camera has half the columns behind it
+        mask = np.zeros((int(rng.integers(4, 40)), int(rng.integers(4, 40))), np.uint8)
+        for _ in range(int(rng.integers(0, 4))):
+            centre = (int(rng.integers(0, mask.shape[1])), int(rng.integers(0, mask.shape[0])))
+            cv2.circle(mask, centre, int(rng.integers(0, 15)), 255, -1)
+        sx, sy = rng.uniform(0.02, 0.3, size=2)
+        points = rng.normal(size=(int(rng.integers(1, 500)), 3))
+        shares = np.linspace(0.0, 1.0, int(rng.integers(1, 60)))
+        met = np.empty(len(points), np.uint8)
+        columns_meet_mask(points, plane, projection, sx, sy, mask, shares, met)
+        expected = _columns_meet_by_numpy(points, plane, projection, sx, sy, mask, shares)
+        np.testing.assert_array_equal(met.astype(bool), expected)
+        met_somewhere += expected.sum()
+        missed_somewhere += (~expected).sum()
+    assert met_somewhere > 100 and missed_somewhere > 100  # both answers were asked for
+
+
+def test_columns_meet_mask_of_a_column_standing_over_a_pixel_by_hand():
+    # A camera looking down the z axis from z = 2 (f = 1, principal point 0) at the plane z = 0, normal up;
+    # coarse pixels of 0.1, so that image coordinate u is coarse (u + 0.5) / 0.1 - 0.5. The column over
+    # (0.5, 0, 1) runs down to (0.5, 0, 0): u = 0.5 / (2 - z) from 0.5 to 0.25, coarse 9.5 to 7.0, rounded half
+    # to even 10 to 7; v = 0 everywhere, coarse row 4.5, rounded 4.
+    projection = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 2.0]])
+    plane = np.array([0.0, 0.0, 1.0, 0.0])
+    shares = np.linspace(0.0, 1.0, 11)
+    point = np.array([[0.5, 0.0, 1.0]])
+    met = np.empty(1, np.uint8)
+    for (row, column), expected in (((4, 10), 1), ((4, 7), 1), ((4, 9), 1), ((4, 6), 0), ((4, 11), 0),
+                                    ((5, 8), 0), ((3, 8), 0)):
+        mask = np.zeros((10, 12), np.uint8)
+        mask[row, column] = 255
+        columns_meet_mask(point, plane, projection, 0.1, 0.1, mask, shares, met)
+        assert met[0] == expected, (row, column)
 
 
 def test_windowed_correlation_is_the_numpy_formula_on_random_window_means():
