@@ -613,9 +613,6 @@ def channel_sum(const floating[:, :, :] image not None, floating[:, ::1] brightn
                 brightness[r, c] = brightness[r, c] + image[r, c, 2]
 
 
-
-
-
 cdef inline bint _column_sample(const double[:, ::1] projection, const double[::1] plane, double x, double y,
                                 double z, double drop, double share, double sx, double sy, double* u,
                                 double* v) noexcept nogil:
