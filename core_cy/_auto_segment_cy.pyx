@@ -244,6 +244,24 @@ def plane_homography_maps(const double[:, ::1] H not None, const double[::1] acr
                 maps[r, c, 1] = <float>((y / z + 0.5) / unit_v - 0.5)
 
 
+cdef inline double _coarse_pixel(const double[:, ::1] projection, double x, double y, double z, double sx,
+                                 double sy, double* u, double* v) noexcept nogil:
+    """The depth of world point (x, y, z) by a pinhole ``projection`` (3, 4), and its nearest coarse pixel
+    (``u`` column, ``v`` row; rounded half to even) in coarse pixels ``sx`` x ``sy`` full-resolution ones."""
+    cdef double hu, hv, hz
+    hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
+    hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
+    hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
+    u[0] = rint((hu / hz + 0.5) / sx - 0.5)
+    v[0] = rint((hv / hz + 0.5) / sy - 0.5)
+    return hz
+
+
+cdef inline bint _in_image(double u, double v, Py_ssize_t width, Py_ssize_t height) noexcept nogil:
+    """Whether coarse pixel (``u``, ``v``) lies within an image of ``width`` x ``height``."""
+    return isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height
+
+
 def project_into_mask(const double[:, ::1] points not None, const double[:, ::1] projection not None,
                       double sx, double sy, const unsigned char[:, ::1] mask not None,
                       long long[:, ::1] pixels not None, unsigned char[::1] seen not None,
@@ -255,7 +273,7 @@ def project_into_mask(const double[:, ::1] points not None, const double[:, ::1]
     where it is seen inside the mask or not seen at all (a point out of a view's image is not carved)."""
     cdef Py_ssize_t n = points.shape[0], k
     cdef Py_ssize_t height = mask.shape[0], width = mask.shape[1]
-    cdef double x, y, z, hu, hv, hz, u, v
+    cdef double hz, u, v
     cdef long long column, row
     if points.shape[1] != 3 or projection.shape[0] != 3 or projection.shape[1] != 4:
         raise ValueError("points must be (N, 3) and projection (3, 4)")
@@ -263,14 +281,9 @@ def project_into_mask(const double[:, ::1] points not None, const double[:, ::1]
         raise ValueError("pixels must be (N, 2) and seen, depth and hit (N,)")
     with nogil:
         for k in range(n):
-            x, y, z = points[k, 0], points[k, 1], points[k, 2]
-            hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
-            hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
-            hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
+            hz = _coarse_pixel(projection, points[k, 0], points[k, 1], points[k, 2], sx, sy, &u, &v)
             depth[k] = hz
-            u = rint((hu / hz + 0.5) / sx - 0.5)
-            v = rint((hv / hz + 0.5) / sy - 0.5)
-            if hz > 0 and isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height:
+            if hz > 0 and _in_image(u, v, width, height):
                 column, row = <long long>u, <long long>v
                 pixels[k, 0], pixels[k, 1] = column, row
                 seen[k] = 1
@@ -616,18 +629,12 @@ def channel_sum(const floating[:, :, :] image not None, floating[:, ::1] brightn
 cdef inline bint _column_sample(const double[:, ::1] projection, const double[::1] plane, double x, double y,
                                 double z, double drop, double share, double sx, double sy, double* u,
                                 double* v) noexcept nogil:
-    """The nearest coarse pixel (``u`` column, ``v`` row; rounded half to even) by a pinhole ``projection`` (3, 4)
-    of the point ``share`` of the way from world point (x, y, z) down the normal of ``plane`` to its foot
-    (``drop`` below it), and whether that point lies in front of the camera. The point is taken as NumPy's
-    ``point - (share * drop) * normal`` gives it."""
-    cdef double step = share * drop, hu, hv, hz
-    x, y, z = x - step * plane[0], y - step * plane[1], z - step * plane[2]
-    hu = projection[0, 0] * x + projection[0, 1] * y + projection[0, 2] * z + projection[0, 3]
-    hv = projection[1, 0] * x + projection[1, 1] * y + projection[1, 2] * z + projection[1, 3]
-    hz = projection[2, 0] * x + projection[2, 1] * y + projection[2, 2] * z + projection[2, 3]
-    u[0] = rint((hu / hz + 0.5) / sx - 0.5)
-    v[0] = rint((hv / hz + 0.5) / sy - 0.5)
-    return hz > 0
+    """:func:`_coarse_pixel` of the point ``share`` of the way from world point (x, y, z) down the normal of
+    ``plane`` to its foot (``drop`` below it), and whether that point lies in front of the camera. The point is
+    taken as NumPy's ``point - (share * drop) * normal`` gives it."""
+    cdef double step = share * drop
+    return _coarse_pixel(projection, x - step * plane[0], y - step * plane[1], z - step * plane[2], sx, sy, u,
+                         v) > 0
 
 
 def columns_meet_mask(const double[:, ::1] points not None, const double[::1] plane not None,
@@ -671,7 +678,6 @@ def columns_meet_mask(const double[:, ::1] points not None, const double[::1] pl
                 continue
             for s in range(count):
                 if (_column_sample(projection, plane, x, y, z, drop, shares[s], sx, sy, &u, &v)
-                        and isfinite(u) and isfinite(v) and u >= 0 and v >= 0 and u < width and v < height
-                        and mask[<Py_ssize_t>v, <Py_ssize_t>u]):
+                        and _in_image(u, v, width, height) and mask[<Py_ssize_t>v, <Py_ssize_t>u]):
                     met[k] = 1
                     break
