@@ -23,6 +23,12 @@ segmentation, so the reconstruction uses its default), three ways:
     silhouettes given as masks (the fit's own cost, no segmentation) and the classic red HSV bundles of
     the standard set, for reference.
 
+(d) the same tables (a) and (b) over `robocell sim scans --set printed-products`
+    (workers.sim.scans.printed_products_set): the YCB-like products in parts (a mug and its handle, a
+    drill, a hammer, a banana, bottles, boxes, cans) wearing the printed looks on the same tables under
+    such a lamp, three views; grouped by table and by product. The printed set's objects are each one
+    superquadric; a robot's shelf holds these too.
+
 A reconstruction that fails scores 0 and is counted. Prints tables; asserts nothing. Rendering takes a few
 minutes: --keep DIR keeps the bundles (and reuses them when DIR already holds them). --record FILE writes
 each scan's scores (per way: volumetric IoU, silhouette IoU per view, grasp verdict, error) as JSON, so
@@ -58,7 +64,7 @@ from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
 from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
 from robocell.wire.bundle import load_bundle  # noqa: E402
 from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth, union_iou  # noqa: E402
-from robocell.workers.sim.scans import printed_set, standard_set  # noqa: E402
+from robocell.workers.sim.scans import printed_products_set, printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
 SEEING = WAYS[:2]  # the ways that segment the images
@@ -232,7 +238,10 @@ def timing(groups: dict[str, tuple[list[Path], list[Path]]]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="printed_set seeds (default 0 1)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1],
+                        help="printed_set and printed_products_set seeds (default 0 1)")
+    parser.add_argument("--sets", nargs="+", choices=("printed", "products"), default=["printed", "products"],
+                        help="which sets to score (default both)")
     parser.add_argument("--keep", type=Path, metavar="DIR", help="keep the bundles here (reused when present)")
     parser.add_argument("--no-timing", action="store_true", help="skip the speed table")
     parser.add_argument("--ways", nargs="+", choices=("default", "background", "masks"),
@@ -243,20 +252,26 @@ def main() -> None:
     cv2.setNumThreads(1)
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_segment_"))
     try:
-        records, pairs, seeds_of_records = [], [], []
-        for seed in args.seeds:
-            for spec, plain, with_bg in write_bundles(printed_set(seed), work / f"printed-{seed}"):
-                pairs.append((spec, plain, with_bg))
-                seeds_of_records.append(seed)
-                records.append((spec, score(spec, plain, with_bg, ways)))
-        default = load_bundle(pairs[0][1]).segmentation
-        print(f"printed_set seeds {args.seeds}: {len(records)} scans; the bundles' default segmentation here is "
-              f"{default.method!r}")
-        tables(records, ways)
+        recorded: dict[str, dict] = {}
+        records, pairs = [], []
+        for set_name, make, prefix in (("printed", printed_set, ""), ("products", printed_products_set, "products-")):
+            if set_name not in args.sets:
+                continue
+            scored, written = [], []
+            for seed in args.seeds:
+                for spec, plain, with_bg in write_bundles(make(seed), work / f"{set_name}-{seed}"):
+                    written.append((spec, plain, with_bg))
+                    scored.append((spec, score(spec, plain, with_bg, ways)))
+                    recorded[f"{prefix}{seed}/{spec.name}"] = scored[-1][1]
+            default = load_bundle(written[0][1]).segmentation
+            print(f"\n== {make.__name__} seeds {args.seeds}: {len(scored)} scans; the bundles' default segmentation "
+                  f"here is {default.method!r}")
+            tables(scored, ways)
+            if set_name == "printed":
+                records, pairs = scored, written
         if args.record:
-            args.record.write_text(json.dumps({f"{seed}/{spec.name}": scores for seed, (spec, scores)
-                                               in zip(seeds_of_records, records)}, indent=1))
-        if not args.no_timing and set(SEEING) <= set(ways):
+            args.record.write_text(json.dumps(recorded, indent=1))
+        if not args.no_timing and set(SEEING) <= set(ways) and records:
             # Bundles that reconstruct: a failing one stops early and would flatter the time.
             def timed(way: str, column: int) -> list[Path]:
                 return [pair[column] for pair, (_, s) in zip(pairs, records)

@@ -16,9 +16,10 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from robocell.wire.bundle import load_bundle
-from robocell.workers.sim.objects import SuperquadricObject, rotation_z
+from robocell.workers.sim.objects import YCB_LIKE, SuperquadricObject, compound, rotation_z
 from robocell.workers.sim.render import Light, TableScene, project, render, render_layers
-from robocell.workers.sim.scans import PRINTED_SCENES, default_K, look_at, printed_set, write_scan
+from robocell.workers.sim.scans import (PRINTED_SCENES, PRODUCT_SET_LOOKS, PRODUCT_TABLES, default_K, look_at,
+                                       printed_products_set, printed_set, write_scan)
 from robocell.workers.sim.textures import TABLE_KINDS, PrintedObject, product_look
 
 SIZE = (320, 240)
@@ -341,6 +342,34 @@ def test_the_cell_camera_photographs_a_printed_object_and_the_empty_workspace():
     assert np.abs(decode(camera.jpeg(T)) - empty).mean(axis=2)[truth > 0].mean() < 5
 
 
+def test_printed_products_set_puts_each_product_in_parts_on_many_tables_and_in_many_looks(tmp_path: Path):
+    specs = printed_products_set(0)
+    assert [s.object_kind for s in specs] == list(YCB_LIKE)
+    assert {s.table_kind for s in specs} == set(PRODUCT_TABLES) == {*TABLE_KINDS, "wood", "fabric"}
+    for s in specs:
+        table, product = s.table_kind, s.object_kind
+        assert s.name.startswith(f"{table}-") and s.name.endswith(f"-{product}")
+        assert s.name[len(table) + 1:-len(product) - 1] in PRODUCT_SET_LOOKS
+        assert s.segmentation is None and s.light is not None and s.truth_masks and len(s.cameras) == 3
+    # Three seeds put each product on three tables and in three looks; the lamp moves with the seed.
+    met: dict[str, set] = {}
+    for seed in range(3):
+        for s in printed_products_set(seed):
+            met.setdefault(s.object_kind, set()).add(s.name.removesuffix(f"-{s.object_kind}"))
+    assert all(len({name.split("-")[0] for name in names}) == 3 and len(names) == 3 for names in met.values())
+    assert [s.light.direction for s in specs] != [s.light.direction for s in printed_products_set(1)]
+    mug = next(s for s in specs if s.object_kind == "ycb-mug")
+    path = mug.write(tmp_path)
+    scan = json.loads((path / "scan.json").read_text())
+    assert "segmentation" not in scan and scan["support_plane"] == [0, 0, 1, 0]
+    truth = json.loads((path / "truth.json").read_text())
+    assert len(truth["parts"]) == len(compound("ycb-mug", (0.6, 0.0)).truth()["parts"]) > 1
+    for i in range(3):
+        mask = cv2.imread(str(path / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) > 0
+        # The whole mug in every view: none of it on the image's border.
+        assert mask.sum() > 2000 and not (mask[[0, -1]].any() or mask[:, [0, -1]].any())
+
+
 def test_cli_writes_backgrounds_and_knows_the_printed_set(tmp_path: Path, capsys):
     import argparse
 
@@ -349,6 +378,7 @@ def test_cli_writes_backgrounds_and_knows_the_printed_set(tmp_path: Path, capsys
     parser = argparse.ArgumentParser(prog="robocell sim scans")
     cli.add_arguments(parser)
     assert parser.parse_args(["--set", "printed"]).set_name == "printed"
+    assert parser.parse_args(["--set", "printed-products"]).set_name == "printed-products"
     args = parser.parse_args(["--out", str(tmp_path), "--shape", "cylinder", "--views", "1", "--backgrounds"])
     assert cli.run(args) == 0
     bundle = Path(capsys.readouterr().out.split()[0])

@@ -42,15 +42,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("sim-scans"), metavar="DIR",
                         help="directory to write bundles under (default: sim-scans)")
     which = parser.add_mutually_exclusive_group()
-    which.add_argument("--set", choices=["standard", "broad", "grasp", "printed", "compound"], dest="set_name",
+    which.add_argument("--set", choices=["standard", "broad", "grasp", "printed", "printed-products", "compound"],
+                       dest="set_name",
                        help="write a fixed benchmark set: standard (the default when --shape is not given; "
                             "32 scans), broad (126: seven families, 3, 4 and 6 views, see bench/bench_core.py), "
                             "grasp (bench/bench_grasp.py's scenes, 10 per family), or printed (16: printed "
                             "grocery-like objects on oak, rubber mat, laminate, cutting mat, wood and fabric, "
                             "lit by a lamp that casts their shadows; no segmentation named, true masks as "
-                            "truth_mask{i}.png; see bench/bench_segment.py), or compound (22: two of each everyday "
-                            "compound object, a bottle, mug, dumbbell, lamp, hammer, ..., truth.json listing "
-                            "its parts)")
+                            "truth_mask{i}.png; see bench/bench_segment.py), printed-products (11: the YCB-like "
+                            "products, a mug, drill, hammer, banana, bottles, boxes and cans, in parts, wearing "
+                            "printed looks on those tables under such a lamp), or compound (22: two of each "
+                            "everyday compound object, a bottle, mug, dumbbell, lamp, hammer, ..., truth.json "
+                            "listing its parts)")
     which.add_argument("--shape", choices=SHAPES, help="write scans of one object")
     parser.add_argument("--size", type=float, nargs=3, metavar=("A1", "A2", "A3"),
                         help="half-sizes in metres (cup-stack: bottom radius, rim radius, cup height; "
@@ -101,7 +104,8 @@ def _make_object(args: argparse.Namespace) -> SimObject:
 def run(args: argparse.Namespace) -> int:
     """Write the bundles, print one path per line; 0 on success, 2 on bad options."""
     from robocell.workers.sim.grasp_set import grasp_set
-    from robocell.workers.sim.scans import broad_set, compound_set, make_spec, printed_set, standard_set
+    from robocell.workers.sim.scans import (broad_set, compound_set, make_spec, printed_products_set, printed_set,
+                                            standard_set)
 
     if args.shape is None:
         given = [f"--{name}" for name in _SHAPE_ONLY if getattr(args, name) is not None]
@@ -112,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
             print("robocell sim: --supplied-masks only applies with --shape", file=sys.stderr)
             return 2
         sets = {"grasp": grasp_set, "broad": broad_set, "printed": printed_set, "standard": standard_set,
-                "compound": compound_set}
+                "printed-products": printed_products_set, "compound": compound_set}
         for spec in sets[args.set_name or "standard"](args.seed):
             print(spec.write(args.out, write_masks=args.masks, backgrounds=args.backgrounds), flush=True)
         return 0

@@ -26,6 +26,8 @@ __all__ = [
     "HSV_SEGMENTATION",
     "BROAD_FAMILIES",
     "PRINTED_SCENES",
+    "PRODUCT_SET_LOOKS",
+    "PRODUCT_TABLES",
     "ScanSpec",
     "OneSidedScan",
     "broad_set",
@@ -39,6 +41,7 @@ __all__ = [
     "make_spec",
     "object_target",
     "plan_views",
+    "printed_products_set",
     "printed_set",
     "standard_set",
     "write_scan",
@@ -440,19 +443,65 @@ def printed_set(seed: int = 0) -> list[ScanSpec]:
             look = table_look(table, xy)
         else:
             look = product_look(look_name, rng, float(obj.size[2]))
-        ambient = float(rng.uniform(0.25, 0.45))
-        elevation = float(rng.uniform(35, 70))
-        # The lit table at 85-100 % of its albedo, as a camera's exposure would put it.
-        strength = (float(rng.uniform(0.85, 1.0)) - ambient) / np.sin(np.radians(elevation))
-        warmth = float(rng.uniform(0.0, 0.12))  # from a daylight-white lamp to a warm one
-        light = Light.from_angles(float(rng.uniform(0, 360)), elevation, strength, ambient,
-                                  colour=(1.0 - warmth, 1.0 - warmth / 3, 1.0))
-        spec = make_spec(f"{kind}-{look_name}-{shape}", PrintedObject(obj, look), scene_seed, n_views,
-                         elevation_deg=(30.0, 60.0), jpeg_quality=int(rng.integers(80, 96)),
-                         noise_sigma=float(rng.uniform(1.5, 3.0)))
-        specs.append(dataclasses.replace(
-            spec, table=table, light=light, blur_sigma=float(rng.uniform(0.5, 0.9)), segmentation=None,
-            truth_masks=True, table_kind=kind, object_kind=look_name))
+        specs.append(_lit_on_table(f"{kind}-{look_name}-{shape}", PrintedObject(obj, look), table, rng, scene_seed,
+                                   n_views, table_kind=kind, object_kind=look_name))
+    return specs
+
+
+def _lit_on_table(name: str, obj: PrintedObject, table: TableScene, rng: np.random.Generator, scene_seed: int,
+                  n_views: int, **kinds: str) -> ScanSpec:
+    """The spec of ``obj`` on ``table`` under one lamp drawn from ``rng`` (any azimuth, 35-70 degrees high,
+    its strength, warmth and the ambient light), with the lens blur, sensor noise and JPEG quality drawn
+    from it too; no segmentation named, the true masks written. ``kinds``: ``table_kind``, ``object_kind``."""
+    ambient = float(rng.uniform(0.25, 0.45))
+    elevation = float(rng.uniform(35, 70))
+    # The lit table at 85-100 % of its albedo, as a camera's exposure would put it.
+    strength = (float(rng.uniform(0.85, 1.0)) - ambient) / np.sin(np.radians(elevation))
+    warmth = float(rng.uniform(0.0, 0.12))  # from a daylight-white lamp to a warm one
+    light = Light.from_angles(float(rng.uniform(0, 360)), elevation, strength, ambient,
+                              colour=(1.0 - warmth, 1.0 - warmth / 3, 1.0))
+    spec = make_spec(name, obj, scene_seed, n_views, elevation_deg=(30.0, 60.0),
+                     jpeg_quality=int(rng.integers(80, 96)), noise_sigma=float(rng.uniform(1.5, 3.0)))
+    return dataclasses.replace(spec, table=table, light=light, blur_sigma=float(rng.uniform(0.5, 0.9)),
+                               segmentation=None, truth_masks=True, **kinds)
+
+
+#: The tables and looks :func:`printed_products_set` puts the products on and in, each in turn.
+PRODUCT_TABLES = ("oak", "rubber-mat", "laminate", "cutting-mat", "wood", "fabric")
+PRODUCT_SET_LOOKS = ("mustard", "sugar-box", "soup-can", "tin", "white", "dark", "printed", "table-colour")
+
+
+def printed_products_set(seed: int = 0) -> list[ScanSpec]:
+    """The YCB-like products (:data:`workers.sim.objects.YCB_LIKE`, unions of superquadrics: a mug and its
+    handle, a drill, a hammer, a banana, bottles, boxes and cans) wearing printed looks on the printed set's
+    tables, lit as :func:`printed_set` lights them, three views each: what a robot meets on a shelf, where
+    the printed set's objects are each one superquadric.
+
+    Product ``i`` stands on table ``(i + seed) % 6`` of :data:`PRODUCT_TABLES` and wears look
+    ``(i + 3 * seed) % 8`` of :data:`PRODUCT_SET_LOOKS` (``table-colour``: the grain and colour of its
+    table), so that a few seeds put each product on most tables and in most looks. Its place (within 5 cm
+    of (0.6, 0)), yaw, lamp, lens blur, noise and JPEG quality follow ``seed``. The bundles name no
+    segmentation and carry their true masks as ``truth_mask{i}.png``; ``truth.json`` lists the parts.
+    Names are ``{table}-{look}-{product}``; ``table_kind`` is the table, ``object_kind`` the product.
+    """
+    from .objects import YCB_LIKE, compound
+
+    specs = []
+    for index, product in enumerate(YCB_LIKE):
+        rng = np.random.default_rng([seed, 900, index])
+        scene_seed = 1000 * seed + 900 + index
+        rho, phi = 0.05 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+        xy = (0.6 + rho * np.cos(phi), rho * np.sin(phi))
+        obj = compound(product, xy, rng.uniform(0, 360))
+        kind = PRODUCT_TABLES[(index + seed) % len(PRODUCT_TABLES)]
+        look_name = PRODUCT_SET_LOOKS[(index + 3 * seed) % len(PRODUCT_SET_LOOKS)]
+        table = TableScene.of_kind(kind, scene_seed)
+        if look_name == "table-colour":
+            look = table_look(table, xy)
+        else:
+            look = product_look(look_name, rng, float(obj.mesh()[0][:, 2].max()) / 2)
+        specs.append(_lit_on_table(f"{kind}-{look_name}-{product}", PrintedObject(obj, look), table, rng,
+                                   scene_seed, 3, table_kind=kind, object_kind=product))
     return specs
 
 
