@@ -2021,9 +2021,10 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
     """The silhouettes without the table under the object's overhang.
 
     The strip of table under a lying can is hidden from every other view by the can itself, so nothing but
-    its look tells it from the object; the first cut seeds it as probably table where it looks like the
-    shadow the other views confirm (:func:`_hidden_shadow`), but the graph cut keeps it wherever the
-    object's colour model holds a dark colour (a navy tin's shaded underside, which a colour model cannot
+    its look tells it from the object. The first cut seeds it as probably table where it looks like the
+    shadow the other views confirm (:func:`_hidden_shadow`), and as table for sure only where the object has
+    none of the table's colour (:func:`_graph_cut`); the graph cut keeps what is only probably table wherever
+    the object's colour model holds a dark colour (a navy tin's shaded underside, which a colour model cannot
     tell from dark grey). It is darker than any shadow seen in the open: the object hides the sky from it
     as well as the lamp. A face turned from the lamp (a box's of its table's colour, a white box's on white
     laminate) looks like the table in shadow too, but the sky and the lit table light it: it is no darker
@@ -2045,10 +2046,9 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
         if seen is None:
             continue
         shadow, brightness, _, off_table, _ = seen
-        deepest = np.quantile(brightness[shadow], _SHADOW_DEEPEST)
         under = np.zeros(mask.shape, bool)
         under[crop] = (_hidden_shadow(off_table < 1.0, brightness, shadow, hidden) & (mask[crop] > 0)
-                       & (brightness < _UNDER_OBJECT * deepest))
+                       & _under_the_object(brightness, shadow))
         if not under.any():
             continue
         hulls = hulls or _Hulls(views, masks, plane, aim)
@@ -2322,6 +2322,23 @@ def _shadow_offset(azimuth: float, elevation: float) -> np.ndarray:
 #: table under the object's overhang is darker than this share of it.
 _SHADOW_DEEPEST = 0.1
 _UNDER_OBJECT = 0.7
+#: An object with under this share of the pixels where it is surely seen of the table's colour has none of it.
+_NONE_OF_IT = 0.02
+
+
+def _under_the_object(brightness: np.ndarray, shadow: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels whose ``brightness`` is under :data:`_UNDER_OBJECT` of the deepest shadow in the
+    open (``shadow``, bool, not empty; its :data:`_SHADOW_DEEPEST` quantile): darker than a shadow can be where
+    the sky lights it, as the table under the object's overhang is, which the object hides from the sky too."""
+    return brightness < _UNDER_OBJECT * np.quantile(brightness[shadow], _SHADOW_DEEPEST)
+
+
+def _none_of_the_table_s_colour(image: np.ndarray, table_colour: np.ndarray, seen: np.ndarray) -> bool:
+    """Whether under :data:`_NONE_OF_IT` of the object's ``seen`` pixels (bool) of ``image`` have the colour
+    ``table_colour`` at their own brightness (:func:`_off_colour` under 1): no face of it, lit or in shade, looks
+    like the table, nor like the table in shadow. False where none is seen: nothing is known of its colours."""
+    count = np.count_nonzero(seen)
+    return bool(count > 0 and np.count_nonzero(_off_colour(image[seen], table_colour) < 1.0) < _NONE_OF_IT * count)
 
 
 def _alone_in_excess(index: int, excess: dict[int, float]) -> bool:
@@ -4018,8 +4035,17 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
-                shadow, brightness, darker, off_table, _ = seen
-                mask[_hidden_shadow(off_table < 1.0, brightness, shadow, hidden)] = cv2.GC_PR_BGD
+                shadow, brightness, darker, off_table, table_colour = seen
+                hidden_shadow = _hidden_shadow(off_table < 1.0, brightness, shadow, hidden)
+                mask[hidden_shadow] = cv2.GC_PR_BGD
+                # Darker than any shadow in the open, such a pixel is the table under the object's overhang (the
+                # strip under a lying can's belly), unless it is a face of the object as dark and of the table's
+                # colour. An object that, where the view surely sees it, has none of the table's colour, lit or
+                # in shade, has no such face: the strip is table for sure, which the colour models, holding the
+                # can's shaded side, would otherwise keep. A dark can of its mat's colour is left to the colour
+                # models, and after them to the other views (_shadows_under_object_dropped).
+                if _none_of_the_table_s_colour(image, table_colour, sure & (score[crop] > _SURE) & ~hidden):
+                    mask[hidden_shadow & _under_the_object(brightness, shadow)] = cv2.GC_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
                 # band, an ellipsoid's underside), whose dark colour the table's model, holding the shadow,
