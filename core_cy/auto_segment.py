@@ -2441,6 +2441,10 @@ def _bays_looked_into(views: Sequence[_View], masks: list[np.ndarray], scores: S
             continue
         outline = cv2.fillConvexPoly(np.zeros_like(masks[i]), cv2.convexHull(cv2.findNonZero(masks[i])), 255)
         bay = cv2.bitwise_and(cv2.bitwise_and(outline, hull), cv2.bitwise_not(masks[i]))
+        # An object in parts leaves bays of table too: the bend of a hammer between its handle and head, within
+        # the other views' hull, which holds the space under the raised handle. Where the object has none of
+        # the table's colour, the table in shadow there is no face of it, and is not looked into.
+        bay[_table_in_shadow(views[i], masks[i], cv2.bitwise_or(masks[i], bay), score)] = 0
         bay = cv2.morphologyEx(bay, cv2.MORPH_OPEN, _SMALL)
         if cv2.countNonZero(bay) > _BAY * cv2.countNonZero(masks[i]):
             found = _cut_within(views[i], cv2.bitwise_or(masks[i], bay), score)
@@ -4146,6 +4150,23 @@ def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) ->
         shadow = low & _shadow_like(image, low)
         view.box_shadow = (view.coarse, key, shadow, _shadow_seen(image, low, shadow, score[crop] == _HIDDEN))
     return view.box_shadow[2], view.box_shadow[3]
+
+
+def _table_in_shadow(view: _View, mask: np.ndarray, region: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """(h, w) bool, coarse: within the graph cut's box round ``region`` (0/255), the shadow the other views
+    confirm and the pixels hidden from them that look like it (:func:`_hidden_shadow`), where the object (``mask``
+    where the view surely sees it) has none of the table's colour; none elsewhere."""
+    x0, y0, x1, y1 = _cut_box(view, region)
+    crop = (slice(y0, y1), slice(x0, x1))
+    shadow, seen = _shadow_in_box(view, crop, score)
+    found = np.zeros(score.shape, bool)
+    if seen is None:
+        return found
+    hidden = score[crop] == _HIDDEN
+    standing = (cv2.erode(mask, _SMALL)[crop] > 0) & (score[crop] > _SURE) & ~hidden
+    if _none_of_the_table_s_colour(view.coarse[crop], seen.table_colour, standing):
+        found[crop] = shadow | _hidden_shadow(seen.off_table < 1.0, seen.brightness, seen.shadow, hidden)
+    return found
 
 
 def _shadow_seen_elsewhere(image: np.ndarray, low: np.ndarray, hidden: np.ndarray,
