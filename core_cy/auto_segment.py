@@ -4136,8 +4136,9 @@ def _shadow_in_box(view: _View, crop: tuple[slice, slice], score: np.ndarray) ->
     other view's picture holds the table point; not the view's ``unconfirmable`` pixels) that looks like a
     shadow (:func:`_shadow_like`), and :func:`_shadow_seen` of it, the pixels hidden from them
     (``score`` :data:`_HIDDEN`) asked: the one way to ask it, for the first cut's graph cut and the shadow it
-    sees in the open, the open shadow round a silhouette, and the table under the object's overhang. A first
-    cut asks it twice of one box and one evidence: the view keeps its last one. Read only."""
+    sees in the open, the open shadow round a silhouette, the table under the object's overhang, and the table
+    in shadow in a bay (:func:`_table_in_shadow`). A first cut asks it twice of one box and one evidence: the
+    view keeps its last one. Read only."""
     rows, columns = crop
     key = (rows.start, rows.stop, columns.start, columns.stop, score[crop].tobytes())
     if view.box_shadow is None or view.box_shadow[0] is not view.coarse or view.box_shadow[1] != key:
