@@ -2045,10 +2045,8 @@ def _shadows_under_object_dropped(views: Sequence[_View], masks: list[np.ndarray
         _, seen = _shadow_in_box(view, crop, score)
         if seen is None:
             continue
-        shadow, brightness, _, off_table, _ = seen
         under = np.zeros(mask.shape, bool)
-        under[crop] = (_hidden_shadow(off_table < 1.0, brightness, shadow, hidden) & (mask[crop] > 0)
-                       & _under_the_object(brightness, shadow))
+        under[crop] = _hidden_shadow(seen, hidden) & (mask[crop] > 0) & _under_the_object(seen)
         if not under.any():
             continue
         hulls = hulls or _Hulls(views, masks, plane, aim)
@@ -2326,11 +2324,11 @@ _UNDER_OBJECT = 0.7
 _NONE_OF_IT = 0.02
 
 
-def _under_the_object(brightness: np.ndarray, shadow: np.ndarray) -> np.ndarray:
-    """(h, w) bool: the pixels whose ``brightness`` is under :data:`_UNDER_OBJECT` of the deepest shadow in the
-    open (``shadow``, bool, not empty; its :data:`_SHADOW_DEEPEST` quantile): darker than a shadow can be where
-    the sky lights it, as the table under the object's overhang is, which the object hides from the sky too."""
-    return brightness < _UNDER_OBJECT * np.quantile(brightness[shadow], _SHADOW_DEEPEST)
+def _under_the_object(seen: _ShadowSeen) -> np.ndarray:
+    """(h, w) bool: the pixels darker than :data:`_UNDER_OBJECT` of the deepest shadow in the open (``seen``'s
+    ``shadow``, not empty; its :data:`_SHADOW_DEEPEST` quantile): darker than a shadow can be where the sky
+    lights it, as the table under the object's overhang is, which the object hides from the sky too."""
+    return seen.brightness < _UNDER_OBJECT * np.quantile(seen.brightness[seen.shadow], _SHADOW_DEEPEST)
 
 
 def _none_of_the_table_s_colour(image: np.ndarray, table_colour: np.ndarray, seen: np.ndarray) -> bool:
@@ -4039,8 +4037,8 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
             if seen is None and view.open_shadow is not None:
                 seen = _shadow_seen_elsewhere(image, low, hidden, view.open_shadow())
             if seen is not None:
-                shadow, brightness, darker, off_table, table_colour = seen
-                hidden_shadow = _hidden_shadow(off_table < 1.0, brightness, shadow, hidden)
+                shadow, _, darker, off_table, table_colour = seen
+                hidden_shadow = _hidden_shadow(seen, hidden)
                 mask[hidden_shadow] = cv2.GC_PR_BGD
                 # Darker than any shadow in the open, such a pixel is the table under the object's overhang (the
                 # strip under a lying can's belly), unless it is a face of the object as dark and of the table's
@@ -4049,7 +4047,7 @@ def _graph_cut(view: _View, region: np.ndarray, score: np.ndarray, outside: np.n
                 # can's shaded side, would otherwise keep. A dark can of its mat's colour is left to the colour
                 # models, and after them to the other views (_shadows_under_object_dropped).
                 if _none_of_the_table_s_colour(image, table_colour, sure & (score[crop] > _SURE) & ~hidden):
-                    mask[hidden_shadow & _under_the_object(brightness, shadow)] = cv2.GC_BGD
+                    mask[hidden_shadow & _under_the_object(seen)] = cv2.GC_BGD
                 # The converse: a hidden pixel darker than the table, but far from the colour of the table and
                 # of the shadow on it alike, is no shadow. It is the object's own side in shade (a tin's dark
                 # band, an ellipsoid's underside), whose dark colour the table's model, holding the shadow,
@@ -4166,7 +4164,7 @@ def _table_in_shadow(view: _View, mask: np.ndarray, region: np.ndarray, score: n
     hidden = score[crop] == _HIDDEN
     standing = (cv2.erode(mask, _SMALL)[crop] > 0) & (score[crop] > _SURE) & ~hidden
     if _none_of_the_table_s_colour(view.coarse[crop], seen.table_colour, standing):
-        found[crop] = shadow | _hidden_shadow(seen.off_table < 1.0, seen.brightness, seen.shadow, hidden)
+        found[crop] = shadow | _hidden_shadow(seen, hidden)
     return found
 
 
@@ -4208,10 +4206,10 @@ def _shadow_like(image: np.ndarray, table: np.ndarray) -> np.ndarray:
     return found
 
 
-def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray, hidden: np.ndarray) -> np.ndarray:
-    """The ``hidden`` pixels (no other view sees their table point) that ``looks`` says look like a shadow
-    on the table, and whose ``brightness`` is no more than that of the ``shadow`` the other views confirm
-    (a region, not empty).
+def _hidden_shadow(seen: _ShadowSeen, hidden: np.ndarray) -> np.ndarray:
+    """The ``hidden`` pixels (no other view sees their table point) that look like a shadow on the table
+    (darker than it, its colour kept: ``seen``'s ``off_table`` under 1), and no brighter than the shadow the
+    other views confirm (``seen``'s ``shadow``, a region, not empty).
 
     The strip of table under a lying can, and the part of a can's shadow behind it, are hidden from the
     other views by the object itself, so nothing but their look tells them from the object; seeded as
@@ -4219,7 +4217,8 @@ def _hidden_shadow(looks: np.ndarray, brightness: np.ndarray, shadow: np.ndarray
     for a dark can, or for any object's own shaded side. A face of the table's colour, or a white box's on
     white laminate, turned from the lamp looks like the table in shadow too, but the lamp's light reaches
     it in part, or more of the sky's: it is brighter than the shadow on the table beside it."""
-    return hidden & looks & (brightness <= np.quantile(brightness[shadow], _SHADOW_BRIGHTEST))
+    return hidden & (seen.off_table < 1.0) & (seen.brightness <= np.quantile(seen.brightness[seen.shadow],
+                                                                               _SHADOW_BRIGHTEST))
 
 
 def _hidden_table(image: np.ndarray, empty: np.ndarray, kept: np.ndarray, shadow: np.ndarray,

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .objects import CupStack, LumpyFigure, SimObject, SuperquadricObject
 from .render import AMBIENT, Light, TableScene, remembered, render
-from .textures import PrintedObject, product_look, table_look
+from .textures import PRODUCT_LOOKS, TABLE_KINDS, PrintedObject, product_look, table_look
 
 __all__ = [
     "HSV_SEGMENTATION",
@@ -467,8 +467,8 @@ def _lit_on_table(name: str, obj: PrintedObject, table: TableScene, rng: np.rand
 
 
 #: The tables and looks :func:`printed_products_set` puts the products on and in, each in turn.
-PRODUCT_TABLES = ("oak", "rubber-mat", "laminate", "cutting-mat", "wood", "fabric")
-PRODUCT_SET_LOOKS = ("mustard", "sugar-box", "soup-can", "tin", "white", "dark", "printed", "table-colour")
+PRODUCT_TABLES = (*TABLE_KINDS, "wood", "fabric")
+PRODUCT_SET_LOOKS = (*PRODUCT_LOOKS, "table-colour")
 
 
 def printed_products_set(seed: int = 0) -> list[ScanSpec]:
