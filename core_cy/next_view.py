@@ -199,7 +199,8 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
         starts = []
     for start in starts:
         try:
-            fit = fit_to_silhouettes(start, cameras, edges, support_plane=plane, max_iterations=_FIT_ITERATIONS)
+            fit = fit_to_silhouettes(start, cameras, edges, support_plane=plane, max_iterations=_FIT_ITERATIONS,
+                                      enclosing_radius=reconstruction.radius)
         except FitError:
             continue
         if miss([fit.superquadric]) <= bar:

@@ -375,7 +375,8 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
         # face left out, and the other views decide.
         doubtful = [samples_near(edges[index], _unsure(view, decoded[index][0], found[index][0], edges[index]))
                     if index in found else None for index, view in enumerate(views)]
-        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful)
+        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful,
+                                  enclosing_radius=radius)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
         lap("fit")
@@ -391,7 +392,8 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
             if agreement:
                 _, agreeing = max(agreement, key=lambda pair: pair[0])
                 restart = fit_to_silhouettes(agreeing, cameras, edges, support_plane=plane,
-                                             max_iterations=_RESTART_ITERATIONS, doubtful=doubtful)
+                                             max_iterations=_RESTART_ITERATIONS, doubtful=doubtful,
+                                             enclosing_radius=radius)
                 evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
@@ -403,7 +405,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
                 # floating over the table follows from every start. So the starts are fitted again with
                 # every sample sure, and that model is kept if it agrees better with the silhouettes
                 # themselves; the steps after it still doubt what auto could not confirm.
-                sure = fit_to_silhouettes(starts, cameras, edges, support_plane=plane)
+                sure = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, enclosing_radius=radius)
                 evaluations["fit"] += sure.evaluations
                 sure_ious, _ = union_ious((sure.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(sure_ious) > np.mean(ious):
@@ -420,7 +422,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
     parts: tuple[Superquadric, ...] = (superquadric,)
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
-                          support_plane=plane, max_parts=options.max_parts,
+                          support_plane=plane, max_parts=options.max_parts, enclosing_radius=radius,
                           single_evaluations=evaluations["fit"],
                           # The pixels of auto's silhouettes that their colours cannot confirm, found only if
                           # a part could pay: it must pay on the rest too.
@@ -450,7 +452,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
                 kept_edges.append(samples[keep])
                 kept_doubts.append((before | view_far)[keep])
         refined = fit_to_silhouettes(model, cameras, kept_edges, support_plane=plane, doubtful=kept_doubts,
-                                     resting=resting)
+                                     resting=resting, enclosing_radius=radius)
         evaluations["fit"] += refined.evaluations
         return refined.superquadric
 
@@ -474,7 +476,8 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
         # silhouette (a shadow taken in, a face left out). This is the one place a model is set at rest.
         # Which of auto's samples the views contradict is judged by the resting model's own outline, not by
         # the tilted one's: each model is held to the samples that it, not another, leaves far off.
-        resting = fit_to_silhouettes([parts], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True)
+        resting = fit_to_silhouettes([parts], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True,
+                                     enclosing_radius=radius)
         evaluations["fit"] += resting.evaluations
         at_rest = resting.parts
         if found and len(at_rest) == 1:
