@@ -40,6 +40,7 @@ from .edges import edge_samples, silhouette_outline
 from .errors import CoreError, FitError
 from .plan import look_at
 from .silhouette_fit import fit_to_silhouettes
+from .sphere import farthest_reach
 from .superquadric import Superquadric, start_superquadrics, surface_points
 
 __all__ = ["NextView", "choose_next_view", "propose_views"]
@@ -197,10 +198,11 @@ def _hypotheses(reconstruction, cameras, plane) -> list[list[Superquadric]]:
         starts = start_superquadrics(points[::max(1, len(points) // 250)], support_plane=plane)[:_MAX_STARTS]
     except FitError:
         starts = []
+    reach = farthest_reach(reconstruction.centre, reconstruction.radius, cameras)
     for start in starts:
         try:
             fit = fit_to_silhouettes(start, cameras, edges, support_plane=plane, max_iterations=_FIT_ITERATIONS,
-                                      enclosing_radius=reconstruction.radius)
+                                     reach=reach)
         except FitError:
             continue
         if miss([fit.superquadric]) <= bar:

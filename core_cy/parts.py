@@ -353,7 +353,7 @@ def _volume(parts) -> float:
 def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious=None,
               support_plane=None, max_parts: int = MAX_PARTS, single_evaluations: int | None = None,
               unsure: Sequence | Callable[[], Sequence] | None = None,
-              enclosing_radius: float | None = None) -> PartsFit:
+              reach: float | None = None) -> PartsFit:
     """The union of superquadrics that explains the silhouettes, from the one-superquadric fit.
 
     Parameters
@@ -383,8 +383,8 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
         (:func:`core_cy.auto_segment.unsure_pixels`); None for a view whose silhouette is sure (a
         mask given). A part must pay with them set aside as well as with them as they are. A
         function is called only if a part could pay (most objects are one part, decided before).
-    enclosing_radius : float, optional
-        The radius of a sphere that surely encloses the object: no part's half-size grows past it
+    reach : float, optional
+        How far the object may reach from its centre: no part's half-size grows past it
         (:func:`core_cy.silhouette_fit.fit_to_silhouettes`).
 
     Returns
@@ -405,8 +405,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
     plane = None if support_plane is None else np.asarray(support_plane, dtype=np.float64)
     edges = [edge_samples(silhouette_outline(silhouette), silhouette, None, count=_PART_SAMPLES)
              for silhouette in silhouettes]
-    fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0,
-                     enclosing_radius=enclosing_radius)
+    fitter = _Fitter(cameras, edges, single.T_world_object[:3, 3], support_plane, 1.0, reach=reach)
     # Going on with a round's proposals left behind (while its winner leaves the silhouettes
     # unexplained) is the search's most open-ended work: it stops once the search has spent
     # _BUDGET times what the one superquadric cost. The next round, which may explain them with one

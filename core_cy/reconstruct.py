@@ -23,7 +23,7 @@ from .parts import MAX_PARTS, explains_more, fit_parts, union_ious
 from .quality import outline_distances, radial_residual
 from .segment import AUTO, Segmentation, mask_with_outline, segment_with_outline
 from .silhouette_fit import _NOISE_PX, fit_to_silhouettes
-from .sphere import CHECK_THE_POSES, enclosing_sphere, fibonacci_sphere
+from .sphere import CHECK_THE_POSES, enclosing_sphere, farthest_reach, fibonacci_sphere
 from .superquadric import Superquadric, fit_superquadric, resting_on, start_superquadrics, upright_box
 
 __all__ = ["View", "Options", "Reconstruction", "decode_image", "reconstruct"]
@@ -345,6 +345,9 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
     plane = None if support_plane is None else check_support_plane(support_plane, centre, radius)
     if plane is not None:
         centre = lift_above_plane(centre, radius, plane)
+    # No part of the model grows past how far the object may reach from the centre (the radius across each
+    # view's line of sight, farther along one that the other views see little across).
+    reach = farthest_reach(centre, radius, cameras)
     lap("centroid")
 
     directions = fibonacci_sphere(options.n_points)
@@ -375,8 +378,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
         # face left out, and the other views decide.
         doubtful = [samples_near(edges[index], _unsure(view, decoded[index][0], found[index][0], edges[index]))
                     if index in found else None for index, view in enumerate(views)]
-        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful,
-                                  enclosing_radius=radius)
+        fit = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, doubtful=doubtful, reach=reach)
         superquadric = fit.superquadric
         evaluations["fit"] = fit.evaluations
         lap("fit")
@@ -393,7 +395,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
                 _, agreeing = max(agreement, key=lambda pair: pair[0])
                 restart = fit_to_silhouettes(agreeing, cameras, edges, support_plane=plane,
                                              max_iterations=_RESTART_ITERATIONS, doubtful=doubtful,
-                                             enclosing_radius=radius)
+                                             reach=reach)
                 evaluations["fit"] += restart.evaluations
                 other_ious, _ = union_ious((restart.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(other_ious) > np.mean(ious):
@@ -405,7 +407,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
                 # floating over the table follows from every start. So the starts are fitted again with
                 # every sample sure, and that model is kept if it agrees better with the silhouettes
                 # themselves; the steps after it still doubt what auto could not confirm.
-                sure = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, enclosing_radius=radius)
+                sure = fit_to_silhouettes(starts, cameras, edges, support_plane=plane, reach=reach)
                 evaluations["fit"] += sure.evaluations
                 sure_ious, _ = union_ious((sure.superquadric,), cameras, silhouettes, boxes)
                 if np.mean(sure_ious) > np.mean(ious):
@@ -422,7 +424,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
     parts: tuple[Superquadric, ...] = (superquadric,)
     if options.silhouette_fit and options.max_parts > 1:
         model = fit_parts(superquadric, points, cameras, silhouettes, boxes, ious=ious,
-                          support_plane=plane, max_parts=options.max_parts, enclosing_radius=radius,
+                          support_plane=plane, max_parts=options.max_parts, reach=reach,
                           single_evaluations=evaluations["fit"],
                           # The pixels of auto's silhouettes that their colours cannot confirm, found only if
                           # a part could pay: it must pay on the rest too.
@@ -452,7 +454,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
                 kept_edges.append(samples[keep])
                 kept_doubts.append((before | view_far)[keep])
         refined = fit_to_silhouettes(model, cameras, kept_edges, support_plane=plane, doubtful=kept_doubts,
-                                     resting=resting, enclosing_radius=radius)
+                                     resting=resting, reach=reach)
         evaluations["fit"] += refined.evaluations
         return refined.superquadric
 
@@ -477,7 +479,7 @@ def _reconstructed(views: list[View], segmentation: Segmentation, support_plane,
         # Which of auto's samples the views contradict is judged by the resting model's own outline, not by
         # the tilted one's: each model is held to the samples that it, not another, leaves far off.
         resting = fit_to_silhouettes([parts], cameras, edges, support_plane=plane, doubtful=doubtful, resting=True,
-                                     enclosing_radius=radius)
+                                     reach=reach)
         evaluations["fit"] += resting.evaluations
         at_rest = resting.parts
         if found and len(at_rest) == 1:

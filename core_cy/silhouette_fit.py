@@ -52,7 +52,7 @@ _SHAPE_BOUNDS = (0.1, 1.0)
 # the residual tries the plane turned about the ray by this much either way (radians).
 _TILT = 0.05
 # Sizes stay within a factor e^4 (55) of the start's: a size collapsing to 0 is no object. Growing, they
-# are also held within the sphere that encloses the object, where it is given (fit_to_silhouettes).
+# are also held within how far the object may reach, where it is given (fit_to_silhouettes).
 _LOG_SIZE_RANGE = 4.0
 # With several starts, each takes this many steps; the best two this many more; the best of them goes on.
 _SEARCH_ITERATIONS = 2
@@ -156,7 +156,7 @@ class _Problem:
     and normal equations. Part p's 11 parameters are ``x[11 p: 11 p + 11]``."""
 
     def __init__(self, start, views: _Views, support_plane, plane_weight, loss_scale, tally: list[int] | None = None,
-                 resting: bool = False, enclosing_radius: float | None = None):
+                 resting: bool = False, reach: float | None = None):
         parts = [start] if isinstance(start, Superquadric) else list(start)
         self.count = len(parts)
         self.tally = [0] if tally is None else tally  # part evaluations so far, shared by a fitter's problems
@@ -181,8 +181,8 @@ class _Problem:
             low, high, x0 = self.low[block], self.high[block], self.x0[block]
             low[3:5], high[3:5] = _SHAPE_BOUNDS
             low[:3], high[:3] = x0[:3] - _LOG_SIZE_RANGE, x0[:3] + _LOG_SIZE_RANGE
-            if enclosing_radius is not None:  # a start already larger keeps its size as its bound
-                high[:3] = np.maximum(x0[:3], np.minimum(high[:3], math.log(enclosing_radius)))
+            if reach is not None:  # a start already larger keeps its size as its bound
+                high[:3] = np.maximum(x0[:3], np.minimum(high[:3], math.log(reach)))
         # Resting, each part's axis along the plane's normal stays so: it turns only about that axis
         # (R = R0 Rz Ry Rx, so with all three angles 0 the two about its other axes are what tilt it).
         self.held: list[int] = []
@@ -241,7 +241,7 @@ class _Fitter:
     """The views packed once, and the settings every start shares: descents from starts."""
 
     def __init__(self, cameras, edges, reference, support_plane, loss_scale: float, doubtful=None,
-                 resting: bool = False, enclosing_radius: float | None = None):
+                 resting: bool = False, reach: float | None = None):
         if len(cameras) != len(edges):
             raise FitError(f"got {len(cameras)} cameras but {len(edges)} sets of edge samples")
         self.views = views = _Views.pack(cameras, edges, reference, doubtful)
@@ -255,9 +255,9 @@ class _Fitter:
             self.plane_weight = views.pixel_scale * math.sqrt(views.count / len(views.samples))
         self.loss_scale = float(loss_scale)
         self.resting = resting
-        if enclosing_radius is not None and not enclosing_radius > 0:
-            raise FitError(f"the enclosing sphere's radius must be positive, got {enclosing_radius}")
-        self.enclosing_radius = enclosing_radius
+        if reach is not None and not reach > 0:
+            raise FitError(f"the object's reach must be positive, got {reach}")
+        self.reach = reach
         # A step that moves the samples' residuals by 0.01 px (RMS) is no step.
         self.tolerance = 0.5 * 1e-4 * views.count
         self.tally = [0]
@@ -271,7 +271,7 @@ class _Fitter:
     def descent(self, start) -> Descent:
         """A descent from ``start`` (a Superquadric, or the parts of a union), not yet run."""
         problem = _Problem(start, self.views, self.plane, self.plane_weight, self.loss_scale, self.tally,
-                           self.resting, self.enclosing_radius)
+                           self.resting, self.reach)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
     def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
@@ -328,7 +328,7 @@ def _first_part(start) -> Superquadric:
 
 def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale: float = 1.0,
                        max_iterations: int = 40, doubtful=None, resting: bool = False,
-                       enclosing_radius: float | None = None) -> SilhouetteFit:
+                       reach: float | None = None) -> SilhouetteFit:
     """Refine a model until its outline in every view runs through that view's edge samples.
 
     The model is one superquadric, or a union of parts: the union's outline is the
@@ -363,9 +363,9 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         Each part is set resting on the support plane (its axis nearest the plane's normal
         along it: :func:`core_cy.superquadric.resting_on`) and kept so, turning only about that
         axis: the model of an object at rest on the plane. Needs ``support_plane``.
-    enclosing_radius : float, optional
-        The radius of a sphere that surely encloses the object (the carving's:
-        :func:`core_cy.sphere.enclosing_sphere`): no part's half-size grows past it. The edge samples
+    reach : float, optional
+        How far the object may reach from its centre, as the views see it
+        (:func:`core_cy.sphere.farthest_reach`): no part's half-size grows past it. The edge samples
         pull each outline towards them, but nothing pulls back an outline that runs on past them all:
         a rod fitted along a hammer's handle may grow on along it far beyond what any camera saw.
 
@@ -377,7 +377,7 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
     ------
     FitError
         If there are fewer than 11 samples in all, a start lies behind a camera, or
-        ``enclosing_radius`` is not positive.
+        ``reach`` is not positive.
     """
     starts = [starts] if isinstance(starts, Superquadric) else list(starts)
     if not starts:
@@ -389,7 +389,7 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
         starts = [tuple(resting_on(part, normal)[0] for part in ([start] if isinstance(start, Superquadric) else start))
                   for start in starts]
     fitter = _Fitter(cameras, edges, _first_part(starts[0]).T_world_object[:3, 3], support_plane, loss_scale,
-                     doubtful, resting, enclosing_radius)
+                     doubtful, resting, reach)
     best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
     descents = fitter.descents
     # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body

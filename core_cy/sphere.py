@@ -7,6 +7,7 @@ from x0's projection, at x0's depth, with a margin.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import cv2
@@ -15,7 +16,7 @@ import numpy as np
 from .camera import Camera  # noqa: F401  (the examples in the docstrings use it)
 from .errors import GeometryError
 
-__all__ = ["CHECK_THE_POSES", "enclosing_sphere", "fibonacci_sphere"]
+__all__ = ["CHECK_THE_POSES", "enclosing_sphere", "farthest_reach", "fibonacci_sphere"]
 
 #: What the views' disagreement about where the object is asks of the user, where the silhouettes are theirs.
 CHECK_THE_POSES = "check the poses' direction (camera-to-world) and units"
@@ -92,6 +93,46 @@ def enclosing_sphere(silhouettes, cameras, *, margin: float = 1.25, known_boxes=
         extent_px = np.linalg.norm(corners - centre_uv, axis=1).max()
         radius = max(radius, extent_px * depth / camera.focal_length)
     return centre, margin * radius
+
+
+def farthest_reach(centre, radius: float, cameras) -> float:
+    """How far from ``centre`` the object may reach, given the radius of the sphere that encloses it as
+    the views see it (:func:`enclosing_sphere`).
+
+    That radius holds across each view's line of sight; along it a view sees nothing. Of two views whose
+    lines of sight to the centre lie an angle phi apart, one sees any direction at phi / 2 or more from
+    its line of sight, where a reach r shows as r sin(phi / 2) at least: the object reaches no farther
+    than ``radius / sin(phi / 2)`` for the widest pair, and as far as it likes for views along one line.
+
+    Parameters
+    ----------
+    centre : (3,) array_like
+    radius : float
+    cameras : sequence of Camera
+
+    Returns
+    -------
+    float
+        The reach; ``inf`` when every view looks along one line.
+
+    Examples
+    --------
+    >>> def at(x, y, z):
+    ...     T = np.eye(4)
+    ...     T[:3, 3] = x, y, z
+    ...     return Camera(K=np.eye(3), T_world_cam=T)
+    >>> float(farthest_reach([0, 0, 0], 1.0, [at(0, 0, -1), at(0, 0, 1)]))  # opposite: every direction seen across
+    1.0
+    >>> round(float(farthest_reach([0, 0, 0], 1.0, [at(0, 0, -1), at(0, -1, 0)])), 3)  # a right angle apart
+    1.414
+    >>> farthest_reach([0, 0, 0], 1.0, [at(0, 0, -1), at(0, 0, -2)])
+    inf
+    """
+    sights = np.asarray([camera.center for camera in cameras], dtype=np.float64) - np.asarray(centre, np.float64)
+    sights /= np.linalg.norm(sights, axis=1, keepdims=True)
+    widest = float(np.arccos(np.clip((sights @ sights.T).min(), -1.0, 1.0)))
+    across = math.sin(widest / 2)
+    return radius / across if across > 1e-9 else math.inf
 
 
 @lru_cache(maxsize=8)

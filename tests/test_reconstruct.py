@@ -10,6 +10,7 @@ from robocell.wire.bundle import load_bundle
 from robocell.workers.sim.objects import box, cylinder, ellipsoid, rounded_box
 from robocell.workers.sim.scans import BROAD_FAMILIES, default_K, plan_views, write_scan
 from robocell.core_cy.errors import CoreError, GeometryError, ImageError, SilhouetteError
+from robocell.core_cy.plan import look_at
 from robocell.core_cy.reconstruct import Options, View, reconstruct
 from robocell.core_cy.scoring import volumetric_iou
 from robocell.core_cy.segment import RED_HSV
@@ -92,6 +93,20 @@ def test_simulated_objects_against_the_truth(tmp_path, family):
     result = _run(bundle)
     assert volumetric_iou(result.superquadric, Superquadric.from_dict(obj.truth())) > 0.95
     assert min(result.silhouette_iou) > 0.9  # a thin object seen edge-on is a few pixels wide
+
+
+def test_views_along_one_line_leave_the_object_s_depth_to_the_fit(tmp_path):
+    """Three views from one side, along a box's length, a degree or two apart: the enclosing sphere's radius
+    says how far the box reaches across their lines of sight, not along them, and the fit, from the views'
+    little spread, finds the length beyond it (held within the radius, 0.78)."""
+    obj = box([0.07, 0.03, 0.025], (0.6, 0.0))
+    target = obj.T_world_object[:3, 3]
+    poses = [look_at(target + 0.4 * np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
+                                              np.sin(elevation)]), target)
+             for azimuth, elevation in np.radians([(179.0, 10.0), (180.0, 11.0), (181.0, 12.0)])]
+    result = _run(write_scan(tmp_path / "along", [obj], poses, default_K(), seed=3, write_masks=True, name_masks=True))
+    assert max(result.superquadric.size) > result.radius
+    assert volumetric_iou(result.superquadric, Superquadric.from_dict(obj.truth())) > 0.9
 
 
 def test_distorted_lens(tmp_path):

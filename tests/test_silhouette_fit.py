@@ -201,20 +201,20 @@ def test_bad_input_is_refused():
     behind[:3, 3] = cameras[0].center + (cameras[0].center - truth.T_world_object[:3, 3])
     with pytest.raises(FitError, match="view 0: the object lies behind the camera"):
         fit_to_silhouettes(Superquadric(truth.size, truth.shape, behind), cameras, edges)
-    with pytest.raises(FitError, match="enclosing sphere's radius must be positive, got 0.0"):
-        fit_to_silhouettes(truth, cameras, edges, enclosing_radius=0.0)
+    with pytest.raises(FitError, match="the object's reach must be positive, got 0.0"):
+        fit_to_silhouettes(truth, cameras, edges, reach=0.0)
 
 
-def test_no_size_grows_past_the_sphere_that_encloses_the_object():
-    """Given a sphere that encloses the object, the fit keeps within it however the edges pull: here one
-    smaller than the box, which the box's edges would pull past; one that encloses it changes nothing."""
+def test_no_size_grows_past_the_object_s_reach():
+    """Given how far the object may reach from its centre, the fit keeps within it however the edges pull:
+    here less than the box's, which the box's edges would pull past; a reach that holds it changes nothing."""
     truth, cameras, edges = _ideal_scan("box", 3)
     start = Superquadric(0.8 * truth.size, [0.7, 0.7], truth.T_world_object)
     small = 0.9 * truth.size.max()
-    held = fit_to_silhouettes(start, cameras, edges, support_plane=[0, 0, 1, 0], enclosing_radius=small)
+    held = fit_to_silhouettes(start, cameras, edges, support_plane=[0, 0, 1, 0], reach=small)
     assert held.superquadric.size.max() <= small * (1 + 1e-12)
     enclosing = 1.25 * float(np.linalg.norm(truth.size))
-    fit = fit_to_silhouettes(start, cameras, edges, support_plane=[0, 0, 1, 0], enclosing_radius=enclosing)
+    fit = fit_to_silhouettes(start, cameras, edges, support_plane=[0, 0, 1, 0], reach=enclosing)
     assert volumetric_iou(fit.superquadric, truth) > 0.98
 
 
