@@ -2938,7 +2938,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
     grain the other views see (:func:`_plane_grain_sums`, called only when asked), and in a look again
     ``grain_before_the_looks``, the same through their silhouettes before the looks. Where the cut gave a face
     in shade to the shadow beside it, the grain (the other views' or the empty workspace's) splits the two
-    (:func:`_split_by_lost_grain`)."""
+    (:func:`_split_by_lost_grain`); a lit piece that keeps the empty workspace's grain is the table."""
     try:
         found = _cut_within(view, cv2.bitwise_or(mask, hull), score)
     except SilhouetteError:
@@ -2954,6 +2954,13 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         area = int(piece.sum())
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * area_found:
+            continue
+        if (shadow is not None and 2 * np.count_nonzero(shadow[piece]) < area
+                and ask.keeps_the_empty_workspace_grain(piece)):
+            # Lit, and keeping the empty workspace's grain as the table round it does: the table seen through a
+            # gap of the object (between a drill's barrel and its battery), which the hull holds (the space
+            # under the barrel) and the colour models may give to the object. A face, even one of the table's
+            # colour, hides the grain.
             continue
         if _lit_above_its_surroundings(view, piece, mask):
             grown[piece] = 255
