@@ -314,19 +314,33 @@ def test_a_flat_hammer_lying_on_the_table_is_not_put_under_it(tmp_path):
     assert plane[:3] @ np.asarray(result.centre) + plane[3] > 0
 
 
-def test_a_hammer_s_handle_is_no_rod_running_on_past_what_the_cameras_saw(tmp_path):
-    """A white hammer on oak, its true masks given (``printed_products_set(9)``): a rod along the handle explains
-    the handle's edges, and nothing pulls back its outline where it runs on past every sample, so the one
-    superquadric grew along the handle to 1.2 m and the parts followed (volumetric IoU 0.013 before). No part
-    reaches farther than the views see the object reach."""
-    spec = {spec.name: spec for spec in printed_products_set(9)}["oak-white-ycb-hammer"]
+def _product_with_true_masks(tmp_path, seed: int, name: str) -> float:
+    """The volumetric IoU against the truth (the judge's) of the model of one of the simulator's printed products
+    in parts (``printed_products_set(seed)``), reconstructed from its true masks."""
+    spec = {spec.name: spec for spec in printed_products_set(seed)}[name]
     directory = spec.write(tmp_path)
     bundle = load_bundle(directory)
     views = [View(view.camera, mask=(directory / f"truth_mask{index}.png").read_bytes())
              for index, view in enumerate(bundle.views)]
     result = reconstruct(views, support_plane=bundle.support_plane)
-    assert union_iou([Part.from_dict(part.to_dict()) for part in result.parts],
-                     parts_from_truth(spec.objects[0].truth())) > 0.95
+    return union_iou([Part.from_dict(part.to_dict()) for part in result.parts],
+                     parts_from_truth(spec.objects[0].truth()))
+
+
+def test_a_hammer_s_handle_is_no_rod_running_on_past_what_the_cameras_saw(tmp_path):
+    """A white hammer on oak, its true masks given (``printed_products_set(9)``): a rod along the handle explains
+    the handle's edges, and nothing pulls back its outline where it runs on past every sample, so the one
+    superquadric grew along the handle to 1.2 m and the parts followed (volumetric IoU 0.013 before). No part
+    reaches farther than the views see the object reach."""
+    assert _product_with_true_masks(tmp_path, 9, "oak-white-ycb-hammer") > 0.95
+
+
+def test_a_drill_s_barrel_is_a_cylinder_along_its_length_not_a_square_bar_across(tmp_path):
+    """A drill standing on fabric, its true masks given (``printed_products_set(15)``): the parts search fitted
+    its barrel, a round cylinder along x, as a square bar whose z axis stood across it, which cannot be round in
+    its cross-section; its outlines ran 0.93 px from the samples, the true union's 0.16 (volumetric IoU 0.78
+    before). Each part is also tried with another of its axes as z, as the one superquadric is."""
+    assert _product_with_true_masks(tmp_path, 15, "fabric-dark-power-drill") > 0.9
 
 
 def _printed_parts(printed_scene, seed: int, name: str, backgrounds: bool = False) -> tuple[int, float]:
