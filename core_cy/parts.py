@@ -50,7 +50,9 @@ cost moves an error between views), or with no more and a lower edge cost (a bet
 parts all pay but that gains so in one view only, a dumbbell's two weights
 without the bar, goes one round on before it is given up; at most ``MAX_PARTS``
 parts. Last, a part that floats (what holds it up hidden behind it in every
-view) is taken down to the table where that explains the silhouettes as well;
+view) is taken down to the table where that explains the silhouettes as well,
+and each part is tried with another of its axes as z, as the one superquadric is
+(a barrel fitted as a square bar across it becomes the cylinder along it);
 whether the model rests on the table, its parts on a face or a side, is decided
 after, for one part and many alike (:func:`explains_more`, in
 :func:`core_cy.reconstruct.reconstruct`).
