@@ -2955,8 +2955,9 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
         # A piece apart from the silhouette is not a face of it.
         if not (piece & touching).any() or area <= _BAY * area_found:
             continue
-        if (shadow is not None and 2 * np.count_nonzero(shadow[piece]) < area
-                and ask.keeps_the_empty_workspace_grain(piece)):
+        # With the empty workspace: whether the piece has a shadow's look over half of it or more.
+        shaded = None if shadow is None else bool(2 * np.count_nonzero(shadow[piece]) >= area)
+        if shaded is False and ask.keeps_the_empty_workspace_grain(piece):
             # Lit, and keeping the empty workspace's grain as the table round it does: the table seen through a
             # gap of the object (between a drill's barrel and its battery), which the hull holds (the space
             # under the barrel) and the colour models may give to the object. A face, even one of the table's
@@ -2971,7 +2972,7 @@ def _faces_beyond_outline(view: _View, mask: np.ndarray, score: np.ndarray, hull
             grown[piece] = 255
             continue
         mostly_seen = 2 * np.count_nonzero(ask.seen_behind[piece]) > area
-        if shadow is not None and 2 * np.count_nonzero(shadow[piece]) >= area:
+        if shaded:
             # A piece with a shadow's look against the empty workspace over half of it may be the shadow
             # beside the object, whose table points the other views' feet hide from them here and there: the
             # parallax must say a face where it can, and the other views see it alike.

@@ -72,7 +72,7 @@ from scipy.spatial import cKDTree
 
 from .edges import edge_samples, silhouette_outline
 from .quality import hull_covers, projected_outline
-from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _SEARCH_ITERATIONS, _Fitter, _other_axes_as_z
+from .silhouette_fit import _EXPLAINED_PX, _NOISE_PX, _Fitter
 from .superquadric import Superquadric, inside_outside, resting_on, surface_points, upright_box
 
 __all__ = ["MAX_PARTS", "PART_GAIN", "PartsFit", "explains_more", "fit_parts", "union_ious"]
@@ -492,7 +492,7 @@ def fit_parts(single: Superquadric, points, cameras, silhouettes, boxes, *, ious
 
 def _turned_where_better(parts, ious, fitter: _Fitter,
                          rasters: _Rasters) -> tuple[tuple[Superquadric, ...], list[float]]:
-    """The union with each part in turn tried with another of its axes as z (:func:`_other_axes_as_z`), as the
+    """The union with each part in turn tried with another of its axes as z (:meth:`_Fitter.turned`), as the
     one superquadric's fit tries it: a part's z axis is the odd one out, its profile with its own exponent, and
     a drill's barrel fitted along x as a square bar becomes the round cylinder along z that it is only by that
     jump. A turn goes a few steps on and, where the union then fits the samples better, to its end; it is kept
@@ -504,8 +504,7 @@ def _turned_where_better(parts, ious, fitter: _Fitter,
     for k in range(len(parts)):
         if fitter.rms(best.cost) <= _NOISE_PX:
             break
-        for turned in _other_axes_as_z(parts[k]):
-            other = fitter.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
+        for other in fitter.turned(parts, k):
             if not other.cost < best.cost:
                 continue
             other.run(_ITERATIONS)

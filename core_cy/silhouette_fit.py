@@ -27,7 +27,7 @@ about the plane's normal.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -274,6 +274,13 @@ class _Fitter:
                            self.resting, self.reach)
         return Descent(problem, problem.x0, problem.low, problem.high, self.tolerance)
 
+    def turned(self, parts: tuple[Superquadric, ...], k: int) -> Iterator[Descent]:
+        """The union ``parts`` with part ``k`` turned so that another of its axes is z (:func:`_other_axes_as_z`),
+        each turn a few steps on, one at a time: a part's z axis is the odd one out (its profile has its own
+        exponent), and the same body with another axis as z can only be reached by that jump."""
+        for turned in _other_axes_as_z(parts[k]):
+            yield self.descent(parts[:k] + (turned,) + parts[k + 1:]).run(_SEARCH_ITERATIONS)
+
     def best_of(self, starts, max_iterations: int, finalists: int = _FINALISTS,
                 explained_px: float | None = None, within: Callable[[], bool] | None = None) -> Descent:
         """The start whose descent fits best: every start a few steps, the ``finalists`` best of
@@ -392,13 +399,11 @@ def fit_to_silhouettes(starts, cameras, edges, *, support_plane=None, loss_scale
                      doubtful, resting, reach)
     best = fitter.best_of(starts, max_iterations, explained_px=_EXPLAINED_PX)
     descents = fitter.descents
-    # The superquadric's z axis is the odd one out (its profile has its own exponent): the same body
-    # with another of its axes as z can only be reached by a jump, so try both, each going on only
-    # if a few steps bring it below the best so far. Not needed where the outlines already run
+    # The same body with another of its axes as z (_Fitter.turned): both turns are tried, each going on
+    # only if a few steps bring it below the best so far. Not needed where the outlines already run
     # through the samples to within the edges' own noise: no other body can explain them better.
     if best.problem.count == 1 and fitter.rms(best.cost) > _NOISE_PX:
-        for turned in _other_axes_as_z(best.problem.superquadric(best.x)):
-            other = fitter.descent(turned).run(_SEARCH_ITERATIONS)
+        for other in fitter.turned(best.problem.parts(best.x), 0):
             if other.cost < best.cost:
                 best = other.run(max_iterations)
     others = sorted((descent for descent in descents if descent is not best and np.isfinite(descent.cost)),
