@@ -16,7 +16,9 @@ segmentation, so the reconstruction uses its default), three ways:
 (b) volumetric IoU of the model (its union of parts, as `robocell reconstruct` gives it) against the true
     object (workers/sim/judge.py's Monte Carlo union_iou, written apart from the fit) per table kind and
     per object kind, mean and worst, beside the ceiling, and whether the best grasp, planned on the union
-    as the cell and `robocell reconstruct --grasps` plan it, holds the true object (the same judge);
+    as the cell and `robocell reconstruct --grasps` plan it, holds the true object (the same judge); also
+    counted over the objects the gripper's opening spans (some true part narrower than it by a millimetre:
+    no grasp holds a tuna can 85 mm across in an 85 mm gripper, whatever its model);
 (c) speed: `robocell reconstruct` on the 3-view 640x480 JPEG bundles, from outside, one core
     (taskset -c 0), as a ratio to OpenCV's decode of the same three JPEGs on the same core, measured
     in the same run, over the bundles that reconstruct; beside it the same bundles with their true
@@ -67,6 +69,9 @@ from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth, un
 from robocell.workers.sim.scans import printed_products_set, printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
+#: An object the gripper spans is narrower than its opening by this much at least (m): fingers that come down
+#: grazing its sides push it away.
+CLEARANCE = 0.001
 SEEING = WAYS[:2]  # the ways that segment the images
 
 
@@ -101,14 +106,46 @@ def best_grasp_holds(result, obj, plane) -> bool:
     return bool(verdict.holds)
 
 
+def narrowest_width(parts, plane) -> float:
+    """How far a parallel gripper closing across the table must open to hold the object by its narrowest true
+    part (m): the least width of that part's outline on the table, over directions a degree apart (its surface
+    by its signed-power parametrisation, on a grid that holds the ends of its own axes, projected on the
+    plane). An object wider than the gripper's opening every way cannot be held, however good its model."""
+    normal = np.asarray(plane[:3], float) / np.linalg.norm(plane[:3])
+    across = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    along = np.cross(normal, across)
+    angles = np.radians(np.arange(180.0))
+    directions = np.outer(np.cos(angles), across) + np.outer(np.sin(angles), along)
+    eta = np.linspace(-np.pi / 2, np.pi / 2, 33)[:, None]
+    omega = np.linspace(-np.pi, np.pi, 129)[None, :]
+
+    def power(x, p):
+        return np.sign(x) * np.abs(x) ** p
+
+    widths = []
+    for part in parts:
+        e1, e2 = part.shape
+        q = np.stack(np.broadcast_arrays(power(np.cos(eta), e1) * power(np.cos(omega), e2),
+                                         power(np.cos(eta), e1) * power(np.sin(omega), e2),
+                                         power(np.sin(eta), e1)), axis=-1).reshape(-1, 3) * part.size
+        projected = (q @ part.T_world_part[:3, :3].T) @ directions.T
+        widths.append(float(np.min(projected.max(axis=0) - projected.min(axis=0))))
+    return min(widths)
+
+
 def score(spec, plain: Path, with_bg: Path, ways=WAYS) -> dict:
-    """{way: {"iou", "views" (silhouette IoU per view), "holds", "error"}} for one scan, each of ``ways``."""
+    """{way: {"iou", "views" (silhouette IoU per view), "holds", "error", "spanned"}} for one scan, each of
+    ``ways``; "spanned", the same for every way: whether the gripper's opening spans the object's narrowest
+    true part (:func:`narrowest_width`), without which no model's grasp can hold it."""
     obj = spec.objects[0]
     truths = [cv2.imread(str(plain / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) > 0
               for i in range(len(spec.cameras))]
+    spanned = (narrowest_width(parts_from_truth(obj.truth()), load_bundle(plain).support_plane)
+               <= DEFAULT_GRIPPER.max_opening - CLEARANCE)
     out = {}
     for way in ways:
-        entry: dict = {"iou": 0.0, "views": [0.0] * len(truths), "holds": False, "error": None}
+        entry: dict = {"iou": 0.0, "views": [0.0] * len(truths), "holds": False, "error": None, "spanned": spanned}
         try:
             bundle = load_bundle(with_bg if way == "+ background" else plain)
             views = bundle.views
@@ -154,6 +191,13 @@ def tables(records: list[tuple], ways=WAYS) -> None:
     print(f"{'failed':<22}" + "".join(f"{sum(s[way]['error'] is not None for _, s in records):>17}" for way in ways))
     held = [f"{sum(s[way]['holds'] for _, s in records)} of {len(records)}" for way in ways]
     print(f"{'best grasp holds':<22}" + "".join(f"{h:>17}" for h in held))
+    spanned = [(spec, s) for spec, s in records if s[ways[0]]["spanned"]]
+    if len(spanned) < len(records):
+        held = [f"{sum(s[way]['holds'] for _, s in spanned)} of {len(spanned)}" for way in ways]
+        print(f"{'  of those spanned':<22}" + "".join(f"{h:>17}" for h in held))
+        wide = sorted({spec.object_kind for spec, s in records if not s[ways[0]]["spanned"]})
+        print(f"  (not spanned: no part of {', '.join(wide)} is narrower than the gripper's opening of "
+              f"{DEFAULT_GRIPPER.max_opening * 1e3:.0f} mm by {CLEARANCE * 1e3:.0f} mm)")
     errors = defaultdict(list)
     for spec, s in records:
         for way in ways:
