@@ -17,8 +17,9 @@ segmentation, so the reconstruction uses its default), three ways:
     object (workers/sim/judge.py's Monte Carlo union_iou, written apart from the fit) per table kind and
     per object kind, mean and worst, beside the ceiling, and whether the best grasp, planned on the union
     as the cell and `robocell reconstruct --grasps` plan it, holds the true object (the same judge); also
-    counted over the objects the gripper's opening spans (some true part narrower than it by a millimetre:
-    no grasp holds a tuna can 85 mm across in an 85 mm gripper, whatever its model);
+    counted over the objects the gripper's opening spans (some true part narrower than it by a millimetre
+    across the table: a grasp closing across the table holds no tuna can 85 mm across in an 85 mm gripper,
+    whatever its model);
 (c) speed: `robocell reconstruct` on the 3-view 640x480 JPEG bundles, from outside, one core
     (taskset -c 0), as a ratio to OpenCV's decode of the same three JPEGs on the same core, measured
     in the same run, over the bundles that reconstruct; beside it the same bundles with their true
@@ -69,10 +70,10 @@ from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth, un
 from robocell.workers.sim.scans import printed_products_set, printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
+SEEING = WAYS[:2]  # the ways that segment the images
 #: An object the gripper spans is narrower than its opening by this much at least (m): fingers that come down
 #: grazing its sides push it away.
 CLEARANCE = 0.001
-SEEING = WAYS[:2]  # the ways that segment the images
 
 
 def write_bundles(specs, out: Path) -> list[tuple]:
@@ -110,7 +111,8 @@ def narrowest_width(parts, plane) -> float:
     """How far a parallel gripper closing across the table must open to hold the object by its narrowest true
     part (m): the least width of that part's outline on the table, over directions a degree apart (its surface
     by its signed-power parametrisation, on a grid that holds the ends of its own axes, projected on the
-    plane). An object wider than the gripper's opening every way cannot be held, however good its model."""
+    plane). An object wider than the gripper's opening every way across the table is not held by a grasp closing
+    across it, however good its model: only by one tilted over an edge, if at all."""
     normal = np.asarray(plane[:3], float) / np.linalg.norm(plane[:3])
     across = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     across /= np.linalg.norm(across)
@@ -137,7 +139,7 @@ def narrowest_width(parts, plane) -> float:
 def score(spec, plain: Path, with_bg: Path, ways=WAYS) -> dict:
     """{way: {"iou", "views" (silhouette IoU per view), "holds", "error", "spanned"}} for one scan, each of
     ``ways``; "spanned", the same for every way: whether the gripper's opening spans the object's narrowest
-    true part (:func:`narrowest_width`), without which no model's grasp can hold it."""
+    true part across the table (:func:`narrowest_width`)."""
     obj = spec.objects[0]
     truths = [cv2.imread(str(plain / f"truth_mask{i}.png"), cv2.IMREAD_GRAYSCALE) > 0
               for i in range(len(spec.cameras))]
