@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import random
 import socket
 import sys
 from pathlib import Path
@@ -30,10 +31,32 @@ def register(commands: Commands) -> None:
 
 
 def free_port() -> int:
-    """A TCP port nobody listens on now (bound to port 0 on loopback, then released)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+    """A TCP port nobody listens on now, on loopback, chosen at random below the ports the system hands out
+    for outgoing connections and for port 0 (32768 up on Linux, 49152 up on macOS and Windows).
+
+    The cell binds it seconds later, once its processes have started; a port from that range, released
+    meanwhile, may be taken by one of their own connections.
+
+    Raises
+    ------
+    OSError
+        If no port of the range could be bound (after :data:`_PORT_TRIES` tries).
+    """
+    pick = random.SystemRandom()
+    for _ in range(_PORT_TRIES):
+        port = pick.randrange(*_PORTS)
+        with socket.socket() as probe:
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        return port
+    raise OSError(f"no free TCP port on 127.0.0.1 between {_PORTS[0]} and {_PORTS[1] - 1}")
+
+
+#: The ports :func:`free_port` chooses from: registered ports no system hands out on its own.
+_PORTS = (20000, 32768)
+_PORT_TRIES = 200
 
 
 def local_config(run_dir: str | Path, **fields) -> CellConfig:
