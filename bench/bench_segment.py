@@ -66,7 +66,8 @@ from bench_core import model_parts  # noqa: E402
 from robocell.core_cy.grasp import DEFAULT_GRIPPER, plan_grasps  # noqa: E402
 from robocell.core_cy.reconstruct import View, reconstruct  # noqa: E402
 from robocell.wire.bundle import load_bundle  # noqa: E402
-from robocell.workers.sim.judge import JudgeGripper, judge, parts_from_truth, union_iou  # noqa: E402
+from robocell.workers.sim.judge import (  # noqa: E402
+    JudgeGripper, judge, parts_from_truth, surface_points, union_iou)
 from robocell.workers.sim.scans import printed_products_set, printed_set, standard_set  # noqa: E402
 
 WAYS = ("default", "+ background", "true masks")
@@ -119,19 +120,10 @@ def narrowest_width(parts, plane) -> float:
     along = np.cross(normal, across)
     angles = np.radians(np.arange(180.0))
     directions = np.outer(np.cos(angles), across) + np.outer(np.sin(angles), along)
-    eta = np.linspace(-np.pi / 2, np.pi / 2, 33)[:, None]
-    omega = np.linspace(-np.pi, np.pi, 129)[None, :]
-
-    def power(x, p):
-        return np.sign(x) * np.abs(x) ** p
-
     widths = []
     for part in parts:
-        e1, e2 = part.shape
-        q = np.stack(np.broadcast_arrays(power(np.cos(eta), e1) * power(np.cos(omega), e2),
-                                         power(np.cos(eta), e1) * power(np.sin(omega), e2),
-                                         power(np.sin(eta), e1)), axis=-1).reshape(-1, 3) * part.size
-        projected = (q @ part.T_world_part[:3, :3].T) @ directions.T
+        # The judge's own sampling of a part's surface; 33 x 128 holds the ends of the part's axes.
+        projected = surface_points(part, n_eta=33, n_omega=128) @ directions.T
         widths.append(float(np.min(projected.max(axis=0) - projected.min(axis=0))))
     return min(widths)
 

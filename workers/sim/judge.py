@@ -466,7 +466,7 @@ def union_iou(model: list[Part], truth: list[Part], n: int = 200_000, seed: int 
     return int(np.count_nonzero(in_model & in_truth)) / union if union else 0.0
 
 
-def _surface(part: Part, n_eta: int = 24, n_omega: int = 48) -> np.ndarray:
+def surface_points(part: Part, n_eta: int = 24, n_omega: int = 48) -> np.ndarray:
     """World points on the part's surface, spread by its own signed-power parametrisation."""
     e1, e2 = part.shape
     eta = np.linspace(-np.pi / 2, np.pi / 2, n_eta)[:, None]
@@ -495,7 +495,7 @@ def union_silhouette_iou(parts: list[Part], K: np.ndarray, T_world_cam: np.ndarr
     covered = np.zeros((height, width), np.uint8)
     R, c = np.asarray(T_world_cam, float)[:3, :3], np.asarray(T_world_cam, float)[:3, 3]
     for part in parts:
-        cam = (_surface(part) - c) @ R
+        cam = (surface_points(part) - c) @ R
         if np.any(cam[:, 2] <= 0):
             continue
         uv = (cam @ np.asarray(K, float).T)[:, :2] / cam[:, 2:3]
